@@ -1,5 +1,9 @@
-//! The forward model of the bench: robot kinematics, extrinsics, optics.
+//! The forward model of the bench: robot description and kinematics, extrinsics, frame tree, optics.
 //! Everything that simulates or fits uses this one model.
 
 pub mod air;
+pub mod extrinsics;
+pub mod frames;
+pub mod kinematics;
 pub mod optics;
+pub mod robot;

@@ -1,0 +1,199 @@
+//! Reading and writing the project's data files (RON descriptions, presets, plans).
+//! Owns the file-level error type that names the file, the line and what was expected, and atomic saves.
+
+use serde::{de::DeserializeOwned, Serialize};
+use std::fmt;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// An error reading or writing a data file: always names the file, and where possible the
+/// line, column or field and what was expected.
+#[derive(Debug, Error)]
+pub enum FileError {
+    /// The file could not be read or written at all.
+    #[error("{file}: {action}: {source}")]
+    Io {
+        /// The file.
+        file: PathBuf,
+        /// What was being done ("cannot read", "cannot write").
+        action: &'static str,
+        /// The operating-system error.
+        source: std::io::Error,
+    },
+    /// The text does not parse as the expected kind of document.
+    #[error("{file}:{line}:{column}: {message} (expected {expected})")]
+    Parse {
+        /// The file.
+        file: PathBuf,
+        /// 1-based line of the error.
+        line: usize,
+        /// 1-based column of the error.
+        column: usize,
+        /// The parser's message.
+        message: String,
+        /// What kind of document was expected.
+        expected: String,
+    },
+    /// The document parses but a field has a value that is not allowed.
+    #[error("{file}: field `{field}`: {problem}")]
+    Invalid {
+        /// The file.
+        file: PathBuf,
+        /// Path of the field, e.g. `links[3].limits`.
+        field: String,
+        /// What is wrong and what was expected.
+        problem: String,
+    },
+    /// The value could not be serialised (a bug, reported rather than panicking).
+    #[error("{file}: cannot serialise: {message}")]
+    Serialise {
+        /// The file.
+        file: PathBuf,
+        /// The serialiser's message.
+        message: String,
+    },
+}
+
+/// A problem found by a validation pass: the field path and what is wrong. Turned into a
+/// [`FileError::Invalid`] once the file name is known.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldError {
+    /// Path of the field, e.g. `links[3].limits`.
+    pub field: String,
+    /// What is wrong and what was expected.
+    pub problem: String,
+}
+
+impl FieldError {
+    /// A field error.
+    pub fn new(field: impl Into<String>, problem: impl Into<String>) -> Self {
+        Self {
+            field: field.into(),
+            problem: problem.into(),
+        }
+    }
+
+    /// Attach the file name.
+    pub fn in_file(self, file: impl Into<PathBuf>) -> FileError {
+        FileError::Invalid {
+            file: file.into(),
+            field: self.field,
+            problem: self.problem,
+        }
+    }
+}
+
+impl fmt::Display for FieldError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "field `{}`: {}", self.field, self.problem)
+    }
+}
+
+/// Parse RON text; `origin` names the file (or the embedded asset) in errors.
+pub fn parse_ron<T: DeserializeOwned>(
+    text: &str,
+    origin: &Path,
+    expected: &str,
+) -> Result<T, FileError> {
+    ron::from_str(text).map_err(|e| FileError::Parse {
+        file: origin.to_path_buf(),
+        line: e.span.start.line,
+        column: e.span.start.col,
+        message: e.code.to_string(),
+        expected: expected.to_string(),
+    })
+}
+
+/// Read and parse a RON file.
+pub fn load_ron<T: DeserializeOwned>(path: &Path, expected: &str) -> Result<T, FileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
+        file: path.to_path_buf(),
+        action: "cannot read",
+        source,
+    })?;
+    parse_ron(&text, path, expected)
+}
+
+/// Serialise to pretty RON.
+pub fn to_ron_string<T: Serialize>(value: &T, origin: &Path) -> Result<String, FileError> {
+    ron::ser::to_string_pretty(value, ron::ser::PrettyConfig::default()).map_err(|e| {
+        FileError::Serialise {
+            file: origin.to_path_buf(),
+            message: e.to_string(),
+        }
+    })
+}
+
+/// Write bytes atomically: into a temporary file beside the target, flushed to disk, then
+/// renamed over it. A crash leaves either the old file or the new one, never half of one.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
+    let io = |action: &'static str| {
+        move |source| FileError::Io {
+            file: path.to_path_buf(),
+            action,
+            source,
+        }
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "file".into());
+    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp).map_err(io("cannot create temporary file"))?;
+        f.write_all(bytes).map_err(io("cannot write"))?;
+        f.sync_all().map_err(io("cannot flush to disk"))?;
+        std::fs::rename(&tmp, path).map_err(io("cannot replace"))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Serialise to RON and save atomically.
+pub fn save_ron<T: Serialize>(path: &Path, value: &T) -> Result<(), FileError> {
+    let text = to_ron_string(value, path)?;
+    write_atomic(path, text.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(serde::Deserialize, serde::Serialize, Debug, PartialEq)]
+    struct Doc {
+        a_um: f64,
+    }
+
+    #[test]
+    fn parse_error_names_file_line_and_expectation() {
+        let err = parse_ron::<Doc>("(\n  a_um: \"x\",\n)", Path::new("x.ron"), "a Doc").unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.starts_with("x.ron:2:"), "{msg}");
+        assert!(msg.contains("expected a Doc"), "{msg}");
+    }
+
+    #[test]
+    fn atomic_save_round_trips_and_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("doc.ron");
+        save_ron(&p, &Doc { a_um: 1.5 }).unwrap();
+        save_ron(&p, &Doc { a_um: 2.5 }).unwrap();
+        let back: Doc = load_ron(&p, "a Doc").unwrap();
+        assert_eq!(back, Doc { a_um: 2.5 });
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1);
+    }
+
+    #[test]
+    fn missing_file_is_named() {
+        let err = load_ron::<Doc>(Path::new("/no/such/file.ron"), "a Doc").unwrap_err();
+        assert!(err.to_string().contains("/no/such/file.ron"));
+    }
+}

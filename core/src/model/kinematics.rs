@@ -1,0 +1,513 @@
+//! Geometric models of a serial chain: link transforms, direct geometric model (DGM), Jacobian,
+//! the closed-form inverse geometric model (IGM) of the 3P+3R layout, a damped-least-squares IGM and joint limits.
+//!
+//! Units: poses are `Isometry3<f64>` with translations in µm; joint vectors hold µm for prismatic
+//! joints and radians for revolute joints (see [`crate::model::robot`]).
+
+use crate::model::robot::{JointType, RobotDescription};
+use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Unit, UnitQuaternion, Vector3, Vector6};
+use std::f64::consts::PI;
+use std::fmt;
+use thiserror::Error;
+
+/// A joint value outside its limits, with the amount by which it is out of range.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub struct LimitViolation {
+    /// Joint name.
+    pub joint: String,
+    /// Requested value in the display unit.
+    pub value: f64,
+    /// The limit that is exceeded, in the display unit.
+    pub limit: f64,
+    /// Display unit (µm or °).
+    pub unit: &'static str,
+}
+
+impl LimitViolation {
+    /// How far past the limit the value is (display unit, positive).
+    pub fn excess(&self) -> f64 {
+        (self.value - self.limit).abs()
+    }
+}
+
+impl fmt::Display for LimitViolation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let side = if self.value > self.limit { "above its upper" } else { "below its lower" };
+        write!(
+            f,
+            "joint {} = {:.3} {u} is {:.3} {u} {side} limit {:.3} {u}",
+            self.joint,
+            self.value,
+            self.excess(),
+            self.limit,
+            u = self.unit
+        )
+    }
+}
+
+/// Why an inverse geometric model found no solution.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum IgmError {
+    /// The chain is not of the 3P+3R layout that has a closed form.
+    #[error("the closed-form IGM needs three prismatic then three revolute joints; this robot is {0}")]
+    NotThreePThreeR(String),
+    /// The orientation cannot be reached by the wrist.
+    #[error("orientation unreachable by the wrist (cosine of the middle joint would be {0:.6})")]
+    OrientationUnreachable(f64),
+    /// Every solution exceeds a joint limit; the nearest one is reported.
+    #[error("target out of range: {0}")]
+    OutOfLimits(LimitViolation),
+    /// The numerical IGM did not converge.
+    #[error("numerical IGM did not converge after {iterations} iterations (residual {residual_um:.3e} µm, {residual_rad:.3e} rad)")]
+    NotConverged {
+        /// Iterations run.
+        iterations: usize,
+        /// Remaining position error (µm).
+        residual_um: f64,
+        /// Remaining orientation error (rad).
+        residual_rad: f64,
+    },
+    /// The translation axes are not independent.
+    #[error("the three prismatic axes are not independent: no position solution")]
+    SingularTranslation,
+}
+
+/// A link compiled for evaluation: `T(i-1,i) = C · Rz(q)` or `C · Tz(q)`.
+#[derive(Debug, Clone)]
+struct CompiledLink {
+    constant: Isometry3<f64>,
+    joint: JointType,
+}
+
+/// A serial chain ready for evaluation, built from a [`RobotDescription`].
+#[derive(Debug, Clone)]
+pub struct Chain {
+    description: RobotDescription,
+    links: Vec<CompiledLink>,
+}
+
+/// Rotation about x by `a` rad.
+pub fn rot_x(a: f64) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), a)
+}
+/// Rotation about y by `a` rad.
+pub fn rot_y(a: f64) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::y_axis(), a)
+}
+/// Rotation about z by `a` rad.
+pub fn rot_z(a: f64) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a)
+}
+
+fn iso_rot(q: UnitQuaternion<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::identity(), q)
+}
+fn iso_trans(x: f64, y: f64, z: f64) -> Isometry3<f64> {
+    Isometry3::translation(x, y, z)
+}
+
+/// Wrap an angle to (-π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let w = (a + PI).rem_euclid(2.0 * PI) - PI;
+    if w <= -PI { w + 2.0 * PI } else { w }
+}
+
+impl Chain {
+    /// Compile a description.
+    pub fn new(description: RobotDescription) -> Self {
+        let links = description
+            .links
+            .iter()
+            .map(|l| CompiledLink {
+                constant: iso_rot(rot_y(l.beta_deg.to_radians()))
+                    * iso_rot(rot_x(l.alpha_deg.to_radians()))
+                    * iso_trans(l.d_um, 0.0, 0.0)
+                    * iso_rot(rot_z(l.theta_deg.to_radians()))
+                    * iso_trans(0.0, 0.0, l.r_um),
+                joint: l.joint,
+            })
+            .collect();
+        Self { description, links }
+    }
+
+    /// The paper's robot.
+    pub fn femto_6dof() -> Self {
+        Self::new(RobotDescription::femto_6dof())
+    }
+
+    /// The description this chain was built from.
+    pub fn description(&self) -> &RobotDescription {
+        &self.description
+    }
+
+    /// Number of joints.
+    pub fn dof(&self) -> usize {
+        self.links.len()
+    }
+
+    fn check_len(&self, q: &[f64]) {
+        assert_eq!(q.len(), self.links.len(), "joint vector length must equal the number of joints");
+    }
+
+    fn joint_motion(link: &CompiledLink, q: f64) -> Isometry3<f64> {
+        match link.joint {
+            JointType::Prismatic => iso_trans(0.0, 0.0, q),
+            JointType::Revolute => iso_rot(rot_z(q)),
+        }
+    }
+
+    /// The link transform `T(i-1,i)` for joint index `i` (0-based) at joint value `qi`.
+    pub fn link_transform(&self, i: usize, qi: f64) -> Isometry3<f64> {
+        let l = &self.links[i];
+        l.constant * Self::joint_motion(l, qi)
+    }
+
+    /// Poses of frames 1..n in the world (frame 0), `0T1, 0T2, …, 0Tn`.
+    pub fn frames(&self, q: &[f64]) -> Vec<Isometry3<f64>> {
+        self.check_len(q);
+        let mut t = Isometry3::identity();
+        self.links
+            .iter()
+            .zip(q)
+            .map(|(l, &qi)| {
+                t *= l.constant * Self::joint_motion(l, qi);
+                t
+            })
+            .collect()
+    }
+
+    /// Direct geometric model: the end-effector pose `wTe = 0Tn`.
+    pub fn end_effector(&self, q: &[f64]) -> Isometry3<f64> {
+        self.check_len(q);
+        let mut t = Isometry3::identity();
+        for (l, &qi) in self.links.iter().zip(q) {
+            t = t * l.constant * Self::joint_motion(l, qi);
+        }
+        t
+    }
+
+    /// Joint axes in the world: for each joint, a point on its axis and the axis direction.
+    pub fn joint_axes(&self, q: &[f64]) -> Vec<(Point3<f64>, Unit<Vector3<f64>>)> {
+        self.check_len(q);
+        let mut t = Isometry3::identity();
+        let mut out = Vec::with_capacity(self.links.len());
+        for (l, &qi) in self.links.iter().zip(q) {
+            let before = t * l.constant;
+            out.push((
+                Point3::from(before.translation.vector),
+                Unit::new_normalize(before.rotation * Vector3::z()),
+            ));
+            t = before * Self::joint_motion(l, qi);
+        }
+        out
+    }
+
+    /// Geometric Jacobian of the end effector (rows: linear velocity in µm per joint unit,
+    /// then angular velocity in rad per joint unit; columns: joints).
+    pub fn jacobian(&self, q: &[f64]) -> nalgebra::DMatrix<f64> {
+        let pe = self.end_effector(q).translation.vector;
+        let mut j = nalgebra::DMatrix::zeros(6, self.dof());
+        for (c, ((o, z), l)) in self.joint_axes(q).into_iter().zip(&self.links).enumerate() {
+            let (lin, ang) = match l.joint {
+                JointType::Prismatic => (z.into_inner(), Vector3::zeros()),
+                JointType::Revolute => (z.cross(&(pe - o.coords)), z.into_inner()),
+            };
+            j.fixed_view_mut::<3, 1>(0, c).copy_from(&lin);
+            j.fixed_view_mut::<3, 1>(3, c).copy_from(&ang);
+        }
+        j
+    }
+
+    /// Check a joint vector (internal units) against the limits; the first violation is returned.
+    pub fn check_limits(&self, q: &[f64]) -> Result<(), LimitViolation> {
+        self.check_len(q);
+        let display = self.description.q_to_display(q);
+        for (l, v) in self.description.links.iter().zip(display) {
+            let unit = l.joint.display_unit();
+            // A tolerance of 1e-9 of the display unit absorbs round-off at a limit.
+            if v > l.limits.max + 1e-9 {
+                return Err(LimitViolation { joint: l.name.clone(), value: v, limit: l.limits.max, unit });
+            }
+            if v < l.limits.min - 1e-9 {
+                return Err(LimitViolation { joint: l.name.clone(), value: v, limit: l.limits.min, unit });
+            }
+        }
+        Ok(())
+    }
+
+    /// Closed-form IGM of the 3P+3R layout (orientation from the wrist, then position from the
+    /// three translations). Among the wrist solutions, those within the limits are preferred,
+    /// then the one nearest `q_ref` (internal units).
+    pub fn igm_closed_form(&self, target: &Isometry3<f64>, q_ref: &[f64]) -> Result<Vec<f64>, IgmError> {
+        if !self.description.is_3p3r() {
+            let kinds: String = self
+                .links
+                .iter()
+                .map(|l| if l.joint == JointType::Prismatic { 'P' } else { 'R' })
+                .collect();
+            return Err(IgmError::NotThreePThreeR(kinds));
+        }
+        self.check_len(q_ref);
+        // Rotation of the three prismatic links (constant) and the wrist's fixed parts.
+        let r03: Matrix3<f64> = (self.links[0].constant.rotation
+            * self.links[1].constant.rotation
+            * self.links[2].constant.rotation)
+            .to_rotation_matrix()
+            .into_inner();
+        let a = |i: usize| self.links[i].constant.rotation.to_rotation_matrix().into_inner();
+        let (a4, a5, a6) = (a(3), a(4), a(5));
+        let w = a4.transpose() * r03.transpose() * target.rotation.to_rotation_matrix().into_inner();
+        // ez·W·ez = (A5ᵀ ez)·Rz(q5)·(A6 ez): P cos q5 + Q sin q5 = rhs.
+        let u = a6 * Vector3::z();
+        let av = a5.transpose() * Vector3::z();
+        let p = av.x * u.x + av.y * u.y;
+        let qq = av.y * u.x - av.x * u.y;
+        let rhs = w[(2, 2)] - av.z * u.z;
+        let rho = p.hypot(qq);
+        let mut q5_candidates = Vec::with_capacity(2);
+        if rho < 1e-12 {
+            q5_candidates.push(q_ref[4]);
+        } else {
+            let c = rhs / rho;
+            if c.abs() > 1.0 + 1e-9 {
+                return Err(IgmError::OrientationUnreachable(c));
+            }
+            let psi = qq.atan2(p);
+            let d = c.clamp(-1.0, 1.0).acos();
+            q5_candidates.push(psi + d);
+            if d > 1e-12 {
+                q5_candidates.push(psi - d);
+            }
+        }
+        let rz = |t: f64| rot_z(t).to_rotation_matrix().into_inner();
+        let mut solutions = Vec::new();
+        for q5 in q5_candidates {
+            let v = a5 * rz(q5) * u;
+            let wz = w * Vector3::z();
+            let q4 = if v.xy().norm() < 1e-12 { q_ref[3] } else { wz.y.atan2(wz.x) - v.y.atan2(v.x) };
+            let m = (rz(q4) * a5 * rz(q5) * a6).transpose() * w;
+            let q6 = m[(1, 0)].atan2(m[(0, 0)]);
+            let mut q = q_ref.to_vec();
+            for (k, ang) in [(3, q4), (4, q5), (5, q6)] {
+                // The representative of the angle nearest the reference.
+                q[k] = q_ref[k] + wrap_angle(ang - q_ref[k]);
+            }
+            self.solve_translations(target, &mut q)?;
+            solutions.push(q);
+        }
+        let distance = |q: &[f64]| -> f64 { q[3..].iter().zip(&q_ref[3..]).map(|(a, b)| (a - b).powi(2)).sum() };
+        solutions.sort_by(|a, b| distance(a).total_cmp(&distance(b)));
+        if let Some(ok) = solutions.iter().find(|q| self.check_limits(q).is_ok()) {
+            return Ok(ok.clone());
+        }
+        Err(IgmError::OutOfLimits(self.check_limits(&solutions[0]).unwrap_err()))
+    }
+
+    /// With the revolute joints of `q` set, solve the translation joints so the end effector
+    /// reaches `target`'s position (the position is affine in the prismatic joints).
+    fn solve_translations(&self, target: &Isometry3<f64>, q: &mut [f64]) -> Result<(), IgmError> {
+        for v in q.iter_mut().take(3) {
+            *v = 0.0;
+        }
+        let p0 = self.end_effector(q).translation.vector;
+        let axes = self.joint_axes(q);
+        let a = Matrix3::from_columns(&[axes[0].1.into_inner(), axes[1].1.into_inner(), axes[2].1.into_inner()]);
+        let sol = a.lu().solve(&(target.translation.vector - p0)).ok_or(IgmError::SingularTranslation)?;
+        q[..3].copy_from_slice(sol.as_slice());
+        Ok(())
+    }
+
+    /// Numerical IGM by damped least squares, from `q0` (internal units). Converges to
+    /// 1e-9 µm and 1e-12 rad or reports failure. Works for any chain.
+    pub fn igm_numeric(&self, target: &Isometry3<f64>, q0: &[f64]) -> Result<Vec<f64>, IgmError> {
+        self.check_len(q0);
+        // Orientation errors are weighted as lengths over 1 mm so both kinds of error count.
+        const LEVER_UM: f64 = 1000.0;
+        const DAMPING: f64 = 1e-6;
+        let mut q = q0.to_vec();
+        let mut err = (f64::INFINITY, f64::INFINITY);
+        for it in 0..200 {
+            let t = self.end_effector(&q);
+            let dp = target.translation.vector - t.translation.vector;
+            let dr = (target.rotation * t.rotation.inverse()).scaled_axis();
+            err = (dp.norm(), dr.norm());
+            if err.0 < 1e-9 && err.1 < 1e-12 {
+                self.check_limits(&q).map_err(IgmError::OutOfLimits)?;
+                return Ok(q);
+            }
+            let mut j = self.jacobian(&q);
+            for c in 0..j.ncols() {
+                for r in 3..6 {
+                    j[(r, c)] *= LEVER_UM;
+                }
+            }
+            let e = Vector6::new(dp.x, dp.y, dp.z, dr.x * LEVER_UM, dr.y * LEVER_UM, dr.z * LEVER_UM);
+            let jjt = &j * j.transpose() + nalgebra::DMatrix::identity(6, 6) * DAMPING;
+            let Some(y) = jjt.lu().solve(&nalgebra::DVector::from_column_slice(e.as_slice())) else {
+                return Err(IgmError::NotConverged { iterations: it, residual_um: err.0, residual_rad: err.1 });
+            };
+            let dq = j.transpose() * y;
+            for (qi, d) in q.iter_mut().zip(dq.iter()) {
+                *qi += d;
+            }
+        }
+        Err(IgmError::NotConverged { iterations: 200, residual_um: err.0, residual_rad: err.1 })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use proptest::prelude::*;
+
+    fn deg(qd: [f64; 6]) -> Vec<f64> {
+        RobotDescription::femto_6dof().q_from_display(&qd)
+    }
+
+    #[test]
+    fn end_effector_at_zero_is_eq_17() {
+        let t = Chain::femto_6dof().end_effector(&[0.0; 6]);
+        let r = t.rotation.to_rotation_matrix().into_inner();
+        let want = Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0);
+        assert_relative_eq!(r, want, epsilon = 1e-15);
+        assert_relative_eq!(t.translation.vector.norm(), 0.0, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn translation_joints_move_along_z_y_x_of_the_world() {
+        let c = Chain::femto_6dof();
+        for (i, axis) in [(0, Vector3::z()), (1, Vector3::y()), (2, Vector3::x())] {
+            let mut q = vec![0.0; 6];
+            q[i] = 7.5;
+            assert_relative_eq!(c.end_effector(&q).translation.vector, axis * 7.5, epsilon = 1e-12);
+        }
+    }
+
+    #[test]
+    fn wrist_rotation_is_eq_25() {
+        let c = Chain::femto_6dof();
+        for (q4d, q5d) in [(1.0, -2.0), (-4.0, 4.0), (7.0, 3.0), (0.0, -9.0)] {
+            let (q4, q5) = (f64::to_radians(q4d), f64::to_radians(q5d));
+            let r = c.end_effector(&[0.0, 0.0, 0.0, q4, q5, 0.0]).rotation.to_rotation_matrix().into_inner();
+            let (c4, s4, c5, s5) = (q4.cos(), q4.sin(), q5.cos(), q5.sin());
+            let want = Matrix3::new(c5, 0.0, -s5, s5 * c4, s4, c5 * c4, s5 * s4, -c4, c5 * s4);
+            assert_relative_eq!(r, want, epsilon = 1e-14);
+        }
+    }
+
+    #[test]
+    fn joint_six_axis_is_the_beam_direction_at_zero() {
+        let axes = Chain::femto_6dof().joint_axes(&[0.0; 6]);
+        assert_relative_eq!(axes[5].1.into_inner(), Vector3::y(), epsilon = 1e-15);
+        // Joints 4 and 5 turn about X_w and Z_w at q = 0 (SPEC section 9).
+        assert_relative_eq!(axes[3].1.into_inner(), Vector3::x(), epsilon = 1e-15);
+        assert_relative_eq!(axes[4].1.into_inner().abs(), Vector3::z(), epsilon = 1e-15);
+    }
+
+    #[test]
+    fn limit_violation_names_joint_and_excess() {
+        let c = Chain::femto_6dof();
+        let e = c.check_limits(&deg([0.0, 0.0, 0.0, 12.3, 0.0, 0.0])).unwrap_err();
+        assert_eq!(e.joint, "q4");
+        assert_relative_eq!(e.excess(), 2.3, epsilon = 1e-9);
+        assert_eq!(e.to_string(), "joint q4 = 12.300 ° is 2.300 ° above its upper limit 10.000 °");
+        let e = c.check_limits(&deg([-151.0, 0.0, 0.0, 0.0, 0.0, 0.0])).unwrap_err();
+        assert_eq!(e.to_string(), "joint q1 = -151.000 µm is 1.000 µm below its lower limit -150.000 µm");
+        assert!(c.check_limits(&deg([150.0, -150.0, 0.0, 10.0, -10.0, 180.0])).is_ok());
+    }
+
+    #[test]
+    fn igm_reports_a_target_out_of_range() {
+        let c = Chain::femto_6dof();
+        let target = c.end_effector(&[0.0; 6]) * Isometry3::translation(0.0, 0.0, 0.0);
+        let far = Isometry3::from_parts(Translation3::new(400.0, 0.0, 0.0), target.rotation);
+        match c.igm_closed_form(&far, &[0.0; 6]) {
+            Err(IgmError::OutOfLimits(v)) => {
+                assert_eq!(v.joint, "q3");
+                assert_relative_eq!(v.excess(), 250.0, epsilon = 1e-6);
+            }
+            other => panic!("expected an out-of-limits error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let c = Chain::femto_6dof();
+        let q = deg([10.0, -20.0, 30.0, 1.0, -2.0, 3.0]);
+        let j = c.jacobian(&q);
+        for k in 0..6 {
+            let h = 1e-6;
+            let mut qp = q.clone();
+            qp[k] += h;
+            let mut qm = q.clone();
+            qm[k] -= h;
+            let (tp, tm) = (c.end_effector(&qp), c.end_effector(&qm));
+            let dv = (tp.translation.vector - tm.translation.vector) / (2.0 * h);
+            let dw = (tp.rotation * tm.rotation.inverse()).scaled_axis() / (2.0 * h);
+            for r in 0..3 {
+                assert_relative_eq!(j[(r, k)], dv[r], epsilon = 1e-5);
+                assert_relative_eq!(j[(r + 3, k)], dw[r], epsilon = 1e-7);
+            }
+        }
+    }
+
+    fn q_in_limits() -> impl Strategy<Value = Vec<f64>> {
+        (
+            -150.0..150.0f64,
+            -150.0..150.0f64,
+            -150.0..150.0f64,
+            -10.0..10.0f64,
+            -10.0..10.0f64,
+            -180.0..180.0f64,
+        )
+            .prop_map(|(a, b, c, d, e, f)| deg([a, b, c, d, e, f]))
+    }
+
+    fn assert_same_q(a: &[f64], b: &[f64]) {
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() < 1e-9, "{a:?} != {b:?}");
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(500))]
+        #[test]
+        fn closed_form_igm_inverts_dgm(q in q_in_limits()) {
+            let c = Chain::femto_6dof();
+            let t = c.end_effector(&q);
+            let back = c.igm_closed_form(&t, &q).unwrap();
+            assert_same_q(&back, &q);
+            // From a far reference, the solution still reproduces the pose.
+            let other = c.igm_closed_form(&t, &[0.0; 6]).unwrap();
+            let t2 = c.end_effector(&other);
+            prop_assert!((t2.translation.vector - t.translation.vector).norm() < 1e-9);
+            prop_assert!(t2.rotation.angle_to(&t.rotation) < 1e-12);
+        }
+
+        #[test]
+        fn numeric_igm_inverts_dgm(q in q_in_limits(), dq in proptest::collection::vec(-0.05..0.05f64, 6)) {
+            let c = Chain::femto_6dof();
+            let t = c.end_effector(&q);
+            // Start a little away (µm and tens of mrad) from the solution.
+            let q0: Vec<f64> = q.iter().zip(&dq).enumerate()
+                .map(|(i, (a, d))| a + if i < 3 { d * 100.0 } else { *d }).collect();
+            let back = c.igm_numeric(&t, &q0).unwrap();
+            assert_same_q(&back, &q);
+        }
+    }
+
+    #[test]
+    fn numeric_igm_works_for_a_chain_without_closed_form() {
+        // A 2P+1R+1P+2R chain: not 3P+3R, so only the numerical IGM applies.
+        let mut d = RobotDescription::femto_6dof();
+        d.links.swap(2, 3);
+        d.links[3].d_um = 50.0;
+        let c = Chain::new(d);
+        assert!(matches!(c.igm_closed_form(&Isometry3::identity(), &[0.0; 6]), Err(IgmError::NotThreePThreeR(k)) if k == "PPRPRR"));
+        let q = vec![5.0, -7.0, 0.02, 12.0, -0.03, 0.4];
+        let t = c.end_effector(&q);
+        let back = c.igm_numeric(&t, &[0.0; 6]).unwrap();
+        assert_same_q(&back, &q);
+    }
+}
