@@ -1,1 +1,5 @@
+//! The photorobot application: a thin command-line interface and the eframe workbench over `photorobot_core`.
+//! Owns argument parsing, printing and the GUI; every command's work is a core function.
 
+pub mod cli;
+pub mod gui;

@@ -72,11 +72,48 @@ pub enum IgmError {
     SingularTranslation,
 }
 
-/// A link compiled for evaluation: `T(i-1,i) = C · Rz(q)` or `C · Tz(q)`.
+/// A link compiled for evaluation: `T(i-1,i) = C · Rz(q)` or `C · Tz(q)` for a nominal joint;
+/// with intrinsic errors, `C · Trans(o)·Rot(u, q')·Trans(-o)` or `C · Trans(u·q')`, where
+/// `q' = q·(1 + scale) + zero offset`, `u` the (tilted) axis and `o` a point on it.
 #[derive(Debug, Clone)]
 struct CompiledLink {
     constant: Isometry3<f64>,
     joint: JointType,
+    /// None for a nominal joint (the fast path).
+    errors: Option<CompiledErrors>,
+}
+
+#[derive(Debug, Clone)]
+struct CompiledErrors {
+    axis: Unit<Vector3<f64>>,
+    point: Vector3<f64>,
+    gain: f64,
+    /// Zero offset in internal units (µm or rad).
+    offset: f64,
+}
+
+impl CompiledLink {
+    /// Joint variable as the joint really moves it (internal units).
+    #[inline]
+    fn effective(&self, q: f64) -> f64 {
+        match &self.errors {
+            None => q,
+            Some(e) => q * e.gain + e.offset,
+        }
+    }
+
+    /// The joint's axis direction and a point on it, in the frame after `constant`.
+    fn axis(&self) -> (Vector3<f64>, Unit<Vector3<f64>>) {
+        match &self.errors {
+            None => (Vector3::zeros(), Vector3::z_axis()),
+            Some(e) => (e.point, e.axis),
+        }
+    }
+
+    /// d(effective)/dq.
+    fn gain(&self) -> f64 {
+        self.errors.as_ref().map_or(1.0, |e| e.gain)
+    }
 }
 
 /// A serial chain ready for evaluation, built from a [`RobotDescription`].
@@ -125,6 +162,19 @@ impl Chain {
                     * iso_rot(rot_z(l.theta_deg.to_radians()))
                     * iso_trans(0.0, 0.0, l.r_um),
                 joint: l.joint,
+                errors: (!l.errors.is_nominal()).then(|| {
+                    let e = &l.errors;
+                    let [tx, ty] = e.axis_tilt_mrad.map(|m| (m * 1e-3).tan());
+                    CompiledErrors {
+                        axis: Unit::new_normalize(Vector3::new(tx, ty, 1.0)),
+                        point: Vector3::from(e.axis_offset_um),
+                        gain: 1.0 + e.scale_ppm * 1e-6,
+                        offset: match l.joint {
+                            JointType::Prismatic => e.zero_offset,
+                            JointType::Revolute => e.zero_offset.to_radians(),
+                        },
+                    }
+                }),
             })
             .collect();
         Self { description, links }
@@ -149,10 +199,20 @@ impl Chain {
         assert_eq!(q.len(), self.links.len(), "joint vector length must equal the number of joints");
     }
 
+    #[inline]
     fn joint_motion(link: &CompiledLink, q: f64) -> Isometry3<f64> {
-        match link.joint {
-            JointType::Prismatic => iso_trans(0.0, 0.0, q),
-            JointType::Revolute => iso_rot(rot_z(q)),
+        match (&link.errors, link.joint) {
+            (None, JointType::Prismatic) => iso_trans(0.0, 0.0, q),
+            (None, JointType::Revolute) => iso_rot(rot_z(q)),
+            (Some(e), JointType::Prismatic) => {
+                let v = e.axis.into_inner() * link.effective(q);
+                iso_trans(v.x, v.y, v.z)
+            }
+            (Some(e), JointType::Revolute) => {
+                let r = UnitQuaternion::from_axis_angle(&e.axis, link.effective(q));
+                // Rotation about the axis through `point`: Trans(o)·R·Trans(-o).
+                Isometry3::from_parts(Translation3::from(e.point - r * e.point), r)
+            }
         }
     }
 
@@ -193,10 +253,8 @@ impl Chain {
         let mut out = Vec::with_capacity(self.links.len());
         for (l, &qi) in self.links.iter().zip(q) {
             let before = t * l.constant;
-            out.push((
-                Point3::from(before.translation.vector),
-                Unit::new_normalize(before.rotation * Vector3::z()),
-            ));
+            let (point, axis) = l.axis();
+            out.push((before * Point3::from(point), Unit::new_normalize(before.rotation * axis.into_inner())));
             t = before * Self::joint_motion(l, qi);
         }
         out
@@ -208,9 +266,10 @@ impl Chain {
         let pe = self.end_effector(q).translation.vector;
         let mut j = nalgebra::DMatrix::zeros(6, self.dof());
         for (c, ((o, z), l)) in self.joint_axes(q).into_iter().zip(&self.links).enumerate() {
+            let g = l.gain();
             let (lin, ang) = match l.joint {
-                JointType::Prismatic => (z.into_inner(), Vector3::zeros()),
-                JointType::Revolute => (z.cross(&(pe - o.coords)), z.into_inner()),
+                JointType::Prismatic => (z.into_inner() * g, Vector3::zeros()),
+                JointType::Revolute => (z.cross(&(pe - o.coords)) * g, z.into_inner() * g),
             };
             j.fixed_view_mut::<3, 1>(0, c).copy_from(&lin);
             j.fixed_view_mut::<3, 1>(3, c).copy_from(&ang);
@@ -248,6 +307,9 @@ impl Chain {
             return Err(IgmError::NotThreePThreeR(kinds));
         }
         self.check_len(q_ref);
+        if self.links[3..].iter().any(|l| l.errors.is_some()) {
+            return Err(IgmError::NotThreePThreeR("3P+3R with intrinsic wrist errors (use Chain::igm)".into()));
+        }
         // Rotation of the three prismatic links (constant) and the wrist's fixed parts.
         let r03: Matrix3<f64> = (self.links[0].constant.rotation
             * self.links[1].constant.rotation
@@ -311,10 +373,32 @@ impl Chain {
         }
         let p0 = self.end_effector(q).translation.vector;
         let axes = self.joint_axes(q);
-        let a = Matrix3::from_columns(&[axes[0].1.into_inner(), axes[1].1.into_inner(), axes[2].1.into_inner()]);
+        let a = Matrix3::from_columns(&[0, 1, 2].map(|i| axes[i].1.into_inner() * self.links[i].gain()));
         let sol = a.lu().solve(&(target.translation.vector - p0)).ok_or(IgmError::SingularTranslation)?;
         q[..3].copy_from_slice(sol.as_slice());
         Ok(())
+    }
+
+    /// The IGM for any chain: the closed form where it applies (then polished by the numerical
+    /// IGM when the chain carries intrinsic errors the closed form ignores), else the
+    /// numerical IGM from `q_ref`.
+    pub fn igm(&self, target: &Isometry3<f64>, q_ref: &[f64]) -> Result<Vec<f64>, IgmError> {
+        let nominal = Chain::new(self.nominal_description());
+        match nominal.igm_closed_form(target, q_ref) {
+            Ok(q) if self.links.iter().all(|l| l.errors.is_none()) => Ok(q),
+            Ok(q) => self.igm_numeric(target, &q),
+            Err(IgmError::NotThreePThreeR(_)) => self.igm_numeric(target, q_ref),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// The description with every intrinsic error set to zero.
+    pub fn nominal_description(&self) -> RobotDescription {
+        let mut d = self.description.clone();
+        for l in &mut d.links {
+            l.errors = Default::default();
+        }
+        d
     }
 
     /// Numerical IGM by damped least squares, from `q0` (internal units). Converges to
@@ -494,6 +578,43 @@ mod tests {
                 .map(|(i, (a, d))| a + if i < 3 { d * 100.0 } else { *d }).collect();
             let back = c.igm_numeric(&t, &q0).unwrap();
             assert_same_q(&back, &q);
+        }
+    }
+
+    #[test]
+    fn intrinsic_errors_act_as_described() {
+        let mut d = RobotDescription::femto_6dof();
+        // q2 (Y_w) 800 ppm too long; q4 turns about an axis 20 µm off along Y_w; q5 zero 0.05° off.
+        d.links[1].errors.scale_ppm = 800.0;
+        let c0 = Chain::femto_6dof();
+        // Link 4's frame at q = 0 has z = X_w; which local axis is Y_w?
+        let f4 = c0.frames(&[0.0; 6])[3];
+        let y_in_link4 = f4.rotation.inverse() * Vector3::y();
+        d.links[3].errors.axis_offset_um = (y_in_link4 * 20.0).into();
+        d.links[4].errors.zero_offset = 0.05;
+        let c = Chain::new(d);
+        let p = c.end_effector(&[0.0, 100.0, 0.0, 0.0, 0.0, 0.0]).translation.vector;
+        assert_relative_eq!(p, Vector3::new(0.0, 100.08, 0.0), epsilon = 1e-9);
+        // Rotating q4 by φ about an axis through (0, 20, 0) moves the origin to
+        // (0, 20 - 20 cos φ, -20 sin φ) (rotation about +X_w), plus the q5 offset's effect (none on the origin).
+        let phi = 3f64.to_radians();
+        let p = c.end_effector(&[0.0, 0.0, 0.0, phi, 0.0, 0.0]).translation.vector;
+        assert_relative_eq!(p, Vector3::new(0.0, 20.0 - 20.0 * phi.cos(), -20.0 * phi.sin()), epsilon = 1e-9);
+        let r5 = c.end_effector(&[0.0; 6]).rotation.angle_to(&c0.end_effector(&[0.0; 6]).rotation);
+        assert_relative_eq!(r5, 0.05f64.to_radians(), epsilon = 1e-12);
+        // The combined IGM stays exact on the perturbed chain.
+        let q = deg([10.0, -20.0, 30.0, 1.0, -2.0, 3.0]);
+        let back = c.igm(&c.end_effector(&q), &[0.0; 6]).unwrap();
+        assert_same_q(&back, &q);
+        // And the Jacobian still matches finite differences.
+        let j = c.jacobian(&q);
+        for k in 0..6 {
+            let mut qp = q.clone();
+            qp[k] += 1e-6;
+            let dv = (c.end_effector(&qp).translation.vector - c.end_effector(&q).translation.vector) / 1e-6;
+            for r in 0..3 {
+                assert!((j[(r, k)] - dv[r]).abs() < 1e-4, "J[{r},{k}] = {} vs {}", j[(r, k)], dv[r]);
+            }
         }
     }
 

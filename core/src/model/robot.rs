@@ -75,6 +75,32 @@ pub struct LinkDescription {
     /// Controller and channel driving the joint, if known.
     #[serde(default)]
     pub drive: Option<Drive>,
+    /// Intrinsic errors of the joint (all zero for a nominal robot). The diagnosis effects and
+    /// the virtual bench's hidden effects act through these.
+    #[serde(default, skip_serializing_if = "JointErrors::is_nominal")]
+    pub errors: JointErrors,
+}
+
+/// Intrinsic errors of one joint, neutral at zero. Expressed in the link frame after the
+/// constant part of the link transform (z = the nominal joint axis).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct JointErrors {
+    /// A point the (revolute) joint axis passes through, in the link frame (µm): a pivot offset.
+    pub axis_offset_um: [f64; 3],
+    /// Tilt of the joint axis toward the link's x and y axes (mrad).
+    pub axis_tilt_mrad: [f64; 2],
+    /// Scale (gain) error of the joint (ppm): the joint moves q·(1 + scale).
+    pub scale_ppm: f64,
+    /// Zero offset of the joint, in the display unit (µm or °).
+    pub zero_offset: f64,
+}
+
+impl JointErrors {
+    /// True when every error is zero.
+    pub fn is_nominal(&self) -> bool {
+        *self == Self::default()
+    }
 }
 
 /// A serial robot described link by link.
@@ -136,6 +162,10 @@ impl RobotDescription {
                 ("r_um", l.r_um),
                 ("limits.min", l.limits.min),
                 ("limits.max", l.limits.max),
+                ("errors.axis_offset_um", l.errors.axis_offset_um.iter().sum::<f64>()),
+                ("errors.axis_tilt_mrad", l.errors.axis_tilt_mrad.iter().sum::<f64>()),
+                ("errors.scale_ppm", l.errors.scale_ppm),
+                ("errors.zero_offset", l.errors.zero_offset),
             ] {
                 if !v.is_finite() {
                     return Err(FieldError::new(f(name), format!("expected a finite number, found {v}")));
