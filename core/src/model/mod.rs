@@ -2,6 +2,7 @@
 //! Everything that simulates or fits uses this one model.
 
 pub mod air;
+pub mod effects;
 pub mod extrinsics;
 pub mod frames;
 pub mod kinematics;

@@ -1,0 +1,143 @@
+//! Benches: the interface every bench implements (virtual, real controllers, recorded data) and the plan runner.
+//! Owns running a motion plan on a bench, segment by segment, keeping every recorded trace even when a step fails.
+
+pub mod preset;
+pub mod virtual_bench;
+
+use crate::model::air::AmbientConditions;
+use crate::model::robot::RobotDescription;
+use crate::plan::{MotionLimits, Plan, PlanError, TimedMotion, TimedSegment};
+use crate::trace::{Trace, TraceKind, TraceMeta};
+use std::sync::atomic::{AtomicBool, Ordering};
+use thiserror::Error;
+
+pub use preset::BenchPreset;
+pub use virtual_bench::VirtualBench;
+
+/// Why a bench operation failed.
+#[derive(Debug, Error)]
+pub enum BenchError {
+    /// The bench is misconfigured (preset, robot, optics).
+    #[error("{0}")]
+    Config(String),
+    /// The user cancelled; the samples recorded so far in this segment are kept.
+    #[error("cancelled by the user")]
+    Cancelled {
+        /// What was recorded of the interrupted segment.
+        partial: Option<Box<Trace>>,
+    },
+    /// The hardware reported a fault.
+    #[error("bench fault: {0}")]
+    Fault(String),
+}
+
+/// Callbacks and the cancel flag for a running segment.
+pub struct RunControl<'a> {
+    /// Set to request a stop; the bench checks it often (every 50 ms of bench time at most).
+    pub cancel: &'a AtomicBool,
+    /// Called with the trace so far and the index of the first sample not yet reported.
+    pub on_samples: &'a mut dyn FnMut(&Trace, usize),
+    /// Called with the fraction of the segment done (0..1).
+    pub on_progress: &'a mut dyn FnMut(f64),
+}
+
+impl RunControl<'_> {
+    /// True once a stop has been requested.
+    pub fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+/// What every bench offers: the robot it believes it has, its state, and running one timed
+/// segment of a plan while recording.
+pub trait Bench: Send {
+    /// A name for the user ("virtual bench table2-ideal", "PI E-712 at 10.0.0.2").
+    fn name(&self) -> String;
+    /// The robot description the software uses for this bench (nominal, never the truth).
+    fn robot(&self) -> &RobotDescription;
+    /// Speeds and accelerations of the stages.
+    fn motion_limits(&self) -> &MotionLimits;
+    /// Current joint positions (µm, °).
+    fn position_display(&self) -> [f64; 6];
+    /// Current laser wavelength (nm).
+    fn wavelength_nm(&self) -> f64;
+    /// Ambient conditions as measured at the bench (they set the air index).
+    fn ambient(&self) -> AmbientConditions;
+    /// Bench time since the start of the session (s).
+    fn clock_s(&self) -> f64;
+    /// Run one segment; return its trace when the segment records.
+    fn run_segment(
+        &mut self,
+        segment: &TimedSegment,
+        meta: TraceMeta,
+        control: &mut RunControl<'_>,
+    ) -> Result<Option<Trace>, BenchError>;
+}
+
+/// Why a plan stopped. The traces recorded before the stop are in [`PlanRun::traces`].
+#[derive(Debug, Error)]
+pub enum RunError {
+    /// The plan is invalid or leaves the joint limits; nothing was moved.
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    /// A segment failed or was cancelled.
+    #[error("segment {segment} ({label}): {error}")]
+    Segment {
+        /// Index of the segment in the plan.
+        segment: usize,
+        /// Its label.
+        label: String,
+        /// What happened.
+        error: BenchError,
+    },
+}
+
+/// The result of running a plan: every trace recorded, and how it ended.
+#[derive(Debug)]
+pub struct PlanRun {
+    /// Recorded traces, in plan order (a partial trace of an interrupted segment included).
+    pub traces: Vec<Trace>,
+    /// Bench time used (s).
+    pub duration_s: f64,
+    /// `Ok` when every segment ran.
+    pub outcome: Result<(), RunError>,
+}
+
+/// Run a plan: expand and check it against the limits first (nothing moves if any move is out
+/// of range), then run segment by segment. Data already recorded is never lost: it is in the
+/// returned [`PlanRun`] whatever the outcome.
+pub fn run_plan(bench: &mut dyn Bench, plan: &Plan, control: &mut RunControl<'_>) -> PlanRun {
+    let start = bench.clock_s();
+    let segments = match plan.expand(bench.robot(), bench.position_display(), bench.motion_limits()) {
+        Ok(s) => s,
+        Err(e) => return PlanRun { traces: vec![], duration_s: 0.0, outcome: Err(e.into()) },
+    };
+    let mut traces = Vec::new();
+    let count = segments.len();
+    for (i, seg) in segments.iter().enumerate() {
+        let meta = TraceMeta {
+            label: seg.label.clone(),
+            kind: if matches!(seg.motion, TimedMotion::Sweep { .. }) { TraceKind::WavelengthSweep } else { TraceKind::Motion },
+            bench: bench.name(),
+            irradiance_unit: "mW".into(),
+            notes: format!("plan {}, segment {} of {}", plan.name, i + 1, count),
+        };
+        match bench.run_segment(seg, meta, control) {
+            Ok(Some(t)) => traces.push(t),
+            Ok(None) => {}
+            Err(error) => {
+                if let BenchError::Cancelled { partial: Some(p) } = &error {
+                    if !p.is_empty() {
+                        traces.push((**p).clone());
+                    }
+                }
+                return PlanRun {
+                    traces,
+                    duration_s: bench.clock_s() - start,
+                    outcome: Err(RunError::Segment { segment: i, label: seg.label.clone(), error }),
+                };
+            }
+        }
+    }
+    PlanRun { traces, duration_s: bench.clock_s() - start, outcome: Ok(()) }
+}
