@@ -2,7 +2,13 @@
 //! Owns no science: each subcommand calls `photorobot_core` and formats what it returns.
 
 use clap::{Parser, Subcommand};
+use photorobot_core::bench::{run_plan, Bench, BenchError, RunControl, RunError, VirtualBench};
 use photorobot_core::files::FileError;
+use photorobot_core::measure::{self, Measurement, MeasureError, PhaseModel};
+use photorobot_core::model::air::AmbientConditions;
+use photorobot_core::model::optics::OpticalParams;
+use photorobot_core::plan::Plan;
+use photorobot_core::trace::{Trace, TraceError};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::frames::FrameTree;
 use photorobot_core::model::kinematics::{Chain, LimitViolation};
@@ -28,8 +34,70 @@ pub struct Cli {
 pub enum Command {
     /// Print every frame's pose, the signed cavity length L and the reflection point P_r.
     Frames(FramesArgs),
+    /// Run a motion plan on a virtual bench and write the recorded traces as CSV.
+    Simulate(SimulateArgs),
+    /// Analyse a recorded trace: fringe count, dL and its uncertainty (or the absolute gap of a sweep).
+    Fringes(FringesArgs),
     /// Start the workbench GUI (the default when no command is given).
     Gui,
+}
+
+/// Arguments of `photorobot simulate`.
+#[derive(Debug, clap::Args)]
+pub struct SimulateArgs {
+    /// Bench preset: an embedded name (table2-ideal, femto-lab) or a preset file (RON).
+    #[arg(long, value_name = "PRESET")]
+    pub bench: String,
+    /// Motion plan file (RON), or an embedded plan: strategy1, strategy2.
+    #[arg(long, value_name = "PLAN")]
+    pub plan: String,
+    /// Output: a directory (one CSV per recorded segment) or, for a plan that records one trace, a .csv file.
+    #[arg(long, value_name = "DIR|FILE")]
+    pub out: PathBuf,
+    /// Random seed (default: the preset's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+/// Ambient conditions, for the air index.
+#[derive(Debug, Clone, clap::Args)]
+pub struct AmbientArgs {
+    /// Air temperature (°C).
+    #[arg(long, default_value_t = 20.0, value_name = "°C")]
+    pub temperature_c: f64,
+    /// Air pressure (hPa).
+    #[arg(long, default_value_t = 1013.25, value_name = "hPa")]
+    pub pressure_hpa: f64,
+    /// Relative humidity (%).
+    #[arg(long, default_value_t = 50.0, value_name = "%")]
+    pub humidity_percent: f64,
+}
+
+impl AmbientArgs {
+    fn conditions(&self) -> AmbientConditions {
+        AmbientConditions {
+            temperature_c: self.temperature_c,
+            pressure_hpa: self.pressure_hpa,
+            relative_humidity_percent: self.humidity_percent,
+            ..Default::default()
+        }
+    }
+}
+
+/// Arguments of `photorobot fringes`.
+#[derive(Debug, clap::Args)]
+pub struct FringesArgs {
+    /// The trace (CSV with header t_s,q1_um,q2_um,q3_um,q4_deg,q5_deg,q6_deg,wavelength_nm,irradiance).
+    pub trace: PathBuf,
+    /// Extrinsics used to predict the motion's direction (default: Table II).
+    #[arg(long, value_name = "FILE")]
+    pub extrinsics: Option<PathBuf>,
+    /// Ambient conditions.
+    #[command(flatten)]
+    pub ambient: AmbientArgs,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `photorobot frames`.
@@ -78,6 +146,18 @@ pub enum CliError {
     /// A joint value is outside its limits.
     #[error("argument --q: {0}")]
     Limits(#[from] LimitViolation),
+    /// A bench could not be built or failed.
+    #[error(transparent)]
+    Bench(#[from] BenchError),
+    /// A plan failed.
+    #[error(transparent)]
+    Run(#[from] RunError),
+    /// A trace file could not be read or written.
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    /// A trace could not be analysed.
+    #[error(transparent)]
+    Measure(#[from] MeasureError),
     /// Output could not be written.
     #[error("cannot write output: {0}")]
     Output(#[from] std::io::Error),
@@ -93,6 +173,8 @@ where
     match cli.command {
         None | Some(Command::Gui) => Ok(Outcome::StartGui),
         Some(Command::Frames(a)) => frames(&a, out).map(|()| Outcome::Done),
+        Some(Command::Simulate(a)) => simulate(&a, out).map(|()| Outcome::Done),
+        Some(Command::Fringes(a)) => fringes(&a, out).map(|()| Outcome::Done),
     }
 }
 
@@ -222,6 +304,151 @@ fn frames(a: &FramesArgs, out: &mut dyn Write) -> Result<(), CliError> {
             )?;
         }
         Err(e) => writeln!(out, "no cavity: {e}")?,
+    }
+    Ok(())
+}
+
+fn load_plan(name_or_path: &str) -> Result<Plan, CliError> {
+    Ok(match name_or_path {
+        "strategy1" => Plan::from_ron_str(photorobot_core::plan::STRATEGY1_RON, std::path::Path::new("assets/plans/strategy1.ron"))?,
+        "strategy2" => Plan::from_ron_str(photorobot_core::plan::STRATEGY2_RON, std::path::Path::new("assets/plans/strategy2.ron"))?,
+        path => Plan::load(std::path::Path::new(path))?,
+    })
+}
+
+/// A file-system-safe name for a trace file.
+fn slug(label: &str) -> String {
+    let s: String = label
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '.' { c } else { '_' })
+        .collect();
+    let s = s.trim_matches('_').to_string();
+    if s.is_empty() { "trace".into() } else { s.chars().take(60).collect() }
+}
+
+fn simulate(a: &SimulateArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let mut bench = VirtualBench::from_preset_name(&a.bench, a.seed)?;
+    let plan = load_plan(&a.plan)?;
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+    let run = run_plan(&mut bench, &plan, &mut control);
+    let single_file = a.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    if single_file && run.traces.len() > 1 {
+        return Err(CliError::Argument {
+            argument: "--out",
+            problem: format!(
+                "the plan recorded {} traces: give a directory, not the file {}",
+                run.traces.len(),
+                a.out.display()
+            ),
+        });
+    }
+    // Whatever happened, the traces recorded so far are written first.
+    let mut written = Vec::new();
+    if single_file {
+        if let Some(t) = run.traces.first() {
+            t.write_csv(&a.out)?;
+            written.push(a.out.clone());
+        }
+    } else {
+        std::fs::create_dir_all(&a.out).map_err(|source| FileError::Io {
+            file: a.out.clone(),
+            action: "cannot create directory",
+            source,
+        })?;
+        for (i, t) in run.traces.iter().enumerate() {
+            let path = a.out.join(format!("{:03}-{}.csv", i + 1, slug(&t.meta.label)));
+            t.write_csv(&path)?;
+            written.push(path);
+        }
+    }
+    let samples: usize = run.traces.iter().map(Trace::len).sum();
+    writeln!(
+        out,
+        "{}: plan {} ran {:.1} s of bench time; {} traces, {} samples written to {}",
+        bench.name(),
+        plan.name,
+        run.duration_s,
+        written.len(),
+        samples,
+        a.out.display()
+    )?;
+    run.outcome?;
+    Ok(())
+}
+
+fn fringes(a: &FringesArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let trace = Trace::read_csv(&a.trace)?;
+    let extrinsics = load_extrinsics(&a.extrinsics)?;
+    let wavelength = trace.wavelength_nm.first().copied().unwrap_or(1560.0);
+    let model = PhaseModel::new(
+        RobotDescription::femto_6dof(),
+        extrinsics,
+        OpticalParams::default(),
+        &a.ambient.conditions(),
+        wavelength,
+    )
+    .map_err(|problem| CliError::Argument { argument: "--temperature-c/--pressure-hpa/--humidity-percent", problem })?;
+    let m = measure::analyse(&trace, &model)?;
+    match (&m, a.json) {
+        (Measurement::Motion(mm), true) => {
+            let doc = json!({
+                "trace": a.trace.display().to_string(),
+                "kind": "motion",
+                "samples": trace.len(),
+                "wavelength_nm": mm.wavelength_nm,
+                "n_air": mm.n_air,
+                "fringe_count": mm.count.count,
+                "extrema": mm.count.extrema.len(),
+                "count_dl_um": mm.count.dl_nm * 1e-3,
+                "count_resolution_um": mm.count.resolution_nm * 1e-3,
+                "dl_um": mm.track.total_dl_nm * 1e-3,
+                "sigma_um": mm.track.sigma_total_nm * 1e-3,
+                "predicted_dl_um": mm.hint_nm.last().copied().unwrap_or(0.0) * 1e-3,
+            });
+            writeln!(out, "{}", serde_json::to_string_pretty(&doc).expect("JSON of plain data"))?;
+        }
+        (Measurement::Motion(mm), false) => {
+            writeln!(out, "trace {} ({} samples, λ = {:.3} nm, n_air - 1 = {:.1} ppm)", a.trace.display(), trace.len(), mm.wavelength_nm, (mm.n_air - 1.0) * 1e6)?;
+            writeln!(
+                out,
+                "fringe count: {} extrema, signed count {} → dL = {:.3} µm ± {:.3} µm (one λ/4 step)",
+                mm.count.extrema.len(),
+                mm.count.count,
+                mm.count.dl_nm * 1e-3,
+                mm.count.resolution_nm * 1e-3
+            )?;
+            writeln!(
+                out,
+                "phase tracking: dL = {:.4} µm, standard uncertainty {:.4} µm",
+                mm.track.total_dl_nm * 1e-3,
+                mm.track.sigma_total_nm * 1e-3
+            )?;
+            writeln!(out, "(nominal model predicted {:.4} µm)", mm.hint_nm.last().copied().unwrap_or(0.0) * 1e-3)?;
+        }
+        (Measurement::Sweep(s), json) => {
+            let e = &s.fit.estimate;
+            if json {
+                let doc = json!({
+                    "trace": a.trace.display().to_string(),
+                    "kind": "sweep",
+                    "samples": trace.len(),
+                    "gap_um": e.gap_um,
+                    "sigma_um": e.sigma_um,
+                    "fringes_across_sweep": e.fringes_across_sweep,
+                    "method": e.method.name(),
+                    "peak_fsr_gap_um": s.peak_fsr.map(|p| p.gap_um),
+                    "peak_fsr_sigma_um": s.peak_fsr.map(|p| p.sigma_um),
+                });
+                writeln!(out, "{}", serde_json::to_string_pretty(&doc).expect("JSON of plain data"))?;
+            } else {
+                writeln!(out, "trace {} is a wavelength sweep ({} samples, {:.1} fringes across it)", a.trace.display(), trace.len(), e.fringes_across_sweep)?;
+                writeln!(out, "absolute gap: {:.4} µm ± {:.4} µm ({})", e.gap_um, e.sigma_um, e.method.name())?;
+                if let Some(p) = s.peak_fsr {
+                    writeln!(out, "paper's peak-FSR method: {:.3} µm ± {:.3} µm", p.gap_um, p.sigma_um)?;
+                }
+            }
+        }
     }
     Ok(())
 }

@@ -2,6 +2,8 @@
 //! Data flows one way: plan -> bench -> trace -> measurements -> estimates -> validation, diagnosis, reports.
 
 pub mod files;
+pub mod bench;
 pub mod fringes;
+pub mod measure;
 pub mod model;
 pub mod sweep;
