@@ -4,4 +4,6 @@
 pub mod files;
 pub mod fringes;
 pub mod model;
+pub mod plan;
 pub mod sweep;
+pub mod trace;
