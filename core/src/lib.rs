@@ -6,4 +6,6 @@ pub mod bench;
 pub mod fringes;
 pub mod measure;
 pub mod model;
+pub mod plan;
 pub mod sweep;
+pub mod trace;
