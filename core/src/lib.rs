@@ -4,7 +4,7 @@
 pub mod files;
 pub mod bench;
 pub mod fringes;
-pub mod measure;
+// pub mod measure;
 pub mod model;
 pub mod plan;
 pub mod sweep;

@@ -260,3 +260,165 @@ impl From<FileError> for BenchError {
         BenchError::Config(e.to_string())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::{run_plan, PlanRun};
+    use crate::plan::{JointTarget, Plan, Segment};
+    use std::sync::atomic::AtomicBool;
+
+    fn run(bench: &mut VirtualBench, plan: &Plan) -> PlanRun {
+        let cancel = AtomicBool::new(false);
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        run_plan(bench, plan, &mut control)
+    }
+
+    fn plan(segments: Vec<Segment>) -> Plan {
+        Plan { name: "test".into(), description: String::new(), segments }
+    }
+
+    fn mv(target: JointTarget, record: bool) -> Segment {
+        Segment::Move { to: target, record, label: "move".into() }
+    }
+
+    fn dwell(s: f64) -> Segment {
+        Segment::Dwell { duration_s: s, record: true, label: "dwell".into() }
+    }
+
+    #[test]
+    fn same_seed_gives_the_same_trace_and_another_seed_other_noise() {
+        let p = plan(vec![mv(JointTarget::default().with(1, 5.0), true)]);
+        let a = run(&mut VirtualBench::from_preset_name("table2-ideal", Some(3)).unwrap(), &p);
+        let b = run(&mut VirtualBench::from_preset_name("table2-ideal", Some(3)).unwrap(), &p);
+        let c = run(&mut VirtualBench::from_preset_name("table2-ideal", Some(4)).unwrap(), &p);
+        assert_eq!(a.traces[0].irradiance, b.traces[0].irradiance);
+        assert_ne!(a.traces[0].irradiance, c.traces[0].irradiance);
+        assert!(a.outcome.is_ok());
+    }
+
+    #[test]
+    fn a_trace_holds_only_what_a_real_bench_records() {
+        let p = plan(vec![mv(JointTarget::default().with(2, 50.0), true)]);
+        let r = run(&mut VirtualBench::from_preset_name("femto-lab", None).unwrap(), &p);
+        let t = &r.traces[0];
+        assert!(t.extra.is_empty(), "no hidden columns");
+        let csv = String::from_utf8(t.to_csv_bytes(std::path::Path::new("t.csv")).unwrap()).unwrap();
+        for secret in ["112.4", "113.3", "0.744", "ThermalDrift", "PivotOffset", "truth"] {
+            assert!(!csv.contains(secret), "the trace leaks `{secret}`");
+        }
+        // Encoders read the joints with noise (femto-lab): the recorded q3 is near, not at, the command.
+        let last = t.q3_um.last().unwrap();
+        assert!((last - 50.0).abs() < 0.02 && *last != 50.0, "q3 = {last}");
+    }
+
+    #[test]
+    fn motion_is_velocity_limited_and_sampled_at_the_preset_rate() {
+        let mut b = VirtualBench::from_preset_name("table2-ideal", None).unwrap();
+        let p = plan(vec![mv(JointTarget::default().with(2, 100.0), true)]);
+        let r = run(&mut b, &p);
+        let t = &r.traces[0];
+        let dt = t.t_s[1] - t.t_s[0];
+        assert!((dt - 1e-4).abs() < 1e-12, "10 kHz");
+        // 100 µm at 100 µm/s with 1000 µm/s² ramps: 1.1 s, plus 0.05 s settling.
+        let span = t.t_s.last().unwrap() - t.t_s[0];
+        assert!((span - 1.15).abs() < 2e-4, "duration {span}");
+        let max_speed = t.q3_um.windows(2).map(|w| (w[1] - w[0]) / dt).fold(0.0, f64::max);
+        assert!(max_speed <= 100.0 + 1e-6, "max speed {max_speed} µm/s");
+        assert_eq!(b.position_display()[2], 100.0);
+    }
+
+    /// Fringe count of a 20 µm move along the beam against the truth computed independently
+    /// from the extrinsics: 2·n·Δd/λ fringes, with d the perpendicular gap.
+    #[test]
+    fn fringes_of_an_axial_move_match_the_truth() {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let mut b = VirtualBench::new(&preset, None).unwrap();
+        let p = plan(vec![mv(JointTarget::default().with(1, -10.0), false), mv(JointTarget::default().with(1, 10.0), true)]);
+        let r = run(&mut b, &p);
+        let t = &r.traces[0];
+        let chain = Chain::femto_6dof();
+        let d = |q2: f64| {
+            let c = preset.truth.cavity(&chain.end_effector(&[0.0, q2, 0.0, 0.0, 0.0, 0.0])).unwrap();
+            c.length_um.abs() * c.tilt_rad.cos()
+        };
+        let n = air_index_ciddor(1560.0, &preset.ambient).unwrap();
+        let fringes = 2.0 * n * (d(10.0) - d(-10.0)).abs() / 1.560;
+        // Count maxima crossing the mean: each fringe gives one upward crossing.
+        let mean = t.irradiance.iter().sum::<f64>() / t.len() as f64;
+        let crossings = t.irradiance.windows(2).filter(|w| w[0] < mean && w[1] >= mean).count();
+        assert!((crossings as f64 - fringes).abs() <= 1.0, "{crossings} crossings, {fringes:.2} fringes expected");
+        assert!(fringes > 25.0);
+    }
+
+    #[test]
+    fn detector_noise_is_the_preset_fraction_of_the_fringe_amplitude() {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let mut b = VirtualBench::new(&preset, Some(11)).unwrap();
+        let r = run(&mut b, &plan(vec![dwell(1.0)]));
+        let v = &r.traces[0].irradiance;
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+        let c = preset.truth.cavity(&Chain::femto_6dof().end_effector(&[0.0; 6])).unwrap();
+        let n = air_index_ciddor(1560.0, &preset.ambient).unwrap();
+        let b_amp = FabryPerot::new(&preset.optics, 1560.0, n).unwrap().two_beam(c.length_um.abs(), c.tilt_rad).amplitude_mw;
+        assert!((sd / b_amp - 1e-3).abs() < 0.05e-3, "σ/B = {}", sd / b_amp);
+    }
+
+    #[test]
+    fn hidden_thermal_drift_moves_the_fringes_at_rest() {
+        let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
+        preset.effects = vec![Effect::ThermalDrift { nm_per_s: 200.0, nm_per_s2: 0.0 }];
+        let mut b = VirtualBench::new(&preset, None).unwrap();
+        let r = run(&mut b, &plan(vec![dwell(8.0)]));
+        // A 50 ms boxcar (the fringe period here is ~3.9 s) removes the noise chatter.
+        let v: Vec<f64> = r.traces[0].irradiance.chunks(500).map(|c| c.iter().sum::<f64>() / c.len() as f64).collect();
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let crossings = v.windows(2).filter(|w| (w[0] < mean) != (w[1] < mean)).count();
+        // 1.6 µm of drift = 2·1.6/1.56 ≈ 2.05 fringes: about 4 mean crossings.
+        assert!((3..=5).contains(&crossings), "{crossings} crossings");
+    }
+
+    #[test]
+    fn cancelling_keeps_the_samples_recorded_so_far() {
+        let mut b = VirtualBench::from_preset_name("table2-ideal", None).unwrap();
+        let p = plan(vec![dwell(0.5), dwell(2.0)]);
+        let cancel = AtomicBool::new(false);
+        let mut seen = 0usize;
+        let mut on_samples = |t: &Trace, _from: usize| {
+            seen = t.len();
+            if t.t_s.last().copied().unwrap_or(0.0) > 1.0 {
+                cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+        };
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut on_samples, on_progress: &mut |_| {} };
+        let r = run_plan(&mut b, &p, &mut control);
+        assert!(matches!(r.outcome, Err(crate::bench::RunError::Segment { segment: 1, error: BenchError::Cancelled { .. }, .. })));
+        assert_eq!(r.traces.len(), 2, "the finished dwell and the partial one");
+        assert!(r.traces[1].len() > 1000 && r.traces[1].len() < 20001);
+        assert!(seen > 0);
+    }
+
+    #[test]
+    fn a_plan_out_of_limits_moves_nothing() {
+        let mut b = VirtualBench::from_preset_name("table2-ideal", None).unwrap();
+        let p = plan(vec![mv(JointTarget::default().with(2, 50.0), true), mv(JointTarget::default().with(3, 12.0), true)]);
+        let r = run(&mut b, &p);
+        assert!(r.traces.is_empty());
+        assert_eq!(b.position_display(), [0.0; 6]);
+        let msg = r.outcome.unwrap_err().to_string();
+        assert!(msg.contains("q4 = 12.000 ° is 2.000 ° above its upper limit 10.000 °"), "{msg}");
+    }
+
+    #[test]
+    fn presets_are_valid_and_errors_name_fields() {
+        for (name, _) in crate::bench::preset::EMBEDDED {
+            VirtualBench::from_preset_name(name, None).unwrap();
+        }
+        let text = crate::bench::preset::EMBEDDED[0].1.replace("sample_rate_hz: 10000.0", "sample_rate_hz: -1.0");
+        let err = BenchPreset::from_ron_str(&text, std::path::Path::new("b.ron")).unwrap_err().to_string();
+        assert_eq!(err, "b.ron: field `detector.sample_rate_hz`: expected a positive number, found -1");
+        let err = BenchPreset::resolve("no-such-bench").unwrap_err().to_string();
+        assert!(err.contains("expected one of: table2-ideal, femto-lab"), "{err}");
+    }
+}
