@@ -22,7 +22,9 @@ fn text_output_at_zero_gives_the_spec_cavity() {
     let text = frames(&[]).unwrap();
     assert!(text.contains("signed cavity length L = -898.830 µm (gap |L| = 898.830 µm)"), "{text}");
     assert!(text.contains("reflection point P_r in world = (104.243, 1.280, 101.818) µm"), "{text}");
-    for name in ["world", "link 1 (q1)", "link 6 (q6)", "end effector", "tool (lamella)", "fiber", "reflection point P_r"] {
+    for name in
+        ["world", "link 1 (q1)", "link 6 (q6)", "end effector", "tool (lamella)", "fiber", "reflection point P_r"]
+    {
         assert!(text.contains(name), "missing frame {name}:\n{text}");
     }
 }

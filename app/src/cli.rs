@@ -4,15 +4,15 @@
 use clap::{Parser, Subcommand};
 use photorobot_core::bench::{run_plan, Bench, BenchError, RunControl, RunError, VirtualBench};
 use photorobot_core::files::FileError;
-use photorobot_core::measure::{self, Measurement, MeasureError, PhaseModel};
+use photorobot_core::measure::{self, MeasureError, Measurement, PhaseModel};
 use photorobot_core::model::air::AmbientConditions;
-use photorobot_core::model::optics::OpticalParams;
-use photorobot_core::plan::Plan;
-use photorobot_core::trace::{Trace, TraceError};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::frames::FrameTree;
 use photorobot_core::model::kinematics::{Chain, LimitViolation};
+use photorobot_core::model::optics::OpticalParams;
 use photorobot_core::model::robot::RobotDescription;
+use photorobot_core::plan::Plan;
+use photorobot_core::trace::{Trace, TraceError};
 use serde_json::json;
 use std::ffi::OsString;
 use std::io::Write;
@@ -266,11 +266,7 @@ fn frames(a: &FramesArgs, out: &mut dyn Write) -> Result<(), CliError> {
         .collect();
     writeln!(out, "joints:     {}", qs.join(", "))?;
     writeln!(out)?;
-    writeln!(
-        out,
-        "{:<28} {:>34}   rotation (rows; columns are the frame's axes)",
-        "frame", "origin in world (µm)"
-    )?;
+    writeln!(out, "{:<28} {:>34}   rotation (rows; columns are the frame's axes)", "frame", "origin in world (µm)")?;
     for (i, n) in tree.nodes.iter().enumerate() {
         let p = n.world.translation.vector;
         let m = n.world.rotation.to_rotation_matrix().into_inner();
@@ -310,20 +306,28 @@ fn frames(a: &FramesArgs, out: &mut dyn Write) -> Result<(), CliError> {
 
 fn load_plan(name_or_path: &str) -> Result<Plan, CliError> {
     Ok(match name_or_path {
-        "strategy1" => Plan::from_ron_str(photorobot_core::plan::STRATEGY1_RON, std::path::Path::new("assets/plans/strategy1.ron"))?,
-        "strategy2" => Plan::from_ron_str(photorobot_core::plan::STRATEGY2_RON, std::path::Path::new("assets/plans/strategy2.ron"))?,
+        "strategy1" => Plan::from_ron_str(
+            photorobot_core::plan::STRATEGY1_RON,
+            std::path::Path::new("assets/plans/strategy1.ron"),
+        )?,
+        "strategy2" => Plan::from_ron_str(
+            photorobot_core::plan::STRATEGY2_RON,
+            std::path::Path::new("assets/plans/strategy2.ron"),
+        )?,
         path => Plan::load(std::path::Path::new(path))?,
     })
 }
 
 /// A file-system-safe name for a trace file.
 fn slug(label: &str) -> String {
-    let s: String = label
-        .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '.' { c } else { '_' })
-        .collect();
+    let s: String =
+        label.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '.' { c } else { '_' }).collect();
     let s = s.trim_matches('_').to_string();
-    if s.is_empty() { "trace".into() } else { s.chars().take(60).collect() }
+    if s.is_empty() {
+        "trace".into()
+    } else {
+        s.chars().take(60).collect()
+    }
 }
 
 fn simulate(a: &SimulateArgs, out: &mut dyn Write) -> Result<(), CliError> {
@@ -409,7 +413,14 @@ fn fringes(a: &FringesArgs, out: &mut dyn Write) -> Result<(), CliError> {
             writeln!(out, "{}", serde_json::to_string_pretty(&doc).expect("JSON of plain data"))?;
         }
         (Measurement::Motion(mm), false) => {
-            writeln!(out, "trace {} ({} samples, λ = {:.3} nm, n_air - 1 = {:.1} ppm)", a.trace.display(), trace.len(), mm.wavelength_nm, (mm.n_air - 1.0) * 1e6)?;
+            writeln!(
+                out,
+                "trace {} ({} samples, λ = {:.3} nm, n_air - 1 = {:.1} ppm)",
+                a.trace.display(),
+                trace.len(),
+                mm.wavelength_nm,
+                (mm.n_air - 1.0) * 1e6
+            )?;
             writeln!(
                 out,
                 "fringe count: {} extrema, signed count {} → dL = {:.3} µm ± {:.3} µm (one λ/4 step)",
@@ -427,7 +438,7 @@ fn fringes(a: &FringesArgs, out: &mut dyn Write) -> Result<(), CliError> {
             writeln!(out, "(nominal model predicted {:.4} µm)", mm.hint_nm.last().copied().unwrap_or(0.0) * 1e-3)?;
         }
         (Measurement::Sweep(s), json) => {
-            let e = &s.fit.estimate;
+            let e = &s.gap;
             if json {
                 let doc = json!({
                     "trace": a.trace.display().to_string(),
@@ -442,7 +453,13 @@ fn fringes(a: &FringesArgs, out: &mut dyn Write) -> Result<(), CliError> {
                 });
                 writeln!(out, "{}", serde_json::to_string_pretty(&doc).expect("JSON of plain data"))?;
             } else {
-                writeln!(out, "trace {} is a wavelength sweep ({} samples, {:.1} fringes across it)", a.trace.display(), trace.len(), e.fringes_across_sweep)?;
+                writeln!(
+                    out,
+                    "trace {} is a wavelength sweep ({} samples, {:.1} fringes across it)",
+                    a.trace.display(),
+                    trace.len(),
+                    e.fringes_across_sweep
+                )?;
                 writeln!(out, "absolute gap: {:.4} µm ± {:.4} µm ({})", e.gap_um, e.sigma_um, e.method.name())?;
                 if let Some(p) = s.peak_fsr {
                     writeln!(out, "paper's peak-FSR method: {:.3} µm ± {:.3} µm", p.gap_um, p.sigma_um)?;

@@ -22,6 +22,13 @@ impl Default for Workbench {
 }
 
 impl Workbench {
+    /// Set the joints (µm, °), clamped to their limits.
+    pub fn set_joints_display(&mut self, q_display: &[f64]) {
+        for ((v, l), new) in self.q_display.iter_mut().zip(&self.chain.description().links).zip(q_display) {
+            *v = new.clamp(l.limits.min, l.limits.max);
+        }
+    }
+
     /// Draw the whole window.
     pub fn show(&mut self, ui: &mut egui::Ui) {
         egui::Panel::top("title").show(ui, |ui| {
@@ -34,10 +41,11 @@ impl Workbench {
             ui.heading("Joints");
             let desc = self.chain.description().clone();
             for (l, v) in desc.links.iter().zip(self.q_display.iter_mut()) {
-                ui.add(
-                    egui::Slider::new(v, l.limits.min..=l.limits.max)
-                        .text(format!("{} ({})", l.name, l.joint.display_unit())),
-                );
+                ui.add(egui::Slider::new(v, l.limits.min..=l.limits.max).text(format!(
+                    "{} ({})",
+                    l.name,
+                    l.joint.display_unit()
+                )));
             }
             if ui.button("Home (all joints 0)").clicked() {
                 self.q_display.iter_mut().for_each(|v| *v = 0.0);

@@ -18,20 +18,10 @@ fn power(c: &mut Criterion) {
         ("power_4_beams_tilted", OpticalParams::default(), 0.0195),
         (
             "power_4_beams_back_face",
-            OpticalParams {
-                back_face: Some(BackFace::default()),
-                ..OpticalParams::default()
-            },
+            OpticalParams { back_face: Some(BackFace::default()), ..OpticalParams::default() },
             0.0195,
         ),
-        (
-            "power_1_beam",
-            OpticalParams {
-                beams: 1,
-                ..OpticalParams::default()
-            },
-            0.0195,
-        ),
+        ("power_1_beam", OpticalParams { beams: 1, ..OpticalParams::default() }, 0.0195),
     ] {
         let fp = FabryPerot::new(&params, 1560.0, 1.000268).unwrap();
         c.bench_function(&format!("{name} (x{GAPS})"), |b| {
@@ -45,19 +35,15 @@ fn power(c: &mut Criterion) {
         });
     }
     let params = OpticalParams::default();
-    c.bench_function(
-        &format!("reflected_power_with_construction (x{GAPS})"),
-        |b| {
-            b.iter(|| {
-                let mut sum = 0.0;
-                for &g in &gaps {
-                    sum +=
-                        reflected_power(&params, black_box(g), 0.0195, 1560.0, 1.000268).unwrap();
-                }
-                sum
-            })
-        },
-    );
+    c.bench_function(&format!("reflected_power_with_construction (x{GAPS})"), |b| {
+        b.iter(|| {
+            let mut sum = 0.0;
+            for &g in &gaps {
+                sum += reflected_power(&params, black_box(g), 0.0195, 1560.0, 1.000268).unwrap();
+            }
+            sum
+        })
+    });
 }
 
 criterion_group!(benches, power);

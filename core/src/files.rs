@@ -68,19 +68,12 @@ pub struct FieldError {
 impl FieldError {
     /// A field error.
     pub fn new(field: impl Into<String>, problem: impl Into<String>) -> Self {
-        Self {
-            field: field.into(),
-            problem: problem.into(),
-        }
+        Self { field: field.into(), problem: problem.into() }
     }
 
     /// Attach the file name.
     pub fn in_file(self, file: impl Into<PathBuf>) -> FileError {
-        FileError::Invalid {
-            file: file.into(),
-            field: self.field,
-            problem: self.problem,
-        }
+        FileError::Invalid { file: file.into(), field: self.field, problem: self.problem }
     }
 }
 
@@ -91,11 +84,7 @@ impl fmt::Display for FieldError {
 }
 
 /// Parse RON text; `origin` names the file (or the embedded asset) in errors.
-pub fn parse_ron<T: DeserializeOwned>(
-    text: &str,
-    origin: &Path,
-    expected: &str,
-) -> Result<T, FileError> {
+pub fn parse_ron<T: DeserializeOwned>(text: &str, origin: &Path, expected: &str) -> Result<T, FileError> {
     ron::from_str(text).map_err(|e| FileError::Parse {
         file: origin.to_path_buf(),
         line: e.span.start.line,
@@ -117,32 +106,19 @@ pub fn load_ron<T: DeserializeOwned>(path: &Path, expected: &str) -> Result<T, F
 
 /// Serialise to pretty RON.
 pub fn to_ron_string<T: Serialize>(value: &T, origin: &Path) -> Result<String, FileError> {
-    ron::ser::to_string_pretty(value, ron::ser::PrettyConfig::default()).map_err(|e| {
-        FileError::Serialise {
-            file: origin.to_path_buf(),
-            message: e.to_string(),
-        }
-    })
+    ron::ser::to_string_pretty(value, ron::ser::PrettyConfig::default())
+        .map_err(|e| FileError::Serialise { file: origin.to_path_buf(), message: e.to_string() })
 }
 
 /// Write bytes atomically: into a temporary file beside the target, flushed to disk, then
 /// renamed over it. A crash leaves either the old file or the new one, never half of one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
-    let io = |action: &'static str| {
-        move |source| FileError::Io {
-            file: path.to_path_buf(),
-            action,
-            source,
-        }
-    };
+    let io = |action: &'static str| move |source| FileError::Io { file: path.to_path_buf(), action, source };
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "file".into());
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "file".into());
     let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(io("cannot create temporary file"))?;

@@ -1,10 +1,10 @@
 //! photorobot core: the science of photo-robotic calibration, without any GUI.
 //! Data flows one way: plan -> bench -> trace -> measurements -> estimates -> validation, diagnosis, reports.
 
-pub mod files;
 pub mod bench;
+pub mod files;
 pub mod fringes;
-// pub mod measure;
+pub mod measure;
 pub mod model;
 pub mod plan;
 pub mod sweep;

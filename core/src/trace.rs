@@ -36,17 +36,8 @@ use thiserror::Error;
 pub const FORMAT_LINE: &str = "# photorobot trace v1";
 
 /// The required columns, in order, at the start of the header row.
-pub const REQUIRED_COLUMNS: [&str; 9] = [
-    "t_s",
-    "q1_um",
-    "q2_um",
-    "q3_um",
-    "q4_deg",
-    "q5_deg",
-    "q6_deg",
-    "wavelength_nm",
-    "irradiance",
-];
+pub const REQUIRED_COLUMNS: [&str; 9] =
+    ["t_s", "q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg", "wavelength_nm", "irradiance"];
 
 /// Default largest number of data rows [`Trace::read_csv`] accepts (50 million, about 4 GB
 /// of columns in memory); larger files are refused with a message instead of exhausting memory.
@@ -69,11 +60,7 @@ pub enum TraceKind {
 
 impl TraceKind {
     /// All kinds, in the order they are documented.
-    pub const ALL: [TraceKind; 3] = [
-        TraceKind::Motion,
-        TraceKind::WavelengthSweep,
-        TraceKind::Static,
-    ];
+    pub const ALL: [TraceKind; 3] = [TraceKind::Motion, TraceKind::WavelengthSweep, TraceKind::Static];
 
     /// The name written in the `# kind:` line.
     pub fn as_str(self) -> &'static str {
@@ -87,9 +74,7 @@ impl TraceKind {
     /// Parse a `# kind:` value (case-insensitive, surrounding spaces ignored).
     pub fn parse(text: &str) -> Option<Self> {
         let t = text.trim();
-        Self::ALL
-            .into_iter()
-            .find(|k| k.as_str().eq_ignore_ascii_case(t))
+        Self::ALL.into_iter().find(|k| k.as_str().eq_ignore_ascii_case(t))
     }
 }
 
@@ -172,9 +157,7 @@ pub struct ReadOptions {
 
 impl Default for ReadOptions {
     fn default() -> Self {
-        Self {
-            max_rows: DEFAULT_MAX_ROWS,
-        }
+        Self { max_rows: DEFAULT_MAX_ROWS }
     }
 }
 
@@ -339,9 +322,7 @@ pub enum TraceError {
         message: String,
     },
     /// In memory: a column's length differs from the number of samples.
-    #[error(
-        "trace column `{column}` has {found} values, expected {expected} (one per t_s sample)"
-    )]
+    #[error("trace column `{column}` has {found} values, expected {expected} (one per t_s sample)")]
     LengthMismatch {
         /// Column name.
         column: String,
@@ -389,11 +370,7 @@ pub enum TraceError {
 }
 
 fn quoted_list(names: &[String]) -> String {
-    names
-        .iter()
-        .map(|n| format!("`{n}`"))
-        .collect::<Vec<_>>()
-        .join(", ")
+    names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
 }
 
 fn show_field(text: &str) -> String {
@@ -418,10 +395,7 @@ fn field_text(bytes: &[u8]) -> String {
 /// Parse a numeric field: UTF-8, surrounding whitespace (including a `\r`) ignored.
 #[inline]
 fn parse_field(bytes: &[u8]) -> Option<f64> {
-    std::str::from_utf8(bytes.trim_ascii())
-        .ok()?
-        .parse::<f64>()
-        .ok()
+    std::str::from_utf8(bytes.trim_ascii()).ok()?.parse::<f64>().ok()
 }
 
 /// Escape a metadata value so that it fits on one line.
@@ -464,22 +438,12 @@ fn unescape_meta(s: &str) -> String {
 /// Read the metadata lines (and blank lines) before the header. Returns the metadata and the
 /// number of lines consumed.
 fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usize), TraceError> {
-    let io_err = |source| {
-        TraceError::File(FileError::Io {
-            file: file.to_path_buf(),
-            action: "cannot read",
-            source,
-        })
-    };
+    let io_err = |source| TraceError::File(FileError::Io { file: file.to_path_buf(), action: "cannot read", source });
     let mut meta = TraceMeta::default();
     let mut lines = 0usize;
     let mut line = Vec::new();
     // A UTF-8 byte-order mark (spreadsheet exports) is skipped.
-    if reader
-        .fill_buf()
-        .map_err(io_err)?
-        .starts_with(b"\xEF\xBB\xBF")
-    {
+    if reader.fill_buf().map_err(io_err)?.starts_with(b"\xEF\xBB\xBF") {
         reader.consume(3);
     }
     loop {
@@ -489,11 +453,7 @@ fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usiz
             _ => break,
         }
         line.clear();
-        reader
-            .by_ref()
-            .take(MAX_META_LINE_BYTES)
-            .read_until(b'\n', &mut line)
-            .map_err(io_err)?;
+        reader.by_ref().take(MAX_META_LINE_BYTES).read_until(b'\n', &mut line).map_err(io_err)?;
         lines += 1;
         if line.len() as u64 >= MAX_META_LINE_BYTES && line.last() != Some(&b'\n') {
             return Err(TraceError::BadMeta {
@@ -545,21 +505,14 @@ fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usiz
 }
 
 /// Check the header row; returns the extra column names.
-fn check_header(
-    rec: &csv::ByteRecord,
-    file: &Path,
-    line: usize,
-) -> Result<Vec<String>, TraceError> {
+fn check_header(rec: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<String>, TraceError> {
     let mut names = Vec::with_capacity(rec.len());
     for (i, field) in rec.iter().enumerate() {
         let name = std::str::from_utf8(field).map_err(|_| TraceError::BadHeader {
             file: file.to_path_buf(),
             line,
             position: i + 1,
-            problem: format!(
-                "expected a column name in UTF-8 text, found bytes `{}`",
-                field_text(field)
-            ),
+            problem: format!("expected a column name in UTF-8 text, found bytes `{}`", field_text(field)),
         })?;
         let name = name.trim();
         if name.is_empty() {
@@ -583,19 +536,12 @@ fn check_header(
                 file: file.to_path_buf(),
                 line,
                 position: i + 1,
-                problem: format!(
-                    "column `{name}` appears twice (also column {}); expected unique names",
-                    first + 1
-                ),
+                problem: format!("column `{name}` appears twice (also column {}); expected unique names", first + 1),
             });
         }
         names.push(name);
     }
-    let missing: Vec<String> = REQUIRED_COLUMNS
-        .iter()
-        .filter(|r| !names.contains(r))
-        .map(|r| r.to_string())
-        .collect();
+    let missing: Vec<String> = REQUIRED_COLUMNS.iter().filter(|r| !names.contains(r)).map(|r| r.to_string()).collect();
     if !missing.is_empty() {
         let unknown = names
             .iter()
@@ -607,13 +553,7 @@ fn check_header(
         if found.chars().count() > 200 {
             found = format!("{}…", found.chars().take(200).collect::<String>());
         }
-        return Err(TraceError::MissingColumns {
-            file: file.to_path_buf(),
-            line,
-            missing,
-            unknown,
-            found,
-        });
+        return Err(TraceError::MissingColumns { file: file.to_path_buf(), line, missing, unknown, found });
     }
     for (k, required) in REQUIRED_COLUMNS.iter().enumerate() {
         if names[k] != *required {
@@ -627,10 +567,7 @@ fn check_header(
             });
         }
     }
-    Ok(names[REQUIRED_COLUMNS.len()..]
-        .iter()
-        .map(|n| n.to_string())
-        .collect())
+    Ok(names[REQUIRED_COLUMNS.len()..].iter().map(|n| n.to_string()).collect())
 }
 
 impl Trace {
@@ -672,14 +609,7 @@ impl Trace {
     /// # Panics
     /// If `i >= self.len()` or a joint column is shorter than `t_s` (see [`Trace::validate`]).
     pub fn joints_display(&self, i: usize) -> [f64; 6] {
-        [
-            self.q1_um[i],
-            self.q2_um[i],
-            self.q3_um[i],
-            self.q4_deg[i],
-            self.q5_deg[i],
-            self.q6_deg[i],
-        ]
+        [self.q1_um[i], self.q2_um[i], self.q3_um[i], self.q4_deg[i], self.q5_deg[i], self.q6_deg[i]]
     }
 
     /// Joint column `j` (0-based: 0 is q1 … 5 is q6), in display units.
@@ -715,31 +645,18 @@ impl Trace {
 
     /// Every column in file order (required, then extra): name and values.
     pub fn columns(&self) -> impl Iterator<Item = (&str, &[f64])> {
-        self.required_columns().into_iter().chain(
-            self.extra
-                .iter()
-                .map(|c| (c.name.as_str(), c.values.as_slice())),
-        )
+        self.required_columns().into_iter().chain(self.extra.iter().map(|c| (c.name.as_str(), c.values.as_slice())))
     }
 
     /// The extra column called `name`, if any.
     pub fn extra_column(&self, name: &str) -> Option<&[f64]> {
-        self.extra
-            .iter()
-            .find(|c| c.name == name)
-            .map(|c| c.values.as_slice())
+        self.extra.iter().find(|c| c.name == name).map(|c| c.values.as_slice())
     }
 
     /// Append one sample to the required columns (joints in display units). Extra columns, if
     /// any, must be filled by the caller (see [`Trace::push_sample_with_extras`]);
     /// [`Trace::validate`] reports a column left short.
-    pub fn push_sample(
-        &mut self,
-        t_s: f64,
-        q_display: [f64; 6],
-        wavelength_nm: f64,
-        irradiance: f64,
-    ) {
+    pub fn push_sample(&mut self, t_s: f64, q_display: [f64; 6], wavelength_nm: f64, irradiance: f64) {
         self.t_s.push(t_s);
         self.q1_um.push(q_display[0]);
         self.q2_um.push(q_display[1]);
@@ -790,9 +707,7 @@ impl Trace {
                 return Err(bad("expected a non-empty name"));
             }
             if c.name.trim() != c.name || c.name.contains(['\n', '\r']) {
-                return Err(bad(
-                    "expected a name without surrounding spaces or line breaks",
-                ));
+                return Err(bad("expected a name without surrounding spaces or line breaks"));
             }
             if REQUIRED_COLUMNS.contains(&c.name.as_str()) {
                 return Err(bad("expected a name other than the required columns"));
@@ -803,26 +718,14 @@ impl Trace {
         }
         for (name, values) in self.columns() {
             if values.len() != n {
-                return Err(TraceError::LengthMismatch {
-                    column: name.to_string(),
-                    expected: n,
-                    found: values.len(),
-                });
+                return Err(TraceError::LengthMismatch { column: name.to_string(), expected: n, found: values.len() });
             }
             if let Some(row) = values.iter().position(|v| !v.is_finite()) {
-                return Err(TraceError::NonFiniteSample {
-                    row,
-                    column: name.to_string(),
-                    value: values[row],
-                });
+                return Err(TraceError::NonFiniteSample { row, column: name.to_string(), value: values[row] });
             }
         }
         if let Some(k) = self.t_s.windows(2).position(|w| w[1] <= w[0]) {
-            return Err(TraceError::NonMonotonicSample {
-                row: k + 1,
-                t_s: self.t_s[k + 1],
-                previous_t_s: self.t_s[k],
-            });
+            return Err(TraceError::NonMonotonicSample { row: k + 1, t_s: self.t_s[k + 1], previous_t_s: self.t_s[k] });
         }
         Ok(())
     }
@@ -849,11 +752,7 @@ impl Trace {
 
     /// Read and validate a trace from any reader, with options; `origin` names it in errors.
     /// Never panics, whatever the bytes.
-    pub fn from_csv_reader_with<R: Read>(
-        reader: R,
-        origin: &Path,
-        options: &ReadOptions,
-    ) -> Result<Self, TraceError> {
+    pub fn from_csv_reader_with<R: Read>(reader: R, origin: &Path, options: &ReadOptions) -> Result<Self, TraceError> {
         let file = || origin.to_path_buf();
         let mut input = BufReader::with_capacity(64 * 1024, reader);
         let (meta, meta_lines) = read_meta(&mut input, origin)?;
@@ -872,16 +771,10 @@ impl Trace {
                 let more = csv_reader.read_byte_record(rec).map_err(|e| {
                     let line = meta_lines + csv_reader.position().line() as usize;
                     match e.into_kind() {
-                        csv::ErrorKind::Io(source) => TraceError::File(FileError::Io {
-                            file: file(),
-                            action: "cannot read",
-                            source,
-                        }),
-                        other => TraceError::Csv {
-                            file: file(),
-                            line,
-                            message: format!("{other:?}"),
-                        },
+                        csv::ErrorKind::Io(source) => {
+                            TraceError::File(FileError::Io { file: file(), action: "cannot read", source })
+                        }
+                        other => TraceError::Csv { file: file(), line, message: format!("{other:?}") },
                     }
                 })?;
                 if !more {
@@ -902,13 +795,7 @@ impl Trace {
         let extra_names = check_header(&rec, origin, header_line)?;
         let n_cols = REQUIRED_COLUMNS.len() + extra_names.len();
         let mut trace = Trace::new(meta);
-        trace.extra = extra_names
-            .into_iter()
-            .map(|name| ExtraColumn {
-                name,
-                values: Vec::new(),
-            })
-            .collect();
+        trace.extra = extra_names.into_iter().map(|name| ExtraColumn { name, values: Vec::new() }).collect();
         let column_name = |trace: &Trace, c: usize| -> String {
             if c < REQUIRED_COLUMNS.len() {
                 REQUIRED_COLUMNS[c].to_string()
@@ -920,19 +807,10 @@ impl Trace {
         let mut previous: Option<(usize, f64)> = None;
         while let Some(line) = next(&mut rec)? {
             if trace.len() >= options.max_rows {
-                return Err(TraceError::TooLarge {
-                    file: file(),
-                    line,
-                    max_rows: options.max_rows,
-                });
+                return Err(TraceError::TooLarge { file: file(), line, max_rows: options.max_rows });
             }
             if rec.len() != n_cols {
-                return Err(TraceError::FieldCount {
-                    file: file(),
-                    line,
-                    expected: n_cols,
-                    found: rec.len(),
-                });
+                return Err(TraceError::FieldCount { file: file(), line, expected: n_cols, found: rec.len() });
             }
             for (c, field) in rec.iter().enumerate() {
                 let v = parse_field(field).ok_or_else(|| TraceError::NotANumber {
@@ -942,12 +820,7 @@ impl Trace {
                     text: field_text(field),
                 })?;
                 if !v.is_finite() {
-                    return Err(TraceError::NonFinite {
-                        file: file(),
-                        line,
-                        column: column_name(&trace, c),
-                        value: v,
-                    });
+                    return Err(TraceError::NonFinite { file: file(), line, column: column_name(&trace, c), value: v });
                 }
                 if c < row.len() {
                     row[c] = v;
@@ -967,12 +840,7 @@ impl Trace {
                 }
             }
             previous = Some((line, row[0]));
-            trace.push_sample(
-                row[0],
-                [row[1], row[2], row[3], row[4], row[5], row[6]],
-                row[7],
-                row[8],
-            );
+            trace.push_sample(row[0], [row[1], row[2], row[3], row[4], row[5], row[6]], row[7], row[8]);
         }
         if trace.is_empty() {
             return Err(TraceError::EmptyTrace { file: file() });
@@ -1003,34 +871,22 @@ impl Trace {
     pub fn write_csv_to<W: Write>(&self, writer: W, origin: &Path) -> Result<(), TraceError> {
         self.validate()?;
         if self.is_empty() {
-            return Err(TraceError::WriteEmpty {
-                file: origin.to_path_buf(),
-            });
+            return Err(TraceError::WriteEmpty { file: origin.to_path_buf() });
         }
         let io_err = |e: std::io::Error| {
-            TraceError::File(FileError::Io {
-                file: origin.to_path_buf(),
-                action: "cannot write",
-                source: e,
-            })
+            TraceError::File(FileError::Io { file: origin.to_path_buf(), action: "cannot write", source: e })
         };
         let csv_err = |e: csv::Error| match e.into_kind() {
             csv::ErrorKind::Io(source) => io_err(source),
-            other => TraceError::File(FileError::Serialise {
-                file: origin.to_path_buf(),
-                message: format!("{other:?}"),
-            }),
+            other => {
+                TraceError::File(FileError::Serialise { file: origin.to_path_buf(), message: format!("{other:?}") })
+            }
         };
         let mut writer = std::io::BufWriter::with_capacity(64 * 1024, writer);
-        writer
-            .write_all(self.meta_lines().as_bytes())
-            .map_err(io_err)?;
-        let mut w = csv::WriterBuilder::new()
-            .terminator(csv::Terminator::Any(b'\n'))
-            .from_writer(&mut writer);
+        writer.write_all(self.meta_lines().as_bytes()).map_err(io_err)?;
+        let mut w = csv::WriterBuilder::new().terminator(csv::Terminator::Any(b'\n')).from_writer(&mut writer);
         let columns: Vec<&[f64]> = self.columns().map(|(_, v)| v).collect();
-        w.write_record(self.columns().map(|(name, _)| name))
-            .map_err(csv_err)?;
+        w.write_record(self.columns().map(|(name, _)| name)).map_err(csv_err)?;
         let mut text = String::with_capacity(32 * columns.len());
         let mut ends = Vec::with_capacity(columns.len());
         for i in 0..self.len() {
@@ -1090,30 +946,14 @@ mod tests {
         };
         let mut t = Trace::with_capacity(meta, 8);
         t.extra = vec![
-            ExtraColumn {
-                name: "temperature_C".into(),
-                values: vec![],
-            },
-            ExtraColumn {
-                name: "odd, \"quoted\" name".into(),
-                values: vec![],
-            },
+            ExtraColumn { name: "temperature_C".into(), values: vec![] },
+            ExtraColumn { name: "odd, \"quoted\" name".into(), values: vec![] },
         ];
-        let values = [
-            0.1 + 0.2,
-            -0.0,
-            5e-324,
-            1e300,
-            -1.7976931348623157e308,
-            std::f64::consts::PI,
-            1e8 / 7.0,
-            2.5e-7,
-        ];
+        let values = [0.1 + 0.2, -0.0, 5e-324, 1e300, -1.7976931348623157e308, std::f64::consts::PI, 1e8 / 7.0, 2.5e-7];
         for (i, &v) in values.iter().enumerate() {
             let t_s = i as f64 * 0.001 + 1e-9;
             let q = [v, -v, v * 0.5, v / 3.0, 1.0 / 3.0, -(i as f64)];
-            t.push_sample_with_extras(t_s, q, 1560.0 + v.abs().min(1.0), v, &[21.5 + t_s, v])
-                .unwrap();
+            t.push_sample_with_extras(t_s, q, 1560.0 + v.abs().min(1.0), v, &[21.5 + t_s, v]).unwrap();
         }
         t
     }
@@ -1138,16 +978,8 @@ mod tests {
         let t = awkward_trace();
         t.write_csv(&path).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
-        assert!(
-            text.starts_with("# photorobot trace v1\n# label: X_w at q1 = -150 µm: move 3\n"),
-            "{text}"
-        );
-        assert!(
-            text.contains(&format!(
-                "\n{HEADER},temperature_C,\"odd, \"\"quoted\"\" name\"\n"
-            )),
-            "{text}"
-        );
+        assert!(text.starts_with("# photorobot trace v1\n# label: X_w at q1 = -150 µm: move 3\n"), "{text}");
+        assert!(text.contains(&format!("\n{HEADER},temperature_C,\"odd, \"\"quoted\"\" name\"\n")), "{text}");
         let back = Trace::read_csv(&path).unwrap();
         assert_bit_identical(&t, &back);
         // Saving again over the file leaves only the file.
@@ -1161,10 +993,7 @@ mod tests {
             "# label: crlf\r\n\r\n{HEADER}\r\n0,1,2,3,4,5,6,1560,0.5\r\n\r\n# a comment\r\n1,1,2,3,4,5,6,1560,x\r\n"
         );
         let err = read_str(&text).unwrap_err().to_string();
-        assert!(
-            err.starts_with("bad.csv:7: column `irradiance`: expected a number, found `x`"),
-            "{err}"
-        );
+        assert!(err.starts_with("bad.csv:7: column `irradiance`: expected a number, found `x`"), "{err}");
         let ok = read_str(&text.replace(",x", ",0.25")).unwrap();
         assert_eq!(ok.meta.label, "crlf");
         assert_eq!(ok.irradiance, [0.5, 0.25]);
@@ -1235,13 +1064,8 @@ mod tests {
         // Raw invalid UTF-8 in a header name.
         let mut bytes = format!("{HEADER},").into_bytes();
         bytes.extend_from_slice(b"\xff\xfe\n");
-        let err = Trace::from_csv_reader(&bytes[..], Path::new("bad.csv"))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.starts_with("bad.csv:1: header column 10: expected a column name in UTF-8 text"),
-            "{err}"
-        );
+        let err = Trace::from_csv_reader(&bytes[..], Path::new("bad.csv")).unwrap_err().to_string();
+        assert!(err.starts_with("bad.csv:1: header column 10: expected a column name in UTF-8 text"), "{err}");
     }
 
     #[test]
@@ -1251,39 +1075,25 @@ mod tests {
             text.push_str(&format!("{i},0,0,0,0,0,0,1560,0.5\n"));
         }
         let opts = ReadOptions { max_rows: 4 };
-        let err = Trace::from_csv_reader_with(text.as_bytes(), Path::new("big.csv"), &opts)
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.starts_with("big.csv:6: more than 4 data rows; refusing to read further"),
-            "{err}"
-        );
+        let err = Trace::from_csv_reader_with(text.as_bytes(), Path::new("big.csv"), &opts).unwrap_err().to_string();
+        assert!(err.starts_with("big.csv:6: more than 4 data rows; refusing to read further"), "{err}");
         let opts = ReadOptions { max_rows: 5 };
-        assert_eq!(
-            Trace::from_csv_reader_with(text.as_bytes(), Path::new("big.csv"), &opts)
-                .unwrap()
-                .len(),
-            5
-        );
+        assert_eq!(Trace::from_csv_reader_with(text.as_bytes(), Path::new("big.csv"), &opts).unwrap().len(), 5);
         assert_eq!(ReadOptions::default().max_rows, 50_000_000);
     }
 
     #[test]
     fn missing_file_is_named() {
-        let err = Trace::read_csv(Path::new("/no/such/trace.csv"))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("/no/such/trace.csv") && err.contains("cannot open"),
-            "{err}"
-        );
+        let err = Trace::read_csv(Path::new("/no/such/trace.csv")).unwrap_err().to_string();
+        assert!(err.contains("/no/such/trace.csv") && err.contains("cannot open"), "{err}");
     }
 
     #[test]
     fn imports_foreign_csv_without_meta_with_two_extra_columns() {
         // As exported by another acquisition system: no comments, spaces after commas,
         // exponent notation, Windows line endings, no final line break.
-        let text = "t_s, q1_um, q2_um, q3_um, q4_deg, q5_deg, q6_deg, wavelength_nm, irradiance, temperature_C, pd2_V\r\n\
+        let text =
+            "t_s, q1_um, q2_um, q3_um, q4_deg, q5_deg, q6_deg, wavelength_nm, irradiance, temperature_C, pd2_V\r\n\
                     0.000, -150, 0, 0, 0, 0, 0, 1560.0, 0.412, 21.50, 1.0e-3\r\n\
                     0.010, -149.5, 0, 0, 0, 0, 0, 1560.0, 0.398, 21.51, 1.1e-3\r\n\
                     0.020, -149.0, 0, 0, 0.5, -0.25, 0, 1560.0, 0.377, 21.52, 1.2E-3";
@@ -1296,10 +1106,7 @@ mod tests {
         assert_eq!(t.irradiance, [0.412, 0.398, 0.377]);
         let names: Vec<&str> = t.extra.iter().map(|c| c.name.as_str()).collect();
         assert_eq!(names, ["temperature_C", "pd2_V"]);
-        assert_eq!(
-            t.extra_column("temperature_C").unwrap(),
-            [21.5, 21.51, 21.52]
-        );
+        assert_eq!(t.extra_column("temperature_C").unwrap(), [21.5, 21.51, 21.52]);
         assert_eq!(t.extra_column("pd2_V").unwrap(), [1.0e-3, 1.1e-3, 1.2e-3]);
         t.validate().unwrap();
     }
@@ -1330,52 +1137,25 @@ mod tests {
             "trace row 1: time 0 s is not after 0 s at row 0 (expected strictly increasing time)"
         );
         let mut extra = t.clone();
-        extra.extra.push(ExtraColumn {
-            name: "T".into(),
-            values: vec![1.0],
-        });
-        assert!(extra
-            .validate()
-            .unwrap_err()
-            .to_string()
-            .contains("column `T` has 1 values, expected 2"));
+        extra.extra.push(ExtraColumn { name: "T".into(), values: vec![1.0] });
+        assert!(extra.validate().unwrap_err().to_string().contains("column `T` has 1 values, expected 2"));
         extra.extra[0].values.push(2.0);
         extra.validate().unwrap();
-        assert!(extra
-            .push_sample_with_extras(0.2, [0.0; 6], 1560.0, 0.5, &[])
-            .is_err());
+        assert!(extra.push_sample_with_extras(0.2, [0.0; 6], 1560.0, 0.5, &[]).is_err());
         assert_eq!(extra.len(), 2, "nothing appended on error");
         extra.extra[0].name = "irradiance".into();
-        assert!(extra
-            .validate()
-            .unwrap_err()
-            .to_string()
-            .contains("expected a name other than the required columns"));
+        assert!(extra.validate().unwrap_err().to_string().contains("expected a name other than the required columns"));
         // Writing refuses invalid and empty traces, and names the destination.
         let dir = tempfile::tempdir().unwrap();
         assert!(nan.write_csv(&dir.path().join("x.csv")).is_err());
-        let err = Trace::default()
-            .write_csv(&dir.path().join("e.csv"))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("e.csv: refusing to write an empty trace"),
-            "{err}"
-        );
+        let err = Trace::default().write_csv(&dir.path().join("e.csv")).unwrap_err().to_string();
+        assert!(err.contains("e.csv: refusing to write an empty trace"), "{err}");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
     }
 
     #[test]
     fn meta_escaping_round_trips() {
-        for s in [
-            "",
-            "a\\b",
-            "\\n literal",
-            "x\ny\r\nz",
-            "trailing\\",
-            " lead",
-            "ü:µ:°",
-        ] {
+        for s in ["", "a\\b", "\\n literal", "x\ny\r\nz", "trailing\\", " lead", "ü:µ:°"] {
             assert_eq!(unescape_meta(&escape_meta(s)), s);
             assert!(!escape_meta(s).contains('\n'));
         }
@@ -1513,14 +1293,7 @@ mod tests {
         let mut t = Trace::with_capacity(TraceMeta::default(), n);
         for i in 0..n {
             let x = i as f64 * 1e-3;
-            let q = [
-                -150.0 + 3e-4 * i as f64,
-                0.0,
-                12.5,
-                0.0,
-                1.0 + x.sin() * 1e-3,
-                0.0,
-            ];
+            let q = [-150.0 + 3e-4 * i as f64, 0.0, 12.5, 0.0, 1.0 + x.sin() * 1e-3, 0.0];
             t.push_sample(x, q, 1560.0, 0.5 + 0.4 * (x * 7.0).cos());
         }
         let bytes = t.to_csv_bytes(Path::new("speed.csv")).unwrap();
@@ -1539,9 +1312,6 @@ mod tests {
             cpu = cpu.min(cpu_s() - c0);
             assert_eq!(back.len(), n);
         }
-        println!(
-            "read {n} rows ({} MB): {wall:.3} s wall, {cpu:.3} s CPU (best of 3)",
-            bytes.len() / 1_000_000
-        );
+        println!("read {n} rows ({} MB): {wall:.3} s wall, {cpu:.3} s CPU (best of 3)", bytes.len() / 1_000_000);
     }
 }

@@ -117,7 +117,11 @@ pub fn run_plan(bench: &mut dyn Bench, plan: &Plan, control: &mut RunControl<'_>
     for (i, seg) in segments.iter().enumerate() {
         let meta = TraceMeta {
             label: seg.label.clone(),
-            kind: if matches!(seg.motion, TimedMotion::Sweep { .. }) { TraceKind::WavelengthSweep } else { TraceKind::Motion },
+            kind: if matches!(seg.motion, TimedMotion::Sweep { .. }) {
+                TraceKind::WavelengthSweep
+            } else {
+                TraceKind::Motion
+            },
             bench: bench.name(),
             irradiance_unit: "mW".into(),
             notes: format!("plan {}, segment {} of {}", plan.name, i + 1, count),

@@ -188,7 +188,10 @@ impl BenchPreset {
         positive("detector.adc_full_scale_mw", self.detector.adc_full_scale_mw)?;
         non_negative("detector.gain_drift_per_hour", self.detector.gain_drift_per_hour.abs())?;
         if self.detector.adc_bits > 32 {
-            return Err(FieldError::new("detector.adc_bits", format!("expected 0 (ideal) to 32 bits, found {}", self.detector.adc_bits)));
+            return Err(FieldError::new(
+                "detector.adc_bits",
+                format!("expected 0 (ideal) to 32 bits, found {}", self.detector.adc_bits),
+            ));
         }
         if !(1500.0..=1630.0).contains(&self.laser.wavelength_nm) {
             return Err(FieldError::new(

@@ -334,7 +334,10 @@ mod tests {
     fn fringes_of_an_axial_move_match_the_truth() {
         let preset = BenchPreset::resolve("table2-ideal").unwrap();
         let mut b = VirtualBench::new(&preset, None).unwrap();
-        let p = plan(vec![mv(JointTarget::default().with(1, -10.0), false), mv(JointTarget::default().with(1, 10.0), true)]);
+        let p = plan(vec![
+            mv(JointTarget::default().with(1, -10.0), false),
+            mv(JointTarget::default().with(1, 10.0), true),
+        ]);
         let r = run(&mut b, &p);
         let t = &r.traces[0];
         let chain = Chain::femto_6dof();
@@ -361,7 +364,8 @@ mod tests {
         let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
         let c = preset.truth.cavity(&Chain::femto_6dof().end_effector(&[0.0; 6])).unwrap();
         let n = air_index_ciddor(1560.0, &preset.ambient).unwrap();
-        let b_amp = FabryPerot::new(&preset.optics, 1560.0, n).unwrap().two_beam(c.length_um.abs(), c.tilt_rad).amplitude_mw;
+        let b_amp =
+            FabryPerot::new(&preset.optics, 1560.0, n).unwrap().two_beam(c.length_um.abs(), c.tilt_rad).amplitude_mw;
         assert!((sd / b_amp - 1e-3).abs() < 0.05e-3, "σ/B = {}", sd / b_amp);
     }
 
@@ -393,7 +397,10 @@ mod tests {
         };
         let mut control = RunControl { cancel: &cancel, on_samples: &mut on_samples, on_progress: &mut |_| {} };
         let r = run_plan(&mut b, &p, &mut control);
-        assert!(matches!(r.outcome, Err(crate::bench::RunError::Segment { segment: 1, error: BenchError::Cancelled { .. }, .. })));
+        assert!(matches!(
+            r.outcome,
+            Err(crate::bench::RunError::Segment { segment: 1, error: BenchError::Cancelled { .. }, .. })
+        ));
         assert_eq!(r.traces.len(), 2, "the finished dwell and the partial one");
         assert!(r.traces[1].len() > 1000 && r.traces[1].len() < 20001);
         assert!(seen > 0);
@@ -402,7 +409,8 @@ mod tests {
     #[test]
     fn a_plan_out_of_limits_moves_nothing() {
         let mut b = VirtualBench::from_preset_name("table2-ideal", None).unwrap();
-        let p = plan(vec![mv(JointTarget::default().with(2, 50.0), true), mv(JointTarget::default().with(3, 12.0), true)]);
+        let p =
+            plan(vec![mv(JointTarget::default().with(2, 50.0), true), mv(JointTarget::default().with(3, 12.0), true)]);
         let r = run(&mut b, &p);
         assert!(r.traces.is_empty());
         assert_eq!(b.position_display(), [0.0; 6]);

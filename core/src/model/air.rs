@@ -46,12 +46,7 @@ pub struct AmbientConditions {
 
 impl Default for AmbientConditions {
     fn default() -> Self {
-        Self {
-            temperature_c: 20.0,
-            pressure_hpa: 1013.25,
-            relative_humidity_percent: 50.0,
-            co2_ppm: 450.0,
-        }
+        Self { temperature_c: 20.0, pressure_hpa: 1013.25, relative_humidity_percent: 50.0, co2_ppm: 450.0 }
     }
 }
 
@@ -95,13 +90,7 @@ fn check_range(
     if (min..=max).contains(&value) {
         Ok(())
     } else {
-        Err(AirIndexError::OutOfRange {
-            quantity,
-            value,
-            min,
-            max,
-            unit,
-        })
+        Err(AirIndexError::OutOfRange { quantity, value, min, max, unit })
     }
 }
 
@@ -110,12 +99,7 @@ impl AmbientConditions {
     pub fn validate(&self) -> Result<(), AirIndexError> {
         check_range("temperature", self.temperature_c, TEMPERATURE_RANGE_C, "°C")?;
         check_range("pressure", self.pressure_hpa, PRESSURE_RANGE_HPA, "hPa")?;
-        check_range(
-            "relative humidity",
-            self.relative_humidity_percent,
-            RELATIVE_HUMIDITY_RANGE_PERCENT,
-            "%",
-        )?;
+        check_range("relative humidity", self.relative_humidity_percent, RELATIVE_HUMIDITY_RANGE_PERCENT, "%")?;
         check_range("CO2", self.co2_ppm, CO2_RANGE_PPM, "ppm")
     }
 }
@@ -162,10 +146,7 @@ pub fn saturation_vapour_pressure_pa(temperature_c: f64) -> f64 {
 ///
 /// Errors if an input is outside the accepted ranges (see the `*_RANGE_*` constants) or
 /// if the humidity implies a vapour pressure above the total pressure.
-pub fn air_index_ciddor(
-    wavelength_nm: f64,
-    ambient: &AmbientConditions,
-) -> Result<f64, AirIndexError> {
+pub fn air_index_ciddor(wavelength_nm: f64, ambient: &AmbientConditions) -> Result<f64, AirIndexError> {
     check_range("wavelength", wavelength_nm, WAVELENGTH_RANGE_NM, "nm")?;
     ambient.validate()?;
 
@@ -179,10 +160,7 @@ pub fn air_index_ciddor(
     let vapour_pa = ambient.relative_humidity_percent / 100.0 * saturation_vapour_pressure_pa(t);
     let xv = f * vapour_pa / p;
     if xv >= 1.0 {
-        return Err(AirIndexError::VapourExceedsPressure {
-            vapour_pa: f * vapour_pa,
-            pressure_pa: p,
-        });
+        return Err(AirIndexError::VapourExceedsPressure { vapour_pa: f * vapour_pa, pressure_pa: p });
     }
 
     // A-III: Ciddor.
@@ -222,12 +200,7 @@ mod tests {
     use super::*;
 
     fn ambient(t: f64, p_hpa: f64, rh: f64) -> AmbientConditions {
-        AmbientConditions {
-            temperature_c: t,
-            pressure_hpa: p_hpa,
-            relative_humidity_percent: rh,
-            co2_ppm: 450.0,
-        }
+        AmbientConditions { temperature_c: t, pressure_hpa: p_hpa, relative_humidity_percent: rh, co2_ppm: 450.0 }
     }
 
     fn refractivity_ppm(wavelength_nm: f64, a: &AmbientConditions) -> f64 {
@@ -253,15 +226,10 @@ mod tests {
         let per_kelvin = d(&|a, h| a.temperature_c += h, 0.5);
         let per_hpa = d(&|a, h| a.pressure_hpa += h, 1.0);
         let per_percent_rh = d(&|a, h| a.relative_humidity_percent += h, 5.0);
-        for (got, want, what) in [
-            (per_kelvin, -0.94, "ppm/K"),
-            (per_hpa, 0.265, "ppm/hPa"),
-            (per_percent_rh, -0.0087, "ppm/%RH"),
-        ] {
-            assert!(
-                ((got - want) / want).abs() < 0.10,
-                "sensitivity {got} {what}, SPEC {want}"
-            );
+        for (got, want, what) in
+            [(per_kelvin, -0.94, "ppm/K"), (per_hpa, 0.265, "ppm/hPa"), (per_percent_rh, -0.0087, "ppm/%RH")]
+        {
+            assert!(((got - want) / want).abs() < 0.10, "sensitivity {got} {what}, SPEC {want}");
         }
     }
 
@@ -288,10 +256,7 @@ mod tests {
         ];
         for (t, rh, p_kpa, wl, want) in NIST {
             let n = air_index_ciddor(wl, &ambient(t, p_kpa * 10.0, rh)).unwrap();
-            assert!(
-                (n - want).abs() < 2e-9,
-                "{t} °C, {rh} %, {p_kpa} kPa, {wl} nm: n = {n:.10}, NIST {want:.9}"
-            );
+            assert!((n - want).abs() < 2e-9, "{t} °C, {rh} %, {p_kpa} kPa, {wl} nm: n = {n:.10}, NIST {want:.9}");
         }
     }
 
@@ -332,48 +297,13 @@ mod tests {
     fn out_of_range_inputs_are_errors_naming_the_field() {
         let ok = AmbientConditions::default();
         let cases: [(AmbientConditions, f64, &str); 7] = [
-            (
-                AmbientConditions {
-                    temperature_c: 101.0,
-                    ..ok
-                },
-                1560.0,
-                "temperature",
-            ),
-            (
-                AmbientConditions {
-                    pressure_hpa: 50.0,
-                    ..ok
-                },
-                1560.0,
-                "pressure",
-            ),
-            (
-                AmbientConditions {
-                    relative_humidity_percent: -1.0,
-                    ..ok
-                },
-                1560.0,
-                "relative humidity",
-            ),
-            (
-                AmbientConditions {
-                    co2_ppm: 2500.0,
-                    ..ok
-                },
-                1560.0,
-                "CO2",
-            ),
+            (AmbientConditions { temperature_c: 101.0, ..ok }, 1560.0, "temperature"),
+            (AmbientConditions { pressure_hpa: 50.0, ..ok }, 1560.0, "pressure"),
+            (AmbientConditions { relative_humidity_percent: -1.0, ..ok }, 1560.0, "relative humidity"),
+            (AmbientConditions { co2_ppm: 2500.0, ..ok }, 1560.0, "CO2"),
             (ok, 1800.0, "wavelength"),
             (ok, f64::NAN, "wavelength"),
-            (
-                AmbientConditions {
-                    temperature_c: f64::NAN,
-                    ..ok
-                },
-                1560.0,
-                "temperature",
-            ),
+            (AmbientConditions { temperature_c: f64::NAN, ..ok }, 1560.0, "temperature"),
         ];
         for (a, wl, field) in cases {
             match air_index_ciddor(wl, &a) {
@@ -381,15 +311,7 @@ mod tests {
                 other => panic!("{field}: expected OutOfRange, got {other:?}"),
             }
         }
-        let msg = air_index_ciddor(
-            1560.0,
-            &AmbientConditions {
-                temperature_c: 101.0,
-                ..ok
-            },
-        )
-        .unwrap_err()
-        .to_string();
+        let msg = air_index_ciddor(1560.0, &AmbientConditions { temperature_c: 101.0, ..ok }).unwrap_err().to_string();
         assert!(msg.contains("-40..100"), "{msg}");
     }
 
@@ -404,10 +326,7 @@ mod tests {
     #[test]
     fn impossible_humidity_is_an_error() {
         let a = ambient(100.0, 500.0, 100.0);
-        assert!(matches!(
-            air_index_ciddor(1560.0, &a),
-            Err(AirIndexError::VapourExceedsPressure { .. })
-        ));
+        assert!(matches!(air_index_ciddor(1560.0, &a), Err(AirIndexError::VapourExceedsPressure { .. })));
     }
 
     #[test]
@@ -416,8 +335,7 @@ mod tests {
         assert_eq!(a.temperature_c, 22.5);
         assert_eq!(a.pressure_hpa, AmbientConditions::default().pressure_hpa);
         assert_eq!(a.co2_ppm, 450.0);
-        let back: AmbientConditions =
-            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
+        let back: AmbientConditions = serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
         assert_eq!(back, a);
     }
 }

@@ -90,7 +90,9 @@ impl Effect {
     pub fn description(&self) -> &'static str {
         match self {
             Effect::ThermalDrift { .. } => "the mechanical loop expands with temperature: the gap drifts in time",
-            Effect::PathScale { .. } => "the optical path differs from the geometric one by a constant factor (air index, wavelength error)",
+            Effect::PathScale { .. } => {
+                "the optical path differs from the geometric one by a constant factor (air index, wavelength error)"
+            }
             Effect::JointScale { .. } => "a stage moves more or less than commanded, in proportion",
             Effect::JointZeroOffset { .. } => "a stage's zero is not where the model puts it",
             Effect::PivotOffset { .. } => "a goniometer's rotation axis misses the common rotation centre",
@@ -185,7 +187,10 @@ mod tests {
     fn unknown_joint_is_named() {
         let e = Effect::JointScale { joint: "q9".into(), ppm: 1.0 };
         let err = apply_all(&[e], &RobotDescription::femto_6dof()).unwrap_err();
-        assert_eq!(err.to_string(), "effect joint scale error: no joint named `q9` (the robot has q1, q2, q3, q4, q5, q6)");
+        assert_eq!(
+            err.to_string(),
+            "effect joint scale error: no joint named `q9` (the robot has q1, q2, q3, q4, q5, q6)"
+        );
     }
 
     #[test]

@@ -89,7 +89,11 @@ impl Extrinsics {
 
     /// Parse and validate; `origin` names the text in errors.
     pub fn from_ron_str(text: &str, origin: &Path) -> Result<Self, FileError> {
-        let e: Self = files::parse_ron(text, origin, "Extrinsics(x_wf_um, y_wf_um, z_wf_um, beta_wf_deg, theta_wf_deg, z_et_um, beta_et_deg, theta_et_deg)")?;
+        let e: Self = files::parse_ron(
+            text,
+            origin,
+            "Extrinsics(x_wf_um, y_wf_um, z_wf_um, beta_wf_deg, theta_wf_deg, z_et_um, beta_et_deg, theta_et_deg)",
+        )?;
         e.validate().map_err(|f| f.in_file(origin))?;
         Ok(e)
     }
@@ -154,10 +158,7 @@ impl Extrinsics {
 
     /// `wTf`, the fiber frame in the world (µm).
     pub fn world_to_fiber(&self) -> Isometry3<f64> {
-        Isometry3::from_parts(
-            Translation3::new(self.x_wf_um, self.y_wf_um, self.z_wf_um),
-            self.fiber_rotation(),
-        )
+        Isometry3::from_parts(Translation3::new(self.x_wf_um, self.y_wf_um, self.z_wf_um), self.fiber_rotation())
     }
 
     /// `eTt`, the tool (lamella) frame in the end-effector frame (µm).
@@ -319,7 +320,11 @@ mod tests {
         }
         for _ in 0..100 {
             let mid = 0.5 * (lo + hi);
-            if height(lo).signum() == height(mid).signum() { lo = mid } else { hi = mid }
+            if height(lo).signum() == height(mid).signum() {
+                lo = mid
+            } else {
+                hi = mid
+            }
         }
         0.5 * (lo + hi)
     }

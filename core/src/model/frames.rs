@@ -156,8 +156,17 @@ mod tests {
         assert_eq!(
             names,
             [
-                "world", "link 1 (q1)", "link 2 (q2)", "link 3 (q3)", "link 4 (q4)", "link 5 (q5)",
-                "link 6 (q6)", "end effector", "tool (lamella)", "fiber", "reflection point P_r"
+                "world",
+                "link 1 (q1)",
+                "link 2 (q2)",
+                "link 3 (q3)",
+                "link 4 (q4)",
+                "link 5 (q5)",
+                "link 6 (q6)",
+                "end effector",
+                "tool (lamella)",
+                "fiber",
+                "reflection point P_r"
             ]
         );
         assert_eq!(t.children(0).count(), 2, "world has link 1 and the fiber as children");

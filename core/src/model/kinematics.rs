@@ -146,7 +146,11 @@ fn iso_trans(x: f64, y: f64, z: f64) -> Isometry3<f64> {
 /// Wrap an angle to (-π, π].
 pub fn wrap_angle(a: f64) -> f64 {
     let w = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if w <= -PI { w + 2.0 * PI } else { w }
+    if w <= -PI {
+        w + 2.0 * PI
+    } else {
+        w
+    }
 }
 
 impl Chain {
@@ -299,11 +303,8 @@ impl Chain {
     /// then the one nearest `q_ref` (internal units).
     pub fn igm_closed_form(&self, target: &Isometry3<f64>, q_ref: &[f64]) -> Result<Vec<f64>, IgmError> {
         if !self.description.is_3p3r() {
-            let kinds: String = self
-                .links
-                .iter()
-                .map(|l| if l.joint == JointType::Prismatic { 'P' } else { 'R' })
-                .collect();
+            let kinds: String =
+                self.links.iter().map(|l| if l.joint == JointType::Prismatic { 'P' } else { 'R' }).collect();
             return Err(IgmError::NotThreePThreeR(kinds));
         }
         self.check_len(q_ref);
@@ -311,11 +312,10 @@ impl Chain {
             return Err(IgmError::NotThreePThreeR("3P+3R with intrinsic wrist errors (use Chain::igm)".into()));
         }
         // Rotation of the three prismatic links (constant) and the wrist's fixed parts.
-        let r03: Matrix3<f64> = (self.links[0].constant.rotation
-            * self.links[1].constant.rotation
-            * self.links[2].constant.rotation)
-            .to_rotation_matrix()
-            .into_inner();
+        let r03: Matrix3<f64> =
+            (self.links[0].constant.rotation * self.links[1].constant.rotation * self.links[2].constant.rotation)
+                .to_rotation_matrix()
+                .into_inner();
         let a = |i: usize| self.links[i].constant.rotation.to_rotation_matrix().into_inner();
         let (a4, a5, a6) = (a(3), a(4), a(5));
         let w = a4.transpose() * r03.transpose() * target.rotation.to_rotation_matrix().into_inner();
@@ -537,14 +537,7 @@ mod tests {
     }
 
     fn q_in_limits() -> impl Strategy<Value = Vec<f64>> {
-        (
-            -150.0..150.0f64,
-            -150.0..150.0f64,
-            -150.0..150.0f64,
-            -10.0..10.0f64,
-            -10.0..10.0f64,
-            -180.0..180.0f64,
-        )
+        (-150.0..150.0f64, -150.0..150.0f64, -150.0..150.0f64, -10.0..10.0f64, -10.0..10.0f64, -180.0..180.0f64)
             .prop_map(|(a, b, c, d, e, f)| deg([a, b, c, d, e, f]))
     }
 
@@ -625,7 +618,9 @@ mod tests {
         d.links.swap(2, 3);
         d.links[3].d_um = 50.0;
         let c = Chain::new(d);
-        assert!(matches!(c.igm_closed_form(&Isometry3::identity(), &[0.0; 6]), Err(IgmError::NotThreePThreeR(k)) if k == "PPRPRR"));
+        assert!(
+            matches!(c.igm_closed_form(&Isometry3::identity(), &[0.0; 6]), Err(IgmError::NotThreePThreeR(k)) if k == "PPRPRR")
+        );
         let q = vec![5.0, -7.0, 0.02, 12.0, -0.03, 0.4];
         let t = c.end_effector(&q);
         let back = c.igm_numeric(&t, &[0.0; 6]).unwrap();

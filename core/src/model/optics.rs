@@ -160,23 +160,11 @@ pub struct OpticsError {
     pub unit: &'static str,
 }
 
-fn check(
-    quantity: &'static str,
-    value: f64,
-    min: f64,
-    max: f64,
-    unit: &'static str,
-) -> Result<(), OpticsError> {
+fn check(quantity: &'static str, value: f64, min: f64, max: f64, unit: &'static str) -> Result<(), OpticsError> {
     if (min..=max).contains(&value) {
         Ok(())
     } else {
-        Err(OpticsError {
-            quantity,
-            value,
-            min,
-            max,
-            unit,
-        })
+        Err(OpticsError { quantity, value, min, max, unit })
     }
 }
 
@@ -184,21 +172,9 @@ impl OpticalParams {
     /// Checks every field (NaN is rejected). Ranges are sanity limits, wide enough for the
     /// plane-wave limit (huge `mode_field_radius_um`) used in tests.
     pub fn validate(&self) -> Result<(), OpticsError> {
-        check(
-            "mode_field_radius_um",
-            self.mode_field_radius_um,
-            0.1,
-            1e9,
-            "µm",
-        )?;
+        check("mode_field_radius_um", self.mode_field_radius_um, 0.1, 1e9, "µm")?;
         check("fiber_index", self.fiber_index, 1.0, 5.0, "")?;
-        check(
-            "lamella_reflectance",
-            self.lamella_reflectance,
-            0.0,
-            1.0,
-            "",
-        )?;
+        check("lamella_reflectance", self.lamella_reflectance, 0.0, 1.0, "")?;
         check("cleave_angle_deg", self.cleave_angle_deg, -20.0, 20.0, "°")?;
         check("beams", self.beams as f64, 1.0, 10_000.0, "")?;
         check("input_power_mw", self.input_power_mw, 0.0, 1e6, "mW")?;
@@ -206,13 +182,7 @@ impl OpticalParams {
             check("back_face.thickness_um", b.thickness_um, 0.0, 1e6, "µm")?;
             check("back_face.phase_index", b.phase_index, 1.0, 5.0, "")?;
             check("back_face.group_index", b.group_index, 1.0, 6.0, "")?;
-            check(
-                "back_face.reference_wavelength_nm",
-                b.reference_wavelength_nm,
-                100.0,
-                20_000.0,
-                "nm",
-            )?;
+            check("back_face.reference_wavelength_nm", b.reference_wavelength_nm, 100.0, 20_000.0, "nm")?;
             check("back_face.reflectance", b.reflectance, 0.0, 1.0, "")?;
         }
         Ok(())
@@ -245,12 +215,7 @@ pub fn tilt_coupling(mode_field_radius_um: f64, tilt_rad: f64, wavelength_nm: f6
 
 /// First-pass power coupling η(L, θ) = tilt_coupling / (1 + (L/z_R)²) of the beam reflected
 /// once by the lamella back into the fiber mode (SMF-28 at 900 µm, square: 0.0036).
-pub fn power_coupling(
-    mode_field_radius_um: f64,
-    gap_um: f64,
-    tilt_rad: f64,
-    wavelength_nm: f64,
-) -> f64 {
+pub fn power_coupling(mode_field_radius_um: f64, gap_um: f64, tilt_rad: f64, wavelength_nm: f64) -> f64 {
     let l = gap_um / rayleigh_range_um(mode_field_radius_um, wavelength_nm);
     tilt_coupling(mode_field_radius_um, tilt_rad, wavelength_nm) / (1.0 + l * l)
 }
@@ -274,11 +239,7 @@ pub fn round_trip_coupling(
     let gap = gap_um.abs();
     let c_m = Complex::new(1.0, 0.0) / Complex::new(1.0, -m * gap / z_r);
     let half_kw = 0.5 * (k * mode_field_radius_um * tilt_rad).powi(2);
-    let tilt = Complex::new(
-        -m * m * half_kw,
-        m * (m * m + 2.0) / 3.0 * k * tilt_rad * tilt_rad * gap,
-    )
-    .exp();
+    let tilt = Complex::new(-m * m * half_kw, m * (m * m + 2.0) / 3.0 * k * tilt_rad * tilt_rad * gap).exp();
     c_m * tilt
 }
 
@@ -342,11 +303,7 @@ pub struct FabryPerot {
 impl FabryPerot {
     /// Precomputes the model for vacuum wavelength `wavelength_nm` (100-20000 nm) and the
     /// index `medium_index` of the cavity medium (1-3; air: see `model::air`).
-    pub fn new(
-        params: &OpticalParams,
-        wavelength_nm: f64,
-        medium_index: f64,
-    ) -> Result<Self, OpticsError> {
+    pub fn new(params: &OpticalParams, wavelength_nm: f64, medium_index: f64) -> Result<Self, OpticsError> {
         params.validate()?;
         check("wavelength_nm", wavelength_nm, 100.0, 20_000.0, "nm")?;
         check("medium_index", medium_index, 1.0, 3.0, "")?;
@@ -375,11 +332,7 @@ impl FabryPerot {
             r1,
             r1_direct: r1 * (-0.5 * cleave).exp(),
             t1_sq: 1.0 - r1 * r1,
-            front: Cavity {
-                r: r2,
-                extra_reduced_um: 0.0,
-                extra_phase_rad: 0.0,
-            },
+            front: Cavity { r: r2, extra_reduced_um: 0.0, extra_phase_rad: 0.0 },
             back,
             beams: params.beams as u32,
             gouy_phase: params.gouy_phase,
@@ -417,8 +370,7 @@ impl FabryPerot {
     /// Finite inputs give finite outputs (a huge tilt just extinguishes the cavity).
     pub fn field(&self, gap_um: f64, tilt_rad: f64) -> Complex<f64> {
         let gap = gap_um.abs();
-        let mut e =
-            Complex::new(self.r1_direct, 0.0) + self.cavity_field(&self.front, gap, tilt_rad);
+        let mut e = Complex::new(self.r1_direct, 0.0) + self.cavity_field(&self.front, gap, tilt_rad);
         if let Some(back) = &self.back {
             e += self.cavity_field(back, gap, tilt_rad);
         }
@@ -445,11 +397,7 @@ impl FabryPerot {
     /// both near |L| ≈ 70 µm, square lamella.
     pub fn fringe_phase_rad(&self, gap_um: f64, tilt_rad: f64) -> f64 {
         let gap = gap_um.abs();
-        let gouy = if self.gouy_phase {
-            (gap / self.rayleigh_um).atan()
-        } else {
-            0.0
-        };
+        let gouy = if self.gouy_phase { (gap / self.rayleigh_um).atan() } else { 0.0 };
         2.0 * self.k_per_um * gap - gouy - self.k_per_um * tilt_rad * tilt_rad * gap + PI
     }
 
@@ -464,11 +412,7 @@ impl FabryPerot {
         TwoBeamFringe {
             offset_mw: self.input_power_mw * offset,
             amplitude_mw: self.input_power_mw * amplitude,
-            visibility: if offset > 0.0 {
-                amplitude / offset
-            } else {
-                0.0
-            },
+            visibility: if offset > 0.0 { amplitude / offset } else { 0.0 },
             phase_rad: self.fringe_phase_rad(gap_um, tilt_rad),
         }
     }
@@ -502,11 +446,7 @@ impl FabryPerot {
         for m in 1..=self.beams {
             let x = f64::from(m) * ell;
             let inv = 1.0 / (1.0 + x * x);
-            let c_m = if self.gouy_phase {
-                Complex::new(inv, x * inv)
-            } else {
-                Complex::new(inv.sqrt(), 0.0)
-            };
+            let c_m = if self.gouy_phase { Complex::new(inv, x * inv) } else { Complex::new(inv.sqrt(), 0.0) };
             let weight = coef * q_m;
             sum += c_m * phase * weight;
             if weight.abs() < NEGLIGIBLE_AMPLITUDE {
@@ -573,10 +513,7 @@ mod tests {
     }
 
     fn glass() -> OpticalParams {
-        OpticalParams {
-            lamella_reflectance: 0.04,
-            ..OpticalParams::default()
-        }
+        OpticalParams { lamella_reflectance: 0.04, ..OpticalParams::default() }
     }
 
     /// Wraps an angle to (-π, π].
@@ -590,12 +527,7 @@ mod tests {
     }
 
     /// Samples `f` over one fringe period centred on `gap_um` and returns the DFT bins.
-    fn one_period_spectrum(
-        fp: &FabryPerot,
-        gap_um: f64,
-        tilt_rad: f64,
-        n: usize,
-    ) -> Vec<Complex<f64>> {
+    fn one_period_spectrum(fp: &FabryPerot, gap_um: f64, tilt_rad: f64, n: usize) -> Vec<Complex<f64>> {
         let period = fp.fringe_period_um();
         let mut buf: Vec<Complex<f64>> = (0..n)
             .map(|j| {
@@ -675,13 +607,7 @@ mod tests {
     impl Propagator {
         fn new(n: usize, dx_um: f64, k: f64) -> Self {
             let mut planner = FftPlanner::new();
-            Self {
-                n,
-                dx_um,
-                k,
-                fwd: planner.plan_fft_forward(n),
-                inv: planner.plan_fft_inverse(n),
-            }
+            Self { n, dx_um, k, fwd: planner.plan_fft_forward(n), inv: planner.plan_fft_inverse(n) }
         }
 
         fn x(&self, j: usize) -> f64 {
@@ -689,11 +615,7 @@ mod tests {
         }
 
         fn kx(&self, j: usize) -> f64 {
-            let jj = if j < self.n / 2 {
-                j as f64
-            } else {
-                j as f64 - self.n as f64
-            };
+            let jj = if j < self.n / 2 { j as f64 } else { j as f64 - self.n as f64 };
             2.0 * PI * jj / (self.n as f64 * self.dx_um)
         }
 
@@ -763,8 +685,8 @@ mod tests {
                 let tilt = f64::to_radians(deg);
                 for m in 1..=3 {
                     // Separable: x carries the tilt, y only the defocus.
-                    let numeric = numerical_coupling_1d(&p, w0, gap, tilt, m)
-                        * numerical_coupling_1d(&p, w0, gap, 0.0, m);
+                    let numeric =
+                        numerical_coupling_1d(&p, w0, gap, tilt, m) * numerical_coupling_1d(&p, w0, gap, 0.0, m);
                     let analytic = round_trip_coupling(w0, gap, tilt, wl_medium, m);
                     assert!(
                         (numeric - analytic).norm() < 1e-6,
@@ -787,9 +709,8 @@ mod tests {
         for gap in [20.0, 200.0] {
             for deg in [0.0, 2.0, 5.0] {
                 let tilt = f64::to_radians(deg);
-                let mode: Vec<f64> = (0..n * n)
-                    .map(|i| (-(p.x(i / n).powi(2) + p.x(i % n).powi(2)) / (w0 * w0)).exp())
-                    .collect();
+                let mode: Vec<f64> =
+                    (0..n * n).map(|i| (-(p.x(i / n).powi(2) + p.x(i % n).powi(2)) / (w0 * w0)).exp()).collect();
                 let mut f: Vec<Complex<f64>> = mode.iter().map(|&v| Complex::new(v, 0.0)).collect();
                 p.exact_2d(&mut f, gap);
                 for (i, v) in f.iter_mut().enumerate() {
@@ -803,14 +724,8 @@ mod tests {
                 let phase_error = wrap(numeric.arg() - analytic.arg());
                 // Measured: ≤ 0.3 % except at the far corner (200 µm, 5°): 1.5 %.
                 let tolerance = if gap * deg > 500.0 { 0.02 } else { 0.01 };
-                assert!(
-                    power_error.abs() < tolerance,
-                    "gap {gap}, {deg}°: power error {power_error}"
-                );
-                assert!(
-                    phase_error.abs() < 0.02,
-                    "gap {gap}, {deg}°: phase error {phase_error} rad"
-                );
+                assert!(power_error.abs() < tolerance, "gap {gap}, {deg}°: power error {power_error}");
+                assert!(phase_error.abs() < 0.02, "gap {gap}, {deg}°: phase error {phase_error} rad");
             }
         }
     }
@@ -821,20 +736,14 @@ mod tests {
     #[test]
     fn evaluator_equals_direct_sum_of_round_trip_couplings() {
         for gouy in [true, false] {
-            let params = OpticalParams {
-                beams: 6,
-                gouy_phase: gouy,
-                cleave_angle_deg: 0.7,
-                ..OpticalParams::default()
-            };
+            let params =
+                OpticalParams { beams: 6, gouy_phase: gouy, cleave_angle_deg: 0.7, ..OpticalParams::default() };
             let fp = bench(&params);
             let wl_medium = WL / N_AIR;
             let k = 2.0 * PI / (wl_medium * 1e-3);
             let r1 = (params.fiber_index - N_AIR) / (params.fiber_index + N_AIR);
-            let cleave = (-0.5
-                * (2.0 * PI / (WL * 1e-3) * params.fiber_index * 5.2 * 0.7f64.to_radians())
-                    .powi(2))
-            .exp();
+            let cleave =
+                (-0.5 * (2.0 * PI / (WL * 1e-3) * params.fiber_index * 5.2 * 0.7f64.to_radians()).powi(2)).exp();
             let r2 = -params.lamella_reflectance.sqrt();
             for gap in [0.0, 3.0, 27.5, 54.0, 333.3, -898.83] {
                 for tilt in [0.0, 0.004, -0.0195, 0.05] {
@@ -846,17 +755,10 @@ mod tests {
                             c *= square.norm() / square;
                         }
                         let prop = Complex::new(0.0, -2.0 * f64::from(m) * k * f64::abs(gap)).exp();
-                        direct += (1.0 - r1 * r1)
-                            * r2.powi(m as i32)
-                            * (-r1).powi(m as i32 - 1)
-                            * c
-                            * prop;
+                        direct += (1.0 - r1 * r1) * r2.powi(m as i32) * (-r1).powi(m as i32 - 1) * c * prop;
                     }
                     let e = fp.field(gap, tilt);
-                    assert!(
-                        (e - direct).norm() < 1e-13,
-                        "gap {gap}, tilt {tilt}: {e} vs {direct}"
-                    );
+                    assert!((e - direct).norm() < 1e-13, "gap {gap}, tilt {tilt}: {e} vs {direct}");
                 }
             }
         }
@@ -864,11 +766,7 @@ mod tests {
 
     #[test]
     fn one_beam_without_gouy_is_the_two_beam_closed_form() {
-        let params = OpticalParams {
-            beams: 1,
-            gouy_phase: false,
-            ..OpticalParams::default()
-        };
+        let params = OpticalParams { beams: 1, gouy_phase: false, ..OpticalParams::default() };
         let fp = bench(&params);
         let r1 = (params.fiber_index - N_AIR) / (params.fiber_index + N_AIR);
         let r2 = -params.lamella_reflectance.sqrt();
@@ -886,12 +784,8 @@ mod tests {
 
     #[test]
     fn plane_wave_signal_is_periodic_with_half_the_wavelength_in_air() {
-        let params = OpticalParams {
-            mode_field_radius_um: 1e8,
-            beams: 1,
-            gouy_phase: false,
-            ..OpticalParams::default()
-        };
+        let params =
+            OpticalParams { mode_field_radius_um: 1e8, beams: 1, gouy_phase: false, ..OpticalParams::default() };
         let fp = bench(&params);
         let period = WL * 1e-3 / (2.0 * N_AIR);
         assert!((fp.fringe_period_um() - period).abs() < 1e-15);
@@ -950,13 +844,8 @@ mod tests {
                 for tilt in [0.0, 0.0195, 0.06] {
                     let f = fp.two_beam(gap, tilt);
                     let model = f.offset_mw + f.amplitude_mw * f.phase_rad.cos();
-                    assert!(
-                        (fp.power(gap, tilt) - model).abs() < 1e-13,
-                        "gap {gap}, tilt {tilt}"
-                    );
-                    assert!(
-                        f.phase_rad == fringe_phase_rad(&params, gap, tilt, WL, N_AIR).unwrap()
-                    );
+                    assert!((fp.power(gap, tilt) - model).abs() < 1e-13, "gap {gap}, tilt {tilt}");
+                    assert!(f.phase_rad == fringe_phase_rad(&params, gap, tilt, WL, N_AIR).unwrap());
                 }
             }
         }
@@ -966,10 +855,7 @@ mod tests {
     /// agrees with [`FabryPerot::fringe_phase_rad`], tilt term included.
     #[test]
     fn fringe_phase_formula_matches_demodulated_signal() {
-        let two_beam = bench(&OpticalParams {
-            beams: 1,
-            ..OpticalParams::default()
-        });
+        let two_beam = bench(&OpticalParams { beams: 1, ..OpticalParams::default() });
         let multi_beam = bench(&OpticalParams::default());
         let mut largest_departure = 0.0f64;
         for gap in [3.0, 20.0, 54.0, 200.0, 898.83] {
@@ -979,10 +865,7 @@ mod tests {
                 assert!(error.abs() < 1e-3, "gap {gap}, tilt {tilt}: {error} rad");
                 // Higher beams pull the fundamental's phase (LiNbO3: up to ~0.03 rad near z_R).
                 let departure = wrap(measured_fringe_phase(&multi_beam, gap, tilt) - formula);
-                assert!(
-                    departure.abs() < 0.04,
-                    "gap {gap}, tilt {tilt}: multi-beam {departure} rad"
-                );
+                assert!(departure.abs() < 0.04, "gap {gap}, tilt {tilt}: multi-beam {departure} rad");
                 largest_departure = largest_departure.max(departure.abs());
             }
         }
@@ -994,37 +877,19 @@ mod tests {
         let z_r = PI * 5.2 * 5.2 / (WL / N_AIR * 1e-3);
         let k = 2.0 * PI * N_AIR / (WL * 1e-3);
         for gouy in [true, false] {
-            let fp = bench(&OpticalParams {
-                gouy_phase: gouy,
-                beams: 1,
-                ..OpticalParams::default()
-            });
+            let fp = bench(&OpticalParams { gouy_phase: gouy, beams: 1, ..OpticalParams::default() });
             let (a, b) = (20.0, 200.0);
-            let departure = wrap(
-                measured_fringe_phase(&fp, b, 0.0)
-                    - measured_fringe_phase(&fp, a, 0.0)
-                    - 2.0 * k * (b - a),
-            );
-            let expected = if gouy {
-                -((b / z_r).atan() - (a / z_r).atan())
-            } else {
-                0.0
-            };
-            assert!(
-                (departure - expected).abs() < 2e-3,
-                "gouy {gouy}: {departure} rad, expected {expected}"
-            );
+            let departure =
+                wrap(measured_fringe_phase(&fp, b, 0.0) - measured_fringe_phase(&fp, a, 0.0) - 2.0 * k * (b - a));
+            let expected = if gouy { -((b / z_r).atan() - (a / z_r).atan()) } else { 0.0 };
+            assert!((departure - expected).abs() < 2e-3, "gouy {gouy}: {departure} rad, expected {expected}");
         }
         // Over a long move the Gouy phase tends to π/2 rad of fringe phase: λ/8 of gap.
         let fp = bench(&OpticalParams::default());
         let far = 1e6;
-        let lag_rad =
-            2.0 * k * far - (fp.fringe_phase_rad(far, 0.0) - fp.fringe_phase_rad(0.0, 0.0));
+        let lag_rad = 2.0 * k * far - (fp.fringe_phase_rad(far, 0.0) - fp.fringe_phase_rad(0.0, 0.0));
         let lag_um = lag_rad / (2.0 * k);
-        assert!(
-            (lag_um - WL * 1e-3 / N_AIR / 8.0).abs() < 1e-3,
-            "{lag_um} µm"
-        );
+        assert!((lag_um - WL * 1e-3 / N_AIR / 8.0).abs() < 1e-3, "{lag_um} µm");
     }
 
     // ---- SPEC §5 visibility and harmonics ---------------------------------------------------
@@ -1032,12 +897,9 @@ mod tests {
     #[test]
     fn two_beam_visibility_at_900_um() {
         let visibility = |r2: f64| {
-            bench(&OpticalParams {
-                lamella_reflectance: r2,
-                ..OpticalParams::default()
-            })
-            .two_beam(-900.0, 0.0)
-            .visibility
+            bench(&OpticalParams { lamella_reflectance: r2, ..OpticalParams::default() })
+                .two_beam(-900.0, 0.0)
+                .visibility
         };
         let lnb = visibility(0.142);
         assert!((0.20..0.25).contains(&lnb), "LiNbO3 n_o: {lnb}");
@@ -1059,17 +921,10 @@ mod tests {
         // The two-beam visibility is that of the full signal within the harmonics (few %).
         let fp = bench(&OpticalParams::default());
         let period = fp.fringe_period_um();
-        let samples: Vec<f64> = (0..256)
-            .map(|j| fp.power(900.0 + j as f64 * period / 256.0, 0.0))
-            .collect();
-        let (min, max) = samples
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(a, b), &p| (a.min(p), b.max(p)));
+        let samples: Vec<f64> = (0..256).map(|j| fp.power(900.0 + j as f64 * period / 256.0, 0.0)).collect();
+        let (min, max) = samples.iter().fold((f64::MAX, f64::MIN), |(a, b), &p| (a.min(p), b.max(p)));
         let full = (max - min) / (max + min);
-        assert!(
-            (full / lnb - 1.0).abs() < 0.05,
-            "full {full} vs two-beam {lnb}"
-        );
+        assert!((full / lnb - 1.0).abs() < 0.05, "full {full} vs two-beam {lnb}");
     }
 
     /// H2/H1 from an FFT of one fringe period, against the leading-order estimate
@@ -1080,14 +935,8 @@ mod tests {
             let bins = one_period_spectrum(&bench(params), gap, tilt, 64);
             bins[2].norm() / bins[1].norm()
         };
-        let lnb = OpticalParams {
-            beams: 12,
-            ..OpticalParams::default()
-        };
-        let glass = OpticalParams {
-            beams: 12,
-            ..glass()
-        };
+        let lnb = OpticalParams { beams: 12, ..OpticalParams::default() };
+        let glass = OpticalParams { beams: 12, ..glass() };
         let z_r = PI * 5.2 * 5.2 / (WL / N_AIR * 1e-3);
         for params in [&lnb, &glass] {
             let r1 = (params.fiber_index - N_AIR) / (params.fiber_index + N_AIR);
@@ -1096,8 +945,7 @@ mod tests {
                     let eps = 0.5 * (2.0 * PI * N_AIR / (WL * 1e-3) * 5.2 * tilt).powi(2);
                     let c1 = (1.0 + (gap / z_r).powi(2)).sqrt();
                     let c2 = (1.0 + (2.0 * gap / z_r).powi(2)).sqrt();
-                    let estimate =
-                        r1 * params.lamella_reflectance.sqrt() * c1 / c2 * (-3.0 * eps).exp();
+                    let estimate = r1 * params.lamella_reflectance.sqrt() * c1 / c2 * (-3.0 * eps).exp();
                     let h = ratio(params, gap, tilt);
                     assert!(
                         (h / estimate - 1.0).abs() < 0.08,
@@ -1108,15 +956,9 @@ mod tests {
             }
         }
         let glass_far = ratio(&glass, 900.0, 0.0);
-        assert!(
-            (0.017..0.021).contains(&glass_far),
-            "glass at 900 µm: {glass_far}"
-        );
+        assert!((0.017..0.021).contains(&glass_far), "glass at 900 µm: {glass_far}");
         let lnb_near = ratio(&lnb, 2.0, 0.0);
-        assert!(
-            (0.065..0.075).contains(&lnb_near),
-            "LiNbO3 at 2 µm: {lnb_near}"
-        );
+        assert!((0.065..0.075).contains(&lnb_near), "LiNbO3 at 2 µm: {lnb_near}");
         // At the same small gap, glass is nearly twice SPEC's 2 %.
         let glass_near = ratio(&glass, 2.0, 0.0);
         assert!(glass_near > 0.033, "glass at 2 µm: {glass_near}");
@@ -1131,18 +973,10 @@ mod tests {
         let r1 = (1.4682 - N_AIR) / (1.4682 + N_AIR);
         assert!((square - r1 * r1).abs() < 1e-15);
         for deg in [0.25, 0.5, 1.0, 2.0] {
-            let params = OpticalParams {
-                cleave_angle_deg: deg,
-                ..OpticalParams::default()
-            };
+            let params = OpticalParams { cleave_angle_deg: deg, ..OpticalParams::default() };
             let cleaved = reflected_power(&params, 100.0, 0.5, WL, N_AIR).unwrap();
-            let spec =
-                (-(2.0 * PI * 1.4682 * 5.2 * f64::to_radians(deg) / (WL * 1e-3)).powi(2)).exp();
-            assert!(
-                (cleaved / square - spec).abs() < 1e-12,
-                "{deg}°: {} vs {spec}",
-                cleaved / square
-            );
+            let spec = (-(2.0 * PI * 1.4682 * 5.2 * f64::to_radians(deg) / (WL * 1e-3)).powi(2)).exp();
+            assert!((cleaved / square - spec).abs() < 1e-12, "{deg}°: {} vs {spec}", cleaved / square);
         }
     }
 
@@ -1184,11 +1018,7 @@ mod tests {
     fn wavelength_sweep_shows_back_face_at_group_optical_thickness() {
         let (gap, t, n_g) = (300.0, 200.0, 2.2634);
         let params = OpticalParams {
-            back_face: Some(BackFace {
-                thickness_um: t,
-                group_index: n_g,
-                ..BackFace::default()
-            }),
+            back_face: Some(BackFace { thickness_um: t, group_index: n_g, ..BackFace::default() }),
             ..OpticalParams::default()
         };
         // Uniform in vacuum wavenumber σ = 1/λ over 1520-1600 nm.
@@ -1197,10 +1027,7 @@ mod tests {
         let mut buf: Vec<Complex<f64>> = (0..n)
             .map(|j| {
                 let sigma = s0 + (s1 - s0) * j as f64 / n as f64;
-                Complex::new(
-                    reflected_power(&params, gap, 0.0, 1e3 / sigma, N_AIR).unwrap(),
-                    0.0,
-                )
+                Complex::new(reflected_power(&params, gap, 0.0, 1e3 / sigma, N_AIR).unwrap(), 0.0)
             })
             .collect();
         let mean = buf.iter().map(|v| v.re).sum::<f64>() / n as f64;
@@ -1210,9 +1037,7 @@ mod tests {
         let opd_per_bin = 1.0 / (s1 - s0);
         let peak_near = |opd: f64| {
             let centre = (opd / opd_per_bin).round() as usize;
-            (centre - 3..=centre + 3)
-                .max_by(|&a, &b| buf[a].norm().total_cmp(&buf[b].norm()))
-                .unwrap()
+            (centre - 3..=centre + 3).max_by(|&a, &b| buf[a].norm().total_cmp(&buf[b].norm())).unwrap()
         };
         for opd in [2.0 * N_AIR * gap, 2.0 * (N_AIR * gap + n_g * t)] {
             let bin = peak_near(opd);
@@ -1229,11 +1054,7 @@ mod tests {
 
     #[test]
     fn signal_is_even_in_gap_and_tilt_and_finite_at_the_edges() {
-        let params = OpticalParams {
-            beams: 1000,
-            back_face: Some(BackFace::default()),
-            ..OpticalParams::default()
-        };
+        let params = OpticalParams { beams: 1000, back_face: Some(BackFace::default()), ..OpticalParams::default() };
         let fp = bench(&params);
         for gap in [0.0, -0.0, 1e-9, 54.0, 1e6] {
             for tilt in [0.0, 1e-9, 0.0195, FRAC_PI_2, 3.0, 1e3, 1e200] {
@@ -1241,11 +1062,7 @@ mod tests {
                 assert!(p.is_finite() && p >= 0.0, "gap {gap}, tilt {tilt}: {p}");
                 assert_eq!(p, fp.power(-gap, -tilt));
                 let f = fp.two_beam(gap, tilt);
-                assert!(
-                    f.offset_mw.is_finite()
-                        && f.amplitude_mw.is_finite()
-                        && f.visibility.is_finite()
-                );
+                assert!(f.offset_mw.is_finite() && f.amplitude_mw.is_finite() && f.visibility.is_finite());
                 assert!(fp.fringe_phase_rad(gap, tilt).is_finite() || tilt > 1e100);
             }
         }
@@ -1255,67 +1072,32 @@ mod tests {
     fn invalid_parameters_are_errors_naming_the_field() {
         let ok = OpticalParams::default();
         let cases = [
-            (
-                OpticalParams {
-                    mode_field_radius_um: 0.0,
-                    ..ok
-                },
-                "mode_field_radius_um",
-            ),
+            (OpticalParams { mode_field_radius_um: 0.0, ..ok }, "mode_field_radius_um"),
             (OpticalParams { beams: 0, ..ok }, "beams"),
+            (OpticalParams { lamella_reflectance: 1.5, ..ok }, "lamella_reflectance"),
             (
-                OpticalParams {
-                    lamella_reflectance: 1.5,
-                    ..ok
-                },
-                "lamella_reflectance",
-            ),
-            (
-                OpticalParams {
-                    back_face: Some(BackFace {
-                        phase_index: f64::NAN,
-                        ..BackFace::default()
-                    }),
-                    ..ok
-                },
+                OpticalParams { back_face: Some(BackFace { phase_index: f64::NAN, ..BackFace::default() }), ..ok },
                 "back_face.phase_index",
             ),
         ];
         for (params, field) in cases {
-            assert_eq!(
-                FabryPerot::new(&params, WL, N_AIR).unwrap_err().quantity,
-                field
-            );
+            assert_eq!(FabryPerot::new(&params, WL, N_AIR).unwrap_err().quantity, field);
         }
-        assert_eq!(
-            FabryPerot::new(&ok, f64::NAN, N_AIR).unwrap_err().quantity,
-            "wavelength_nm"
-        );
-        assert_eq!(
-            FabryPerot::new(&ok, WL, 0.5).unwrap_err().quantity,
-            "medium_index"
-        );
-        let msg = FabryPerot::new(&OpticalParams { beams: 0, ..ok }, WL, N_AIR)
-            .unwrap_err()
-            .to_string();
+        assert_eq!(FabryPerot::new(&ok, f64::NAN, N_AIR).unwrap_err().quantity, "wavelength_nm");
+        assert_eq!(FabryPerot::new(&ok, WL, 0.5).unwrap_err().quantity, "medium_index");
+        let msg = FabryPerot::new(&OpticalParams { beams: 0, ..ok }, WL, N_AIR).unwrap_err().to_string();
         assert!(msg.contains("beams") && msg.contains("1..10000"), "{msg}");
     }
 
     #[test]
     fn params_serde_fills_missing_fields_with_defaults() {
-        let p: OpticalParams = serde_json::from_str(
-            r#"{"lamella_reflectance": 0.04, "back_face": {"thickness_um": 1000.0}}"#,
-        )
-        .unwrap();
+        let p: OpticalParams =
+            serde_json::from_str(r#"{"lamella_reflectance": 0.04, "back_face": {"thickness_um": 1000.0}}"#).unwrap();
         assert_eq!(p.lamella_reflectance, 0.04);
         assert_eq!(p.mode_field_radius_um, 5.2);
         assert_eq!(p.back_face.unwrap().thickness_um, 1000.0);
-        assert_eq!(
-            p.back_face.unwrap().phase_index,
-            BackFace::default().phase_index
-        );
-        let back: OpticalParams =
-            serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap();
+        assert_eq!(p.back_face.unwrap().phase_index, BackFace::default().phase_index);
+        let back: OpticalParams = serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap();
         assert_eq!(back, p);
         let d: OpticalParams = serde_json::from_str("{}").unwrap();
         assert_eq!(d, OpticalParams::default());

@@ -175,10 +175,7 @@ impl RobotDescription {
             if l.limits.min >= l.limits.max {
                 return Err(FieldError::new(
                     f("limits"),
-                    format!(
-                        "expected min < max, found min = {} {unit}, max = {} {unit}",
-                        l.limits.min, l.limits.max
-                    ),
+                    format!("expected min < max, found min = {} {unit}, max = {} {unit}", l.limits.min, l.limits.max),
                 ));
             }
             if l.limits.min > 0.0 || l.limits.max < 0.0 {
@@ -193,10 +190,7 @@ impl RobotDescription {
             if l.joint == JointType::Revolute && (l.limits.min < -360.0 || l.limits.max > 360.0) {
                 return Err(FieldError::new(
                     f("limits"),
-                    format!(
-                        "expected revolute limits within ±360°, found [{}, {}]°",
-                        l.limits.min, l.limits.max
-                    ),
+                    format!("expected revolute limits within ±360°, found [{}, {}]°", l.limits.min, l.limits.max),
                 ));
             }
         }
@@ -270,12 +264,24 @@ mod tests {
     #[test]
     fn bad_descriptions_name_the_file_field_and_expectation() {
         let cases: &[(&str, &str, &str)] = &[
-            ("limits: (min: -10.0, max: 10.0)", "limits: (min: 10.0, max: -10.0)", "bad.ron: field `links[3].limits`: expected min < max"),
-            ("limits: (min: -150.0, max: 150.0)", "limits: (min: 20.0, max: 150.0)", "bad.ron: field `links[0].limits`: expected limits that contain the zero position"),
+            (
+                "limits: (min: -10.0, max: 10.0)",
+                "limits: (min: 10.0, max: -10.0)",
+                "bad.ron: field `links[3].limits`: expected min < max",
+            ),
+            (
+                "limits: (min: -150.0, max: 150.0)",
+                "limits: (min: 20.0, max: 150.0)",
+                "bad.ron: field `links[0].limits`: expected limits that contain the zero position",
+            ),
             ("name: \"q2\"", "name: \"q1\"", "bad.ron: field `links[1].name`: joint name `q1` is used twice"),
             ("joint: Revolute", "joint: Spherical", "bad.ron:"),
             ("beta_deg: 0.0, alpha_deg: -90.0", "beta_deg: \"x\", alpha_deg: -90.0", "expected a RobotDescription"),
-            ("limits: (min: -180.0, max: 180.0)", "limits: (min: -720.0, max: 180.0)", "field `links[5].limits`: expected revolute limits within ±360°"),
+            (
+                "limits: (min: -180.0, max: 180.0)",
+                "limits: (min: -720.0, max: 180.0)",
+                "field `links[5].limits`: expected revolute limits within ±360°",
+            ),
         ];
         for (from, to, want) in cases {
             let err = with_edit(from, to).unwrap_err().to_string();
