@@ -1,0 +1,118 @@
+//! Identification: measurements → extrinsic parameters with uncertainties (paper mode, joint estimate),
+//! identifiability, experiment design. Owns the observation types and the forward prediction shared by every estimator.
+//!
+//! Every observation is predicted by the same forward model the virtual bench uses
+//! ([`crate::measure::PhaseModel`]): phase-equivalent gap changes from the fringes, absolute
+//! gaps from sweeps, fringe amplitudes (reflected power) from tilt scans.
+
+pub mod observability;
+
+use crate::measure::PhaseModel;
+use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use crate::model::optics::FabryPerot;
+use serde::{Deserialize, Serialize};
+
+/// Number of extrinsic parameters.
+pub const N_EXTRINSICS: usize = 8;
+
+/// Scale of each parameter in the estimators' internal units: angles in mrad, lengths in µm
+/// (SPEC section 6.4), so the Jacobian columns are comparable. `internal = value / scale`
+/// with values in ° and µm.
+pub fn parameter_scale(i: usize) -> f64 {
+    if PARAMETER_NAMES[i].1 == "°" {
+        0.001f64.to_degrees() // 1 mrad in degrees
+    } else {
+        1.0
+    }
+}
+
+/// What was observed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum ObservationKind {
+    /// Phase-equivalent gap change from one pose to another (nm), from the fringes.
+    GapChange {
+        /// Joints at the start (µm, °).
+        from_display: [f64; 6],
+        /// Joints at the end (µm, °).
+        to_display: [f64; 6],
+        /// Measured change (nm).
+        dl_nm: f64,
+    },
+    /// Phase-equivalent (perpendicular) gap at a pose (µm), from a wavelength sweep.
+    AbsoluteGap {
+        /// Joints (µm, °).
+        at_display: [f64; 6],
+        /// Measured gap (µm).
+        gap_um: f64,
+    },
+    /// Fringe amplitude at a pose (mW), from a tilt scan; `group` shares one unknown detector
+    /// gain between the observations of one scan.
+    FringeAmplitude {
+        /// Joints (µm, °).
+        at_display: [f64; 6],
+        /// Measured half peak-to-peak fringe amplitude (mW).
+        amplitude_mw: f64,
+        /// Gain group.
+        group: usize,
+    },
+}
+
+/// One observation with its standard uncertainty (in the observation's unit: nm, µm or mW).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Observation {
+    /// Which motion or measurement it comes from (for residual reports).
+    pub label: String,
+    /// What was observed.
+    pub kind: ObservationKind,
+    /// Standard uncertainty (nm for gap changes, µm for gaps, mW for amplitudes).
+    pub sigma: f64,
+    /// Vacuum wavelength (nm).
+    pub wavelength_nm: f64,
+}
+
+impl Observation {
+    /// The unit of the observation's value and σ.
+    pub fn unit(&self) -> &'static str {
+        match self.kind {
+            ObservationKind::GapChange { .. } => "nm",
+            ObservationKind::AbsoluteGap { .. } => "µm",
+            ObservationKind::FringeAmplitude { .. } => "mW",
+        }
+    }
+
+    /// The measured value.
+    pub fn value(&self) -> f64 {
+        match self.kind {
+            ObservationKind::GapChange { dl_nm, .. } => dl_nm,
+            ObservationKind::AbsoluteGap { gap_um, .. } => gap_um,
+            ObservationKind::FringeAmplitude { amplitude_mw, .. } => amplitude_mw,
+        }
+    }
+}
+
+/// Predict an observation from extrinsics `e` and the gain of its amplitude group (ignored for
+/// other kinds). NaN when the beam misses the lamella.
+pub fn predict(model: &PhaseModel, fp: &FabryPerot, e: &Extrinsics, obs: &Observation, gain: f64) -> f64 {
+    let cavity = |q: &[f64; 6]| {
+        let q = model.chain.description().q_from_display(q);
+        e.cavity(&model.chain.end_effector(&q)).ok()
+    };
+    let phase_gap_nm = |q: &[f64; 6]| match cavity(q) {
+        Some(c) => {
+            fp.fringe_phase_rad(c.length_um.abs(), c.tilt_rad) * fp.wavelength_nm()
+                / (4.0 * std::f64::consts::PI * fp.medium_index())
+        }
+        None => f64::NAN,
+    };
+    match &obs.kind {
+        ObservationKind::GapChange { from_display, to_display, .. } => {
+            phase_gap_nm(to_display) - phase_gap_nm(from_display)
+        }
+        ObservationKind::AbsoluteGap { at_display, .. } => {
+            cavity(at_display).map_or(f64::NAN, |c| c.length_um.abs() * (1.0 - c.tilt_rad * c.tilt_rad / 2.0))
+        }
+        ObservationKind::FringeAmplitude { at_display, .. } => {
+            cavity(at_display).map_or(f64::NAN, |c| gain * fp.two_beam(c.length_um.abs(), c.tilt_rad).amplitude_mw)
+        }
+    }
+}

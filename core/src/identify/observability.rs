@@ -1,0 +1,1 @@
+//! (placeholder: identifiability and uncertainty, being written)
