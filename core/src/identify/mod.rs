@@ -6,6 +6,7 @@
 //! gaps from sweeps, fringe amplitudes (reflected power) from tilt scans.
 
 pub mod observability;
+pub mod paper;
 
 use crate::measure::PhaseModel;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
