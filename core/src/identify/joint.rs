@@ -1,0 +1,343 @@
+//! The joint estimate: every extrinsic parameter from every observation at once (fringe phase, absolute gaps, power),
+//! by Levenberg-Marquardt, with per-parameter masks and priors. Owns the convergence report.
+
+use crate::identify::{parameter_scale, predict, Observation, ObservationKind, N_EXTRINSICS};
+use crate::measure::PhaseModel;
+use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use crate::model::optics::FabryPerot;
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+use serde::Serialize;
+
+/// A Gaussian prior on a parameter (display units: ° or µm).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Prior {
+    /// Prior mean.
+    pub value: f64,
+    /// Prior standard deviation.
+    pub sigma: f64,
+}
+
+/// Options of the joint estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointOptions {
+    /// Which of the eight parameters are free (order of [`PARAMETER_NAMES`]); fixed ones keep the start value.
+    pub free: [bool; N_EXTRINSICS],
+    /// Optional priors per parameter.
+    pub priors: [Option<Prior>; N_EXTRINSICS],
+    /// Iteration budget (function evaluations of the solver, × parameters).
+    pub patience: usize,
+}
+
+impl Default for JointOptions {
+    fn default() -> Self {
+        Self { free: [true; N_EXTRINSICS], priors: [None; N_EXTRINSICS], patience: 200 }
+    }
+}
+
+/// The outcome of the joint estimate, with an honest convergence report.
+#[derive(Debug, Clone)]
+pub struct JointEstimate {
+    /// The estimate (fixed parameters at their start values).
+    pub extrinsics: Extrinsics,
+    /// Detector gain per amplitude group.
+    pub gains: Vec<f64>,
+    /// True only when the solver reports convergence *and* the residuals are finite.
+    pub converged: bool,
+    /// The solver's own words on how it stopped.
+    pub termination: String,
+    /// Function evaluations used.
+    pub evaluations: usize,
+    /// Residual per observation (measured − predicted, in the observation's unit).
+    pub residuals: Vec<f64>,
+    /// Residual per observation in σ units.
+    pub normalised_residuals: Vec<f64>,
+    /// Jacobian of the normalised residuals w.r.t. the free parameters in internal units
+    /// (mrad, µm, then relative gains), rows = observations then priors.
+    pub weighted_jacobian: DMatrix<f64>,
+    /// Names of the Jacobian's columns.
+    pub column_names: Vec<String>,
+    /// Index into [`PARAMETER_NAMES`] of each extrinsic column (gain columns: None).
+    pub column_parameter: Vec<Option<usize>>,
+}
+
+struct Problem<'a> {
+    model: &'a PhaseModel,
+    fps: Vec<(f64, FabryPerot)>,
+    obs: &'a [Observation],
+    start: [f64; N_EXTRINSICS],
+    options: &'a JointOptions,
+    free: Vec<usize>,
+    groups: usize,
+    x: DVector<f64>,
+}
+
+impl Problem<'_> {
+    fn unpack(&self, x: &DVector<f64>) -> (Extrinsics, Vec<f64>) {
+        let mut a = self.start;
+        for (k, &i) in self.free.iter().enumerate() {
+            a[i] = x[k] * parameter_scale(i);
+        }
+        let gains = (0..self.groups).map(|g| x[self.free.len() + g]).collect();
+        (Extrinsics::from_array(a), gains)
+    }
+
+    fn fp(&self, wavelength_nm: f64) -> &FabryPerot {
+        &self.fps.iter().find(|(w, _)| *w == wavelength_nm).expect("a FabryPerot per wavelength").1
+    }
+
+    fn residuals_at(&self, x: &DVector<f64>) -> DVector<f64> {
+        let (e, gains) = self.unpack(x);
+        let priors: Vec<(usize, Prior)> =
+            self.options.priors.iter().enumerate().filter_map(|(i, p)| p.map(|p| (i, p))).collect();
+        let mut r = DVector::zeros(self.obs.len() + priors.len());
+        for (k, o) in self.obs.iter().enumerate() {
+            let gain = match o.kind {
+                ObservationKind::FringeAmplitude { group, .. } => gains[group],
+                _ => 1.0,
+            };
+            let p = predict(self.model, self.fp(o.wavelength_nm), &e, o, gain);
+            r[k] = if p.is_finite() { (o.value() - p) / o.sigma } else { 1e6 };
+        }
+        let a = e.to_array();
+        for (k, (i, p)) in priors.iter().enumerate() {
+            r[self.obs.len() + k] = (a[*i] - p.value) / p.sigma;
+        }
+        r
+    }
+
+    fn jacobian_at(&self, x: &DVector<f64>) -> DMatrix<f64> {
+        let n = x.len();
+        let r0 = self.residuals_at(x);
+        let mut j = DMatrix::zeros(r0.len(), n);
+        for c in 0..n {
+            // Steps: 1e-4 mrad, 1e-4 µm, 1e-6 of a gain.
+            let h = if c < self.free.len() { 1e-4 } else { 1e-6 * x[c].abs().max(1e-9) };
+            let (mut a, mut b) = (x.clone(), x.clone());
+            a[c] += h;
+            b[c] -= h;
+            // The residual is measured − predicted: its derivative is minus the model's.
+            let d = (self.residuals_at(&a) - self.residuals_at(&b)) / (2.0 * h);
+            j.set_column(c, &d);
+        }
+        j
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.x.copy_from(x);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.x.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        // The solver minimises ½‖r‖² with r = model − data: negate our data − model.
+        Some(-self.residuals_at(&self.x))
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        Some(-self.jacobian_at(&self.x))
+    }
+}
+
+/// Estimate the extrinsics (and one detector gain per amplitude group) from the observations,
+/// starting at `start`.
+pub fn estimate(
+    model: &PhaseModel,
+    observations: &[Observation],
+    start: &Extrinsics,
+    options: &JointOptions,
+) -> JointEstimate {
+    let mut wavelengths: Vec<f64> = observations.iter().map(|o| o.wavelength_nm).collect();
+    wavelengths.sort_by(f64::total_cmp);
+    wavelengths.dedup();
+    let fps = wavelengths
+        .iter()
+        .filter_map(|&w| FabryPerot::new(&model.optics, w, model.n_air).ok().map(|fp| (w, fp)))
+        .collect();
+    let groups = observations
+        .iter()
+        .filter_map(|o| match o.kind {
+            ObservationKind::FringeAmplitude { group, .. } => Some(group + 1),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(0);
+    let free: Vec<usize> = (0..N_EXTRINSICS).filter(|&i| options.free[i]).collect();
+    let start_a = start.to_array();
+    let mut x = DVector::zeros(free.len() + groups);
+    for (k, &i) in free.iter().enumerate() {
+        x[k] = start_a[i] / parameter_scale(i);
+    }
+    let mut problem = Problem { model, fps, obs: observations, start: start_a, options, free, groups, x };
+    // Start each gain at the ratio of measured to predicted amplitudes (linear in the gain).
+    if groups > 0 {
+        let (e, _) = problem.unpack(&problem.x);
+        for g in 0..groups {
+            let (mut num, mut den) = (0.0, 0.0);
+            for o in observations {
+                if let ObservationKind::FringeAmplitude { group, .. } = o.kind {
+                    if group == g {
+                        let p = predict(model, problem.fp(o.wavelength_nm), &e, o, 1.0);
+                        if p.is_finite() {
+                            num += p * o.value();
+                            den += p * p;
+                        }
+                    }
+                }
+            }
+            let k = problem.free.len() + g;
+            problem.x[k] = if den > 0.0 { num / den } else { 1.0 };
+        }
+    }
+    let (problem, report) = LevenbergMarquardt::new().with_patience(options.patience).minimize(problem);
+    let r = problem.residuals_at(&problem.x);
+    let finite = r.iter().all(|v| v.is_finite());
+    let (extrinsics, gains) = problem.unpack(&problem.x);
+    let weighted_jacobian = problem.jacobian_at(&problem.x);
+    let mut column_names: Vec<String> = problem.free.iter().map(|&i| PARAMETER_NAMES[i].0.to_string()).collect();
+    let mut column_parameter: Vec<Option<usize>> = problem.free.iter().map(|&i| Some(i)).collect();
+    for g in 0..groups {
+        column_names.push(format!("gain[{g}]"));
+        column_parameter.push(None);
+    }
+    let residuals: Vec<f64> = observations.iter().zip(r.iter()).map(|(o, ri)| ri * o.sigma).collect();
+    JointEstimate {
+        extrinsics,
+        gains,
+        converged: report.termination.was_successful() && finite,
+        termination: format!("{:?}", report.termination),
+        evaluations: report.number_of_evaluations,
+        normalised_residuals: r.iter().take(observations.len()).copied().collect(),
+        residuals,
+        weighted_jacobian,
+        column_names,
+        column_parameter,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::air::AmbientConditions;
+    use crate::model::optics::OpticalParams;
+    use crate::model::robot::RobotDescription;
+
+    fn model() -> PhaseModel {
+        PhaseModel::new(
+            RobotDescription::femto_6dof(),
+            Extrinsics::table2(),
+            OpticalParams::default(),
+            &AmbientConditions::default(),
+            1560.0,
+        )
+        .unwrap()
+    }
+
+    /// Exact observations predicted from the truth: gap changes of translations and rotations,
+    /// absolute gaps and amplitudes of a tilt scan.
+    fn synthetic(truth: &Extrinsics) -> Vec<Observation> {
+        let m = model();
+        let fp = FabryPerot::new(&m.optics, 1560.0, m.n_air).unwrap();
+        let mut out = Vec::new();
+        let mut push = |kind: ObservationKind, sigma: f64| {
+            let mut o = Observation { label: "s".into(), kind, sigma, wavelength_nm: 1560.0 };
+            let v = predict(&m, &fp, truth, &o, 2.0);
+            match &mut o.kind {
+                ObservationKind::GapChange { dl_nm, .. } => *dl_nm = v,
+                ObservationKind::AbsoluteGap { gap_um, .. } => *gap_um = v,
+                ObservationKind::FringeAmplitude { amplitude_mw, .. } => *amplitude_mw = v,
+            }
+            out.push(o);
+        };
+        for q in [[0.0, 0.0, 150.0, 0.0, 0.0, 0.0], [150.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 10.0, 0.0, 0.0, 0.0, 0.0]] {
+            let mut from = q;
+            for v in from.iter_mut().take(3) {
+                *v = -*v;
+            }
+            push(ObservationKind::GapChange { from_display: from, to_display: q, dl_nm: 0.0 }, 2.0);
+        }
+        for lateral in [-150.0, 0.0, 150.0] {
+            for (j, a) in [(3, 4.0), (4, 4.0), (3, -4.0), (4, -4.0), (5, 40.0)] {
+                let mut from = [lateral, 0.0, lateral, 0.0, 0.0, 0.0];
+                from[1] = 50.0;
+                let mut to = from;
+                to[j] = a;
+                push(ObservationKind::GapChange { from_display: from, to_display: to, dl_nm: 0.0 }, 2.0);
+            }
+            push(
+                ObservationKind::AbsoluteGap { at_display: [lateral, -100.0, lateral, 0.0, 0.0, 0.0], gap_um: 0.0 },
+                0.02,
+            );
+        }
+        for a in [-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0] {
+            push(
+                ObservationKind::FringeAmplitude {
+                    at_display: [0.0, 0.0, 0.0, a, 0.0, 0.0],
+                    amplitude_mw: 0.0,
+                    group: 0,
+                },
+                1e-6,
+            );
+            push(
+                ObservationKind::FringeAmplitude {
+                    at_display: [0.0, 0.0, 0.0, 0.0, a, 0.0],
+                    amplitude_mw: 0.0,
+                    group: 0,
+                },
+                1e-6,
+            );
+        }
+        out
+    }
+
+    #[test]
+    fn recovers_the_truth_from_exact_observations() {
+        let truth = Extrinsics::table2();
+        let obs = synthetic(&truth);
+        let start = Extrinsics::from_array({
+            let a = truth.to_array();
+            std::array::from_fn(|i| if i < 4 { a[i] * 0.5 } else { a[i] + 8.0 })
+        });
+        let est = estimate(&model(), &obs, &start, &JointOptions::default());
+        assert!(est.converged, "{}", est.termination);
+        let (got, want) = (est.extrinsics.to_array(), truth.to_array());
+        for i in [0, 1, 2, 3, 5, 7] {
+            assert!((got[i] - want[i]).abs() < 1e-4, "{}: {} vs {}", PARAMETER_NAMES[i].0, got[i], want[i]);
+        }
+        // The gap (y_wf − Z_et) is fixed by the absolute gaps.
+        assert!(((got[6] - got[4]) - (want[6] - want[4])).abs() < 1e-3);
+        assert!((est.gains[0] - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn masked_parameters_stay_and_priors_pull() {
+        let truth = Extrinsics::table2();
+        let obs = synthetic(&truth);
+        let mut options = JointOptions::default();
+        options.free[4] = false; // Z_et fixed at the start value
+        options.priors[6] = Some(Prior { value: 905.0, sigma: 1e-6 }); // y_wf pinned by a tight prior
+        let est = estimate(&model(), &obs, &truth, &options);
+        assert_eq!(est.extrinsics.z_et_um, truth.z_et_um);
+        assert!((est.extrinsics.y_wf_um - 905.0).abs() < 1e-3, "y_wf {}", est.extrinsics.y_wf_um);
+        assert!(!est.column_names.contains(&"Z_et".to_string()));
+    }
+
+    #[test]
+    fn a_failure_is_not_called_a_success() {
+        let truth = Extrinsics::table2();
+        let obs = synthetic(&truth);
+        let options = JointOptions { patience: 1, ..Default::default() };
+        let mut start = truth;
+        start.beta_et_deg = 3.0;
+        let est = estimate(&model(), &obs, &start, &options);
+        assert!(!est.converged, "one evaluation cannot converge from 3° away: {}", est.termination);
+    }
+}
