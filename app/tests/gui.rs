@@ -31,8 +31,8 @@ fn the_window_opens_on_the_virtual_bench_and_shows_the_cavity() {
     h.run();
     h.get_by_label_contains("L = -898.830 µm");
     h.get_by_label_contains("P_r (world) = (104.243, 1.280, 101.818) µm");
-    for frame in ["world", "fiber", "tool (lamella)", "reflection point P_r"] {
-        h.get_by_label_contains(frame);
+    for frame in ["world", "link 6 (q6)", "end effector", "fiber", "tool (lamella)", "reflection point P_r"] {
+        assert!(h.query_all_by_label_contains(frame).next().is_some(), "frame {frame} is not shown");
     }
     save_screenshot(&mut h, "foundation-frames");
 }

@@ -170,7 +170,8 @@ pub fn analyse(trace: &Trace, model: &PhaseModel) -> Result<Measurement, Measure
     let wavelength_nm = trace.wavelength_nm[0];
     let hint =
         model.hint_nm(trace, wavelength_nm).map_err(|problem| MeasureError::Trace { label: label.clone(), problem })?;
-    let track = fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &TrackConfig::default())
+    let track_cfg = TrackConfig { per_sample_sigma: true, ..TrackConfig::default() };
+    let track = fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
         .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
     let count = fringes::count_extrema(
         &trace.irradiance,

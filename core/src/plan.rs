@@ -23,6 +23,9 @@ use std::path::Path;
 pub const STRATEGY1_RON: &str = include_str!("../../assets/plans/strategy1.ron");
 /// The paper's strategy 2 (rotations q4, q5), embedded.
 pub const STRATEGY2_RON: &str = include_str!("../../assets/plans/strategy2.ron");
+/// The measurements the paper lacks (tilt scans, absolute gaps at several poses, rotations at
+/// other gaps), for the joint estimate.
+pub const JOINT_EXTRAS_RON: &str = include_str!("../../assets/plans/joint-extras.ron");
 
 /// Names of the six joint fields, in order, with their units (as in the trace CSV header).
 pub const JOINT_FIELDS: [&str; 6] = ["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"];
@@ -707,6 +710,12 @@ impl Plan {
             .expect("the embedded plan is valid (checked by tests)")
     }
 
+    /// The extra measurements of the joint estimate, from the embedded asset.
+    pub fn joint_extras() -> Self {
+        Self::from_ron_str(JOINT_EXTRAS_RON, Path::new("assets/plans/joint-extras.ron"))
+            .expect("the embedded plan is valid (checked by tests)")
+    }
+
     /// Load and validate a plan file ([`Plan::validate`]; the joint limits and the laser range
     /// are checked by [`Plan::expand`], which knows the robot).
     pub fn load(path: &Path) -> Result<Self, FileError> {
@@ -1296,6 +1305,18 @@ mod tests {
         assert!(total > 120.0 && total < 20.0 * 60.0, "implausible bench time {total} s");
         // It ends where it started.
         assert_eq!(segs.last().unwrap().to_display, [0.0; 6]);
+    }
+
+    #[test]
+    fn shipped_joint_extras_is_inside_the_limits_with_tilt_scans_and_sweeps() {
+        let p = Plan::joint_extras();
+        let robot = RobotDescription::femto_6dof();
+        let segs = p.expand(&robot, [0.0; 6], &MotionLimits::default()).unwrap();
+        let scans = segs.iter().filter(|s| s.record && s.label.starts_with("tilt scan")).count();
+        let sweeps = segs.iter().filter(|s| matches!(s.motion, TimedMotion::Sweep { .. })).count();
+        assert_eq!((scans, sweeps), (4, 5));
+        let d = total_duration_s(&segs);
+        assert!(d > 60.0 && d < 300.0, "{d} s");
     }
 
     #[test]

@@ -155,6 +155,27 @@ pub fn estimate(
     start: &Extrinsics,
     options: &JointOptions,
 ) -> JointEstimate {
+    run(model, observations, start, options, true)
+}
+
+/// Residuals and Jacobian at `at` without moving (gains fitted linearly): for the uncertainty of
+/// an estimate made by another method (the paper's steps).
+pub fn evaluate(
+    model: &PhaseModel,
+    observations: &[Observation],
+    at: &Extrinsics,
+    options: &JointOptions,
+) -> JointEstimate {
+    run(model, observations, at, options, false)
+}
+
+fn run(
+    model: &PhaseModel,
+    observations: &[Observation],
+    start: &Extrinsics,
+    options: &JointOptions,
+    minimise: bool,
+) -> JointEstimate {
     let mut wavelengths: Vec<f64> = observations.iter().map(|o| o.wavelength_nm).collect();
     wavelengths.sort_by(f64::total_cmp);
     wavelengths.dedup();
@@ -197,7 +218,13 @@ pub fn estimate(
             problem.x[k] = if den > 0.0 { num / den } else { 1.0 };
         }
     }
-    let (problem, report) = LevenbergMarquardt::new().with_patience(options.patience).minimize(problem);
+    let (problem, converged, termination, evaluations) = if minimise {
+        let (problem, report) = LevenbergMarquardt::new().with_patience(options.patience.max(1)).minimize(problem);
+        let t = format!("{:?}", report.termination);
+        (problem, report.termination.was_successful(), t, report.number_of_evaluations)
+    } else {
+        (problem, true, "evaluated, not minimised".to_string(), 1)
+    };
     let r = problem.residuals_at(&problem.x);
     let finite = r.iter().all(|v| v.is_finite());
     let (extrinsics, gains) = problem.unpack(&problem.x);
@@ -212,9 +239,9 @@ pub fn estimate(
     JointEstimate {
         extrinsics,
         gains,
-        converged: report.termination.was_successful() && finite,
-        termination: format!("{:?}", report.termination),
-        evaluations: report.number_of_evaluations,
+        converged: converged && finite,
+        termination,
+        evaluations,
         normalised_residuals: r.iter().take(observations.len()).copied().collect(),
         residuals,
         weighted_jacobian,

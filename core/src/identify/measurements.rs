@@ -112,7 +112,8 @@ pub fn observations_from_traces(
         if obs.iter().any(|o| matches!(o.kind, ObservationKind::FringeAmplitude { .. })) {
             group += 1;
         }
-        all.extend(obs);
+        // An observation without a finite value and a positive finite σ carries no information.
+        all.extend(obs.into_iter().filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0));
     }
     Ok(all)
 }

@@ -5,6 +5,7 @@
 //! ([`crate::measure::PhaseModel`]): phase-equivalent gap changes from the fringes, absolute
 //! gaps from sweeps, fringe amplitudes (reflected power) from tilt scans.
 
+pub mod calibration;
 pub mod joint;
 pub mod measurements;
 pub mod observability;

@@ -1,0 +1,358 @@
+//! A whole calibration: run the measurement plans on a bench, turn traces into observations, identify
+//! (paper mode or joint estimate), report uncertainties and validate. Owns the order of those steps and the report.
+//!
+//! The motion hint of the fringe analysis needs a rough model first: lateral moves show no
+//! fringes in a model with square lamella and fiber. The wavelength sweeps measure absolute
+//! gaps at many poses, and gap differences between poses give the lamella normal n_t, so the
+//! first estimate comes from the sweeps alone (a bootstrap); the traces are then analysed
+//! with it, the full estimate made, and the traces analysed once more with that estimate.
+
+use crate::bench::{run_plan, Bench, RunControl};
+use crate::identify::joint::{self, JointEstimate, JointOptions};
+use crate::identify::measurements::{observations_from_traces, ExtractOptions};
+use crate::identify::observability::IdentifiabilityReport;
+use crate::identify::{paper, Observation, ObservationKind, N_EXTRINSICS};
+use crate::measure::PhaseModel;
+use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use crate::plan::Plan;
+use crate::trace::Trace;
+use crate::validate::{run_validation, ValidationMotion};
+use serde::Serialize;
+use std::sync::atomic::AtomicBool;
+
+/// Which identifier.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// The paper's steps A, B, C on strategies 1 and 2.
+    Paper,
+    /// Every parameter from every measurement at once, with tilt scans and absolute gaps.
+    Joint,
+}
+
+/// One row of the Table II-style result.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParameterRow {
+    /// Parameter name (paper's).
+    pub name: String,
+    /// Value (display unit).
+    pub value: f64,
+    /// Unit.
+    pub unit: String,
+    /// Standard uncertainty, `None` when the data do not determine the parameter.
+    pub sigma: Option<f64>,
+    /// Whether the data determine it.
+    pub determined: bool,
+    /// Why not, when not.
+    pub reason: Option<String>,
+}
+
+/// One validation result.
+#[derive(Debug, Clone, Serialize)]
+pub struct ValidationRow {
+    /// The motion.
+    pub motion: String,
+    /// Peak-to-peak L variation planned with the nominal (pre-calibration) extrinsics (nm).
+    pub before_nm: Option<f64>,
+    /// The same planned with the identified extrinsics (nm).
+    pub after_nm: Option<f64>,
+    /// The paper's figure after calibration (nm).
+    pub paper_nm: f64,
+    /// Why a figure is missing.
+    pub note: Option<String>,
+}
+
+/// The whole calibration report.
+#[derive(Debug, Clone, Serialize)]
+pub struct CalibrationReport {
+    /// Identifier used.
+    pub mode: Mode,
+    /// The bench's name.
+    pub bench: String,
+    /// The Table II-style result.
+    pub parameters: Vec<ParameterRow>,
+    /// Identifiability and uncertainty.
+    pub identifiability: IdentifiabilityReport,
+    /// Solver convergence (joint mode: the solver's report; paper mode: step A's).
+    pub converged: bool,
+    /// The solver's words.
+    pub termination: String,
+    /// RMS of the normalised residuals (1 = at the noise floor).
+    pub residual_rms_sigma: f64,
+    /// Residual per observation: label, unit, measured − predicted, σ.
+    pub residuals: Vec<(String, String, f64, f64)>,
+    /// Validation figures.
+    pub validation: Vec<ValidationRow>,
+    /// Bench time of the measurements (s).
+    pub measurement_duration_s: f64,
+    /// Number of observations used.
+    pub observations: usize,
+    /// Sentences for the user.
+    pub warnings: Vec<String>,
+    /// The identified extrinsics.
+    #[serde(skip)]
+    pub extrinsics: Extrinsics,
+    /// The recorded traces.
+    #[serde(skip)]
+    pub traces: Vec<Trace>,
+}
+
+/// The plans a mode measures.
+pub fn plans(mode: Mode) -> Vec<Plan> {
+    match mode {
+        Mode::Paper => vec![Plan::strategy1(), Plan::strategy2()],
+        Mode::Joint => vec![Plan::strategy1(), Plan::strategy2(), Plan::joint_extras()],
+    }
+}
+
+/// Run the plans on the bench; every trace recorded is returned, with the bench time used.
+pub fn measure(bench: &mut dyn Bench, plans: &[Plan]) -> Result<(Vec<Trace>, f64), String> {
+    let cancel = AtomicBool::new(false);
+    let mut traces = Vec::new();
+    let mut duration = 0.0;
+    for p in plans {
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        let run = run_plan(bench, p, &mut control);
+        duration += run.duration_s;
+        traces.extend(run.traces);
+        run.outcome.map_err(|e| format!("plan {}: {e}", p.name))?;
+    }
+    Ok((traces, duration))
+}
+
+fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
+    PhaseModel { extrinsics: e, ..base.clone() }
+}
+
+/// Identify from recorded traces. `nominal` is the model before calibration (design
+/// extrinsics); it also supplies the robot, optics and air.
+pub fn identify(
+    traces: &[Trace],
+    nominal: &PhaseModel,
+    mode: Mode,
+) -> Result<(JointEstimate, Vec<Observation>, Option<paper::StepA>), String> {
+    let opts = ExtractOptions::default();
+    let sweeps: Vec<Trace> = traces.iter().filter(|t| crate::measure::is_sweep(t)).cloned().collect();
+    let gaps = observations_from_traces(&sweeps, nominal, &opts).map_err(|e| e.to_string())?;
+    // Bootstrap from the absolute gaps: the lamella normal and the gap.
+    let mut boot_opts = JointOptions::default();
+    boot_opts.free = [true, true, false, false, false, false, true, false];
+    let boot = joint::estimate(nominal, &gaps, &nominal.extrinsics, &boot_opts);
+    let mut current = boot.extrinsics;
+    let mut last = None;
+    for _pass in 0..2 {
+        let model = model_with(nominal, current);
+        let obs = observations_from_traces(traces, &model, &opts).map_err(|e| e.to_string())?;
+        let (est, step_a) = match mode {
+            Mode::Joint => (joint::estimate(nominal, &obs, &current, &JointOptions::default()), None),
+            Mode::Paper => {
+                let translations: Vec<Observation> = obs.iter().filter(|o| is_translation(o)).cloned().collect();
+                let rotations: Vec<Observation> = obs.iter().filter(|o| is_rotation(o)).cloned().collect();
+                let a = paper::step_a(&nominal.chain, &translations, &current);
+                let b = paper::step_b(&nominal.chain, &rotations, a.angles_deg);
+                let e = Extrinsics {
+                    beta_et_deg: a.angles_deg[0],
+                    theta_et_deg: a.angles_deg[1],
+                    beta_wf_deg: a.angles_deg[2],
+                    theta_wf_deg: a.angles_deg[3],
+                    z_et_um: b.origins_um[0],
+                    x_wf_um: b.origins_um[1],
+                    y_wf_um: b.origins_um[2],
+                    z_wf_um: b.origins_um[3],
+                };
+                // Uncertainties of the paper's result: the joint machinery evaluated at it,
+                // on the paper's data only (one evaluation, no move).
+                let paper_obs: Vec<Observation> = translations.iter().chain(&rotations).cloned().collect();
+                let mut est = joint::evaluate(nominal, &paper_obs, &e, &JointOptions::default());
+                est.converged = a.converged;
+                est.termination = format!("step A: {}", if a.converged { "converged" } else { "did not converge" });
+                (est, Some(a))
+            }
+        };
+        current = est.extrinsics;
+        last = Some((est, obs, step_a));
+    }
+    Ok(last.expect("two passes ran"))
+}
+
+fn joints_changed(o: &Observation) -> Option<[bool; 6]> {
+    match o.kind {
+        ObservationKind::GapChange { from_display, to_display, .. } => {
+            Some(std::array::from_fn(|i| (from_display[i] - to_display[i]).abs() > 1e-9))
+        }
+        _ => None,
+    }
+}
+
+fn is_translation(o: &Observation) -> bool {
+    joints_changed(o).is_some_and(|c| c[..3].iter().any(|&x| x) && !c[3..].iter().any(|&x| x))
+}
+
+fn is_rotation(o: &Observation) -> bool {
+    joints_changed(o).is_some_and(|c| c[3..].iter().any(|&x| x) && !c[..3].iter().any(|&x| x))
+}
+
+/// The identifiability report of a joint estimate: its weighted Jacobian and residuals, the
+/// free extrinsics with their useful bounds, and the detector gains as nuisance parameters.
+pub fn analyse_estimate(est: &JointEstimate) -> IdentifiabilityReport {
+    use crate::identify::observability::{analyse, Options, ParamInfo};
+    let all = ParamInfo::extrinsics();
+    let params: Vec<ParamInfo> = est
+        .column_parameter
+        .iter()
+        .zip(&est.column_names)
+        .map(|(p, name)| match p {
+            Some(i) => all[*i].clone(),
+            None => ParamInfo::new(name.clone(), "(gain)", 1.0),
+        })
+        .collect();
+    let rows = est.weighted_jacobian.nrows();
+    let mut r = nalgebra::DVector::zeros(rows);
+    for (k, v) in est.normalised_residuals.iter().enumerate().take(rows) {
+        r[k] = *v;
+    }
+    match analyse(&est.weighted_jacobian, &r, &params, &Options::default()) {
+        Ok(report) => report,
+        Err(e) => {
+            // Inconsistent input is a bug, but the user still gets a report that says so.
+            let mut report = analyse(
+                &nalgebra::DMatrix::zeros(1, params.len()),
+                &nalgebra::DVector::zeros(1),
+                &params,
+                &Options::default(),
+            )
+            .expect("a zero Jacobian is valid input");
+            report.warnings.push(format!("identifiability analysis failed: {e}"));
+            report
+        }
+    }
+}
+
+/// Rows of the Table II-style result from an estimate and its identifiability report.
+pub fn parameter_rows(e: &Extrinsics, report: &IdentifiabilityReport) -> Vec<ParameterRow> {
+    let values = e.to_array();
+    (0..N_EXTRINSICS)
+        .map(|i| {
+            let (name, unit) = PARAMETER_NAMES[i];
+            let u = report.parameters.iter().find(|p| p.name == name);
+            ParameterRow {
+                name: name.to_string(),
+                value: values[i],
+                unit: unit.to_string(),
+                sigma: u.and_then(|u| u.sigma),
+                determined: u.is_some_and(|u| u.determined),
+                reason: match u {
+                    Some(u) => u.reason.clone(),
+                    None => Some("held fixed (masked)".into()),
+                },
+            }
+        })
+        .collect()
+}
+
+/// Measure, identify, report and validate on a bench.
+pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Result<CalibrationReport, String> {
+    let (traces, duration) = measure(bench, &plans(mode))?;
+    let (est, obs, _step_a) = identify(&traces, nominal, mode)?;
+    let report = analyse_estimate(&est);
+    let mut warnings = report.warnings.clone();
+    if !est.converged {
+        warnings
+            .push(format!("the solver did not converge ({}): the values below are not a calibration", est.termination));
+    }
+    let after_model = model_with(nominal, est.extrinsics);
+    let mut validation = Vec::new();
+    for m in ValidationMotion::ALL {
+        let before = run_validation(bench, &after_model, &nominal.extrinsics, m, [0.0; 6]);
+        let after = run_validation(bench, &after_model, &est.extrinsics, m, [0.0; 6]);
+        let note = match (&before, &after) {
+            (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
+            _ => None,
+        };
+        validation.push(ValidationRow {
+            motion: m.name().to_string(),
+            before_nm: before.ok().map(|f| f.peak_to_peak_nm),
+            after_nm: after.ok().map(|f| f.peak_to_peak_nm),
+            paper_nm: m.paper_after_nm(),
+            note,
+        });
+    }
+    let rms = (est.normalised_residuals.iter().map(|r| r * r).sum::<f64>()
+        / est.normalised_residuals.len().max(1) as f64)
+        .sqrt();
+    Ok(CalibrationReport {
+        mode,
+        bench: bench.name(),
+        parameters: parameter_rows(&est.extrinsics, &report),
+        identifiability: report,
+        converged: est.converged,
+        termination: est.termination.clone(),
+        residual_rms_sigma: rms,
+        residuals: obs
+            .iter()
+            .zip(&est.residuals)
+            .map(|(o, r)| (o.label.clone(), o.unit().to_string(), *r, o.sigma))
+            .collect(),
+        validation,
+        measurement_duration_s: duration,
+        observations: obs.len(),
+        warnings,
+        extrinsics: est.extrinsics,
+        traces,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::{BenchPreset, VirtualBench};
+    use crate::model::robot::RobotDescription;
+
+    fn run(mode: Mode) -> CalibrationReport {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let mut bench = VirtualBench::new(&preset, Some(1)).unwrap();
+        let nominal = PhaseModel::new(
+            RobotDescription::femto_6dof(),
+            Extrinsics::nominal_design(),
+            preset.optics,
+            &preset.ambient,
+            preset.laser.wavelength_nm,
+        )
+        .unwrap();
+        calibrate(&mut bench, &nominal, mode).unwrap()
+    }
+
+    #[test]
+    fn joint_calibration_on_table2_ideal() {
+        let r = run(Mode::Joint);
+        let truth = Extrinsics::table2().to_array();
+        for (row, t) in r.parameters.iter().zip(truth) {
+            eprintln!(
+                "{:>9} {:>12.5} {:>3} σ {:?} determined {} (truth {t}) {:?}",
+                row.name, row.value, row.unit, row.sigma, row.determined, row.reason
+            );
+        }
+        for v in &r.validation {
+            eprintln!("{}: before {:?} after {:?} nm {:?}", v.motion, v.before_nm, v.after_nm, v.note);
+        }
+        eprintln!(
+            "converged {} rms {:.2} obs {} duration {:.0} s warnings {:?}",
+            r.converged, r.residual_rms_sigma, r.observations, r.measurement_duration_s, r.warnings
+        );
+        assert!(r.converged);
+    }
+
+    #[test]
+    fn paper_calibration_on_table2_ideal() {
+        let r = run(Mode::Paper);
+        for row in &r.parameters {
+            eprintln!(
+                "{:>9} {:>12.5} {:>3} σ {:?} determined {} {:?}",
+                row.name, row.value, row.unit, row.sigma, row.determined, row.reason
+            );
+        }
+        for v in &r.validation {
+            eprintln!("{}: before {:?} after {:?} nm {:?}", v.motion, v.before_nm, v.after_nm, v.note);
+        }
+    }
+}
