@@ -87,7 +87,7 @@ impl VirtualBench {
         let truth = Truth {
             geometry: preset.truth.geometry(),
             extrinsics: preset.truth,
-            optics: preset.optics.clone(),
+            optics: preset.optics,
             n_air,
             laser_wavelength_nm: preset.laser.wavelength_nm,
             fp,

@@ -135,8 +135,7 @@ pub fn identify(
     let sweeps: Vec<Trace> = traces.iter().filter(|t| crate::measure::is_sweep(t)).cloned().collect();
     let gaps = observations_from_traces(&sweeps, nominal, &opts).map_err(|e| e.to_string())?;
     // Bootstrap from the absolute gaps: the lamella normal and the gap.
-    let mut boot_opts = JointOptions::default();
-    boot_opts.free = [true, true, false, false, false, false, true, false];
+    let boot_opts = JointOptions { free: [true, true, false, false, false, false, true, false], ..Default::default() };
     let boot = joint::estimate(nominal, &gaps, &nominal.extrinsics, &boot_opts);
     let mut current = boot.extrinsics;
     let mut last = None;

@@ -70,7 +70,6 @@ impl FrameTree {
         }
         let ee = push(&mut nodes, "end effector".into(), FrameKind::EndEffector, parent, Isometry3::identity());
         let tool = push(&mut nodes, "tool (lamella)".into(), FrameKind::Tool, ee, extrinsics.ee_to_tool());
-        push(&mut nodes, "fiber".into(), FrameKind::Fiber, 0, extrinsics.world_to_fiber());
         let cavity = extrinsics.cavity(&nodes[ee].world);
         if let Ok(c) = &cavity {
             let local = Isometry3::from_parts(
@@ -79,6 +78,8 @@ impl FrameTree {
             );
             push(&mut nodes, "reflection point P_r".into(), FrameKind::ReflectionPoint, tool, local);
         }
+        // The fiber last, so a listing in tree order reads right (P_r under the tool).
+        push(&mut nodes, "fiber".into(), FrameKind::Fiber, 0, extrinsics.world_to_fiber());
         Self { nodes, cavity }
     }
 
@@ -165,13 +166,13 @@ mod tests {
                 "link 6 (q6)",
                 "end effector",
                 "tool (lamella)",
-                "fiber",
-                "reflection point P_r"
+                "reflection point P_r",
+                "fiber"
             ]
         );
         assert_eq!(t.children(0).count(), 2, "world has link 1 and the fiber as children");
-        assert_eq!(t.depth(10), 9);
-        let pr = t.nodes[10].world.translation.vector;
+        assert_eq!(t.depth(9), 9);
+        let pr = t.nodes[9].world.translation.vector;
         let c = t.cavity.unwrap();
         assert!((pr - c.reflection_point_world_um.coords).norm() < 1e-9);
     }
@@ -198,10 +199,10 @@ mod tests {
             prop_assert!((t.nodes[7].world.translation.vector - ee.translation.vector).norm() < 1e-9);
             let tool = ee * e.ee_to_tool();
             prop_assert!(t.nodes[8].world.rotation.angle_to(&tool.rotation) < 1e-12);
-            prop_assert!((t.nodes[9].world.translation.vector - e.world_to_fiber().translation.vector).norm() < 1e-12);
+            prop_assert!((t.nodes[10].world.translation.vector - e.world_to_fiber().translation.vector).norm() < 1e-12);
             // The reflection point lies on the beam and on the lamella plane.
             let c = t.cavity.unwrap();
-            let pr = t.nodes[10].world.translation.vector;
+            let pr = t.nodes[9].world.translation.vector;
             let on_beam = e.world_to_fiber().translation.vector + c.n_f.into_inner() * c.length_um;
             prop_assert!((pr - on_beam).norm() < 1e-9);
         }
