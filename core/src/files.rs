@@ -94,14 +94,18 @@ pub fn parse_ron<T: DeserializeOwned>(text: &str, origin: &Path, expected: &str)
     })
 }
 
-/// Read and parse a RON file.
-pub fn load_ron<T: DeserializeOwned>(path: &Path, expected: &str) -> Result<T, FileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
+/// Read a text file; the error names the file.
+pub fn read_text(path: &Path) -> Result<String, FileError> {
+    std::fs::read_to_string(path).map_err(|source| FileError::Io {
         file: path.to_path_buf(),
         action: "cannot read",
         source,
-    })?;
-    parse_ron(&text, path, expected)
+    })
+}
+
+/// Read and parse a RON file.
+pub fn load_ron<T: DeserializeOwned>(path: &Path, expected: &str) -> Result<T, FileError> {
+    parse_ron(&read_text(path)?, path, expected)
 }
 
 /// Serialise to pretty RON.

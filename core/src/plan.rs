@@ -719,11 +719,7 @@ impl Plan {
     /// Load and validate a plan file ([`Plan::validate`]; the joint limits and the laser range
     /// are checked by [`Plan::expand`], which knows the robot).
     pub fn load(path: &Path) -> Result<Self, FileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
-            file: path.to_path_buf(),
-            action: "cannot read",
-            source,
-        })?;
+        let text = files::read_text(path)?;
         Self::from_ron_str(&text, path)
     }
 

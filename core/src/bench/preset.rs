@@ -129,11 +129,7 @@ impl BenchPreset {
 
     /// Load a preset file.
     pub fn load(path: &Path) -> Result<Self, FileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
-            file: path.to_path_buf(),
-            action: "cannot read",
-            source,
-        })?;
+        let text = files::read_text(path)?;
         let mut p = Self::from_ron_str(&text, path)?;
         if let RobotRef::File(f) = &p.robot {
             if f.is_relative() {

@@ -108,11 +108,7 @@ impl Extrinsics {
 
     /// Load and validate a file.
     pub fn load(path: &Path) -> Result<Self, FileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| FileError::Io {
-            file: path.to_path_buf(),
-            action: "cannot read",
-            source,
-        })?;
+        let text = files::read_text(path)?;
         Self::from_ron_str(&text, path)
     }
 
