@@ -38,8 +38,12 @@ pub enum Command {
     Simulate(SimulateArgs),
     /// Analyse a recorded trace: fringe count, dL and its uncertainty (or the absolute gap of a sweep).
     Fringes(FringesArgs),
+    /// Measure, identify and validate end to end on a bench; write the session.
+    Calibrate(crate::cli_calibrate::CalibrateArgs),
     /// Start the workbench GUI (the default when no command is given).
     Gui,
+    /// Serve a stage-controller protocol emulator (PI E-712 or SmarAct MCS) on 127.0.0.1.
+    Emulate(crate::cli_emulate::EmulateArgs),
 }
 
 /// Arguments of `photorobot simulate`.
@@ -175,6 +179,8 @@ where
         Some(Command::Frames(a)) => frames(&a, out).map(|()| Outcome::Done),
         Some(Command::Simulate(a)) => simulate(&a, out).map(|()| Outcome::Done),
         Some(Command::Fringes(a)) => fringes(&a, out).map(|()| Outcome::Done),
+        Some(Command::Calibrate(a)) => crate::cli_calibrate::calibrate(&a, out).map(|()| Outcome::Done),
+        Some(Command::Emulate(a)) => crate::cli_emulate::emulate(&a, out).map(|()| Outcome::Done),
     }
 }
 

@@ -7,7 +7,9 @@ use photorobot_core::plan::{JointTarget, Plan, Segment};
 use std::sync::atomic::AtomicBool;
 
 fn simulate(c: &mut Criterion) {
-    // A combined translation + rotation move: every sample pays the full DGM, cavity and optics.
+    // A combined translation + rotation move, with every joint moving. The default (fast) path
+    // interpolates the slowly varying parts between exact nodes; the exact path, kept as the
+    // reference, pays the full DGM, cavity and optics at every sample.
     let plan = Plan {
         name: "bench".into(),
         description: String::new(),
@@ -19,8 +21,9 @@ fn simulate(c: &mut Criterion) {
     };
     let mut group = c.benchmark_group("virtual bench");
     group.sample_size(10);
-    for preset in ["table2-ideal", "femto-lab"] {
+    for (preset, exact) in [("table2-ideal", false), ("femto-lab", false), ("femto-lab", true)] {
         let mut probe = VirtualBench::from_preset_name(preset, None).unwrap();
+        probe.set_exact(exact);
         let cancel = AtomicBool::new(false);
         let run = |b: &mut VirtualBench| {
             let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
@@ -28,9 +31,15 @@ fn simulate(c: &mut Criterion) {
         };
         let samples = run(&mut probe).traces[0].len() as u64;
         group.throughput(Throughput::Elements(samples));
-        group.bench_function(format!("{preset}: samples of a 6-joint move"), |b| {
+        let name = if exact {
+            format!("{preset}: samples of a 6-joint move, exact path")
+        } else {
+            format!("{preset}: samples of a 6-joint move")
+        };
+        group.bench_function(name, |b| {
             b.iter(|| {
                 let mut bench = VirtualBench::from_preset_name(preset, None).unwrap();
+                bench.set_exact(exact);
                 run(&mut bench).traces.len()
             })
         });

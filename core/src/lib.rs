@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod files;
 pub mod fringes;
+pub mod hardware;
 pub mod identify;
 pub mod measure;
 pub mod model;

@@ -29,6 +29,26 @@ pub enum BenchError {
     /// The hardware reported a fault.
     #[error("bench fault: {0}")]
     Fault(String),
+    /// A hardware fault (disconnect, timeout, error reply, limit) interrupted the segment: the stages
+    /// were stopped and the samples recorded so far are kept. Resume with [`resume_plan`] once the
+    /// cause is cleared (reconnect).
+    #[error("{fault}")]
+    Interrupted {
+        /// What happened, where, and what was done about it.
+        fault: String,
+        /// What was recorded of the interrupted segment.
+        partial: Option<Box<Trace>>,
+    },
+}
+
+impl BenchError {
+    /// The samples recorded before a cancel or a hardware fault, if any.
+    pub fn partial(&self) -> Option<&Trace> {
+        match self {
+            BenchError::Cancelled { partial } | BenchError::Interrupted { partial, .. } => partial.as_deref(),
+            _ => None,
+        }
+    }
 }
 
 /// Callbacks and the cancel flag for a running segment.
@@ -130,9 +150,9 @@ pub fn run_plan(bench: &mut dyn Bench, plan: &Plan, control: &mut RunControl<'_>
             Ok(Some(t)) => traces.push(t),
             Ok(None) => {}
             Err(error) => {
-                if let BenchError::Cancelled { partial: Some(p) } = &error {
+                if let Some(p) = error.partial() {
                     if !p.is_empty() {
-                        traces.push((**p).clone());
+                        traces.push(p.clone());
                     }
                 }
                 return PlanRun {
@@ -144,4 +164,37 @@ pub fn run_plan(bench: &mut dyn Bench, plan: &Plan, control: &mut RunControl<'_>
         }
     }
     PlanRun { traces, duration_s: bench.clock_s() - start, outcome: Ok(()) }
+}
+
+/// Run the rest of a plan after an interruption: first back (unrecorded) to where segment
+/// `from_segment` started, then that segment and every one after it, so an interrupted recorded
+/// move is measured again in full. `plan_start_display` is the joint vector (µm, °) the plan was
+/// first run from (it fixes where each segment starts). Segment indices in the returned outcome
+/// count from the return move (index 0), then `from_segment` as 1, and so on.
+pub fn resume_plan(
+    bench: &mut dyn Bench,
+    plan: &Plan,
+    plan_start_display: [f64; 6],
+    from_segment: usize,
+    control: &mut RunControl<'_>,
+) -> PlanRun {
+    let segments = match plan.expand(bench.robot(), plan_start_display, bench.motion_limits()) {
+        Ok(s) => s,
+        Err(e) => return PlanRun { traces: vec![], duration_s: 0.0, outcome: Err(e.into()) },
+    };
+    let Some(first) = segments.get(from_segment) else {
+        return PlanRun { traces: vec![], duration_s: 0.0, outcome: Ok(()) };
+    };
+    let mut rest = vec![crate::plan::Segment::Move {
+        to: crate::plan::JointTarget::all(first.from_display),
+        record: false,
+        label: format!("resume: back to the start of segment {from_segment} ({})", first.label),
+    }];
+    rest.extend(plan.segments[from_segment..].iter().cloned());
+    let remainder = Plan {
+        name: format!("{} (resumed at segment {from_segment})", plan.name),
+        description: plan.description.clone(),
+        segments: rest,
+    };
+    run_plan(bench, &remainder, control)
 }

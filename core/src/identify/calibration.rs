@@ -126,28 +126,47 @@ fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
 
 /// Identify from recorded traces. `nominal` is the model before calibration (design
 /// extrinsics); it also supplies the robot, optics and air.
-pub fn identify(
-    traces: &[Trace],
-    nominal: &PhaseModel,
-    mode: Mode,
-) -> Result<(JointEstimate, Vec<Observation>, Option<paper::StepA>), String> {
+pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Identification, String> {
     let opts = ExtractOptions::default();
-    let sweeps: Vec<Trace> = traces.iter().filter(|t| crate::measure::is_sweep(t)).cloned().collect();
-    let gaps = observations_from_traces(&sweeps, nominal, &opts).map_err(|e| e.to_string())?;
+    // The motion traces need the model's motion hint, so they are analysed again with each
+    // better model. The sweeps depend on the model only through the small tilt correction of
+    // the phase: the nominal analysis serves the bootstrap and the first pass, and they are
+    // analysed again with the first estimate for the final pass.
+    let (sweeps, motions): (Vec<Trace>, Vec<Trace>) = traces.iter().cloned().partition(crate::measure::is_sweep);
+    let mut swept = observations_from_traces(&sweeps, nominal, &opts);
+    if swept.observations.len() < 3 {
+        return Err(format!(
+            "{} usable absolute-gap sweeps (at least 3 at different poses are needed to start the identification)",
+            swept.observations.len()
+        ));
+    }
     // Bootstrap from the absolute gaps: the lamella normal and the gap.
     let boot_opts = JointOptions { free: [true, true, false, false, false, false, true, false], ..Default::default() };
-    let boot = joint::estimate(nominal, &gaps, &nominal.extrinsics, &boot_opts);
+    let boot = joint::estimate(nominal, &swept.observations, &nominal.extrinsics, &boot_opts);
     let mut current = boot.extrinsics;
     let mut last = None;
-    for _pass in 0..2 {
+    // Paper mode analyses the traces once, with the bootstrap model: its steps leave the
+    // fiber direction and the gap split undetermined, so its estimate is no better model for
+    // the motion hints than the bootstrap.
+    let passes = match mode {
+        Mode::Joint => 2,
+        Mode::Paper => 1,
+    };
+    for pass in 0..passes {
+        if pass > 0 {
+            swept = observations_from_traces(&sweeps, &model_with(nominal, current), &opts);
+        }
         let model = model_with(nominal, current);
-        let obs = observations_from_traces(traces, &model, &opts).map_err(|e| e.to_string())?;
-        let (est, step_a) = match mode {
-            Mode::Joint => (joint::estimate(nominal, &obs, &current, &JointOptions::default()), None),
+        let mut extracted = observations_from_traces(&motions, &model, &opts);
+        extracted.skipped.extend(swept.skipped.iter().cloned());
+        let mut obs = swept.observations.clone();
+        obs.append(&mut extracted.observations);
+        let (est, step_a, obs) = match mode {
+            Mode::Joint => (joint::estimate(nominal, &obs, &current, &JointOptions::default()), None, obs),
             Mode::Paper => {
                 let translations: Vec<Observation> = obs.iter().filter(|o| is_translation(o)).cloned().collect();
                 let rotations: Vec<Observation> = obs.iter().filter(|o| is_rotation(o)).cloned().collect();
-                let a = paper::step_a(&nominal.chain, &translations, &current);
+                let a = paper::step_a_with(&nominal.chain, &translations, &current, true);
                 let b = paper::step_b(&nominal.chain, &rotations, a.angles_deg);
                 let e = Extrinsics {
                     beta_et_deg: a.angles_deg[0],
@@ -161,17 +180,43 @@ pub fn identify(
                 };
                 // Uncertainties of the paper's result: the joint machinery evaluated at it,
                 // on the paper's data only (one evaluation, no move).
-                let paper_obs: Vec<Observation> = translations.iter().chain(&rotations).cloned().collect();
-                let mut est = joint::evaluate(nominal, &paper_obs, &e, &JointOptions::default());
+                // Step A's data only: step B reads the fringes as the change of L along the beam
+                // where they measure the perpendicular distance (a bias of |L|·(1 − cos γ), µm
+                // over the 4° rotations), so its residuals say nothing about the noise, and the
+                // origins stay undetermined by the data the method can trust.
+                // Evaluated with the bootstrap's origins (translations barely depend on them),
+                // then the step B origins put back for the report.
+                let at = Extrinsics {
+                    z_et_um: current.z_et_um,
+                    x_wf_um: current.x_wf_um,
+                    y_wf_um: current.y_wf_um,
+                    z_wf_um: current.z_wf_um,
+                    ..e
+                };
+                let mut est = joint::evaluate(nominal, &translations, &at, &JointOptions::default());
+                est.extrinsics = e;
                 est.converged = a.converged;
                 est.termination = format!("step A: {}", if a.converged { "converged" } else { "did not converge" });
-                (est, Some(a))
+                (est, Some(a), translations)
             }
         };
         current = est.extrinsics;
-        last = Some((est, obs, step_a));
+        last = Some(Identification { estimate: est, observations: obs, step_a, skipped: extracted.skipped });
     }
-    Ok(last.expect("two passes ran"))
+    last.ok_or_else(|| "no identification pass ran".to_string())
+}
+
+/// What [`identify`] found.
+#[derive(Debug, Clone)]
+pub struct Identification {
+    /// The estimate with its Jacobian and residuals.
+    pub estimate: JointEstimate,
+    /// The observations it used.
+    pub observations: Vec<Observation>,
+    /// Paper mode: step A's details.
+    pub step_a: Option<paper::StepA>,
+    /// Traces that gave no observation (label, why).
+    pub skipped: Vec<(String, String)>,
 }
 
 fn joints_changed(o: &Observation) -> Option<[bool; 6]> {
@@ -252,9 +297,13 @@ pub fn parameter_rows(e: &Extrinsics, report: &IdentifiabilityReport) -> Vec<Par
 /// Measure, identify, report and validate on a bench.
 pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Result<CalibrationReport, String> {
     let (traces, duration) = measure(bench, &plans(mode))?;
-    let (est, obs, _step_a) = identify(&traces, nominal, mode)?;
+    let id = identify(&traces, nominal, mode)?;
+    let (est, obs) = (id.estimate, id.observations);
     let report = analyse_estimate(&est);
     let mut warnings = report.warnings.clone();
+    for (label, why) in &id.skipped {
+        warnings.push(format!("trace `{label}` not used: {why}"));
+    }
     if !est.converged {
         warnings
             .push(format!("the solver did not converge ({}): the values below are not a calibration", est.termination));

@@ -367,4 +367,66 @@ mod tests {
         let est = estimate(&model(), &obs, &start, &options);
         assert!(!est.converged, "one evaluation cannot converge from 3° away: {}", est.termination);
     }
+
+    /// Monte Carlo over 200 seeds: the σ the identifiability report gives each determined
+    /// parameter matches the scatter of the estimates within 20 % (observations predicted from
+    /// the truth plus Gaussian noise of their stated σ).
+    #[test]
+    fn reported_sigma_matches_the_monte_carlo_scatter() {
+        use crate::identify::calibration::analyse_estimate;
+        use rand::{rngs::StdRng, SeedableRng};
+        use rand_distr::{Distribution, StandardNormal};
+        let truth = Extrinsics::table2();
+        let exact = synthetic(&truth);
+        let m = model();
+        let seeds = 200;
+        let mut values: Vec<[f64; N_EXTRINSICS]> = Vec::new();
+        let mut sigmas: Vec<[Option<f64>; N_EXTRINSICS]> = Vec::new();
+        for seed in 0..seeds {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let noisy: Vec<Observation> = exact
+                .iter()
+                .map(|o| {
+                    let mut o = o.clone();
+                    let n: f64 = StandardNormal.sample(&mut rng);
+                    let d = n * o.sigma;
+                    match &mut o.kind {
+                        ObservationKind::GapChange { dl_nm, .. } => *dl_nm += d,
+                        ObservationKind::AbsoluteGap { gap_um, .. } => *gap_um += d,
+                        ObservationKind::FringeAmplitude { amplitude_mw, .. } => *amplitude_mw += d,
+                    }
+                    o
+                })
+                .collect();
+            let est = estimate(&m, &noisy, &truth, &JointOptions::default());
+            assert!(est.converged, "seed {seed}: {}", est.termination);
+            let report = analyse_estimate(&est);
+            values.push(est.extrinsics.to_array());
+            sigmas.push(std::array::from_fn(|i| {
+                report
+                    .parameters
+                    .iter()
+                    .find(|p| p.name == PARAMETER_NAMES[i].0)
+                    .filter(|p| p.determined)
+                    .and_then(|p| p.sigma)
+            }));
+        }
+        let mut checked = 0;
+        for i in 0..N_EXTRINSICS {
+            if sigmas.iter().any(|s| s[i].is_none()) {
+                continue;
+            }
+            let mean = values.iter().map(|v| v[i]).sum::<f64>() / seeds as f64;
+            let scatter = (values.iter().map(|v| (v[i] - mean).powi(2)).sum::<f64>() / (seeds - 1) as f64).sqrt();
+            let reported = (sigmas.iter().map(|s| s[i].unwrap().powi(2)).sum::<f64>() / seeds as f64).sqrt();
+            eprintln!("{}: scatter {scatter:.3e}, reported σ {reported:.3e}", PARAMETER_NAMES[i].0);
+            assert!(
+                (reported / scatter - 1.0).abs() < 0.2,
+                "{}: σ {reported} vs scatter {scatter}",
+                PARAMETER_NAMES[i].0
+            );
+            checked += 1;
+        }
+        assert!(checked >= 6, "only {checked} parameters determined");
+    }
 }

@@ -61,7 +61,8 @@ pub fn observations_from_trace(
                 });
             }
             if label.starts_with("tilt scan") {
-                out.extend(amplitudes(trace, group, wavelength_nm));
+                let half_fringe_nm = wavelength_nm / (4.0 * model.n_air);
+                out.extend(amplitudes(trace, &m.track.dl_nm, half_fringe_nm, group, wavelength_nm));
             }
         }
     }
@@ -70,7 +71,9 @@ pub fn observations_from_trace(
 
 /// Fringe amplitude (half peak-to-peak between neighbouring extrema) along a trace, at the
 /// joints midway between them; σ from the detector noise estimated from sample differences.
-fn amplitudes(trace: &Trace, group: usize, wavelength_nm: f64) -> Vec<Observation> {
+/// Only pairs a half fringe apart on the tracked gap `dl_nm` count: an intensity extremum at a
+/// turning point of the phase (the gap stops and comes back) is not a fringe extremum.
+fn amplitudes(trace: &Trace, dl_nm: &[f64], half_fringe_nm: f64, group: usize, wavelength_nm: f64) -> Vec<Observation> {
     let v = &trace.irradiance;
     let Ok(ext) = detect_extrema(v, &HysteresisConfig::default()) else { return vec![] };
     // Noise σ from the median absolute second difference (robust to the fringe itself).
@@ -82,6 +85,10 @@ fn amplitudes(trace: &Trace, group: usize, wavelength_nm: f64) -> Vec<Observatio
     let sigma = d2[d2.len() / 2] / 0.6745 / 6f64.sqrt();
     ext.windows(2)
         .filter(|w| w[0].kind != w[1].kind)
+        .filter(|w| match (dl_nm.get(w[0].index), dl_nm.get(w[1].index)) {
+            (Some(a), Some(b)) => ((b - a).abs() / half_fringe_nm - 1.0).abs() < 0.15,
+            _ => false,
+        })
         .map(|w| {
             let mid = (w[0].index + w[1].index) / 2;
             Observation {
@@ -99,21 +106,47 @@ fn amplitudes(trace: &Trace, group: usize, wavelength_nm: f64) -> Vec<Observatio
         .collect()
 }
 
-/// Observations from many traces; amplitude groups numbered in order.
-pub fn observations_from_traces(
-    traces: &[Trace],
-    model: &PhaseModel,
-    options: &ExtractOptions,
-) -> Result<Vec<Observation>, MeasureError> {
-    let mut all = Vec::new();
+/// Observations from many traces, and the traces that could not be analysed.
+#[derive(Debug, Clone, Default)]
+pub struct Extracted {
+    /// Every usable observation; amplitude groups numbered in trace order.
+    pub observations: Vec<Observation>,
+    /// Traces whose analysis failed: their label and why. Their data stay in the session;
+    /// they only give no observation with the current model.
+    pub skipped: Vec<(String, String)>,
+}
+
+/// Observations from many traces; a trace whose analysis fails is listed in
+/// [`Extracted::skipped`] and the others are still used.
+pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &ExtractOptions) -> Extracted {
+    use rayon::prelude::*;
+    // Traces are independent: analyse them in parallel, then number the amplitude groups in
+    // trace order.
+    let results: Vec<Result<Vec<Observation>, MeasureError>> =
+        traces.par_iter().map(|t| observations_from_trace(t, model, options, 0)).collect();
+    let mut out = Extracted::default();
     let mut group = 0;
-    for t in traces {
-        let obs = observations_from_trace(t, model, options, group)?;
-        if obs.iter().any(|o| matches!(o.kind, ObservationKind::FringeAmplitude { .. })) {
+    for (t, r) in traces.iter().zip(results) {
+        let mut obs = match r {
+            Ok(o) => o,
+            Err(e) => {
+                out.skipped.push((t.meta.label.clone(), e.to_string()));
+                continue;
+            }
+        };
+        let mut has_amplitudes = false;
+        for o in &mut obs {
+            if let ObservationKind::FringeAmplitude { group: g, .. } = &mut o.kind {
+                *g = group;
+                has_amplitudes = true;
+            }
+        }
+        if has_amplitudes {
             group += 1;
         }
         // An observation without a finite value and a positive finite σ carries no information.
-        all.extend(obs.into_iter().filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0));
+        out.observations
+            .extend(obs.into_iter().filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0));
     }
-    Ok(all)
+    out
 }

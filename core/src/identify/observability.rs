@@ -302,13 +302,26 @@ pub fn pseudo_inverse_covariance(j: &DMatrix<f64>, relative_tolerance: f64) -> P
     let (s, v) = full_svd(j);
     let s_max = s.first().copied().unwrap_or(0.0);
     let tolerance = relative_tolerance * s_max * m.max(n) as f64;
+    let rank = s.iter().filter(|&&sk| sk > tolerance).count();
+    // The covariance from the SVD of the column-equilibrated matrix J·D⁻¹ (unit-norm columns),
+    // C = D⁻¹ (Σ_k v_k v_kᵀ / s_k²) D⁻¹ over its `rank` largest singular values: the raw SVD
+    // loses accuracy when column scales differ by decades.
+    let norms: Vec<f64> = j.column_iter().map(|c| c.norm()).collect();
+    let scaled = DMatrix::from_fn(m, n, |i, k| if norms[k] > 0.0 { j[(i, k)] / norms[k] } else { 0.0 });
+    let (ss, sv) = full_svd(&scaled);
+    let mut order: Vec<usize> = (0..ss.len()).collect();
+    order.sort_by(|&a, &b| ss[b].total_cmp(&ss[a]));
     let mut covariance = DMatrix::zeros(n, n);
-    let mut rank = 0;
-    for (k, &sk) in s.iter().enumerate() {
-        if sk > tolerance {
-            rank += 1;
-            let vk = v.column(k);
-            covariance += (vk * vk.transpose()) / (sk * sk);
+    for &k in order.iter().take(rank) {
+        if ss[k] > 0.0 {
+            let vk = sv.column(k);
+            covariance += (vk * vk.transpose()) / (ss[k] * ss[k]);
+        }
+    }
+    for a in 0..n {
+        for b in 0..n {
+            let d = norms[a] * norms[b];
+            covariance[(a, b)] = if d > 0.0 { covariance[(a, b)] / d } else { 0.0 };
         }
     }
     PseudoInverse { covariance, rank, singular_values: s, v, tolerance }

@@ -59,11 +59,20 @@ fn paper_dl_nm(obs: &Observation) -> Option<([f64; 6], [f64; 6], f64)> {
 /// from translation-only observations (strategy 1). `start` gives the initial angles (and is
 /// what the solver returns for directions the data do not see).
 pub fn step_a(chain: &Chain, observations: &[Observation], start: &Extrinsics) -> StepA {
+    step_a_with(chain, observations, start, false)
+}
+
+/// Step A with the fiber direction held at `start` when `hold_fiber`: eq. 14 sees n_f only
+/// through n_t·n_f, so the paper's data cannot place it (SPEC section 6.4); holding it at the
+/// design value keeps step B on a sane beam instead of one the solver wandered to.
+pub fn step_a_with(chain: &Chain, observations: &[Observation], start: &Extrinsics, hold_fiber: bool) -> StepA {
     struct P<'a> {
         rows: Vec<(Vector3<f64>, f64, f64)>, // dp (µm), dL (nm), σ (nm)
         ree: nalgebra::Rotation3<f64>,
         base: &'a Extrinsics,
-        x: Vector4<f64>, // angles in mrad
+        x: Vector4<f64>,  // angles in mrad
+        x0: Vector4<f64>, // start angles (mrad)
+        hold_fiber: bool,
     }
     impl P<'_> {
         fn extr(&self, x: &Vector4<f64>) -> Extrinsics {
@@ -80,9 +89,19 @@ pub fn step_a(chain: &Chain, observations: &[Observation], start: &Extrinsics) -
             let n_t = self.ree * e.n_t_in_ee().into_inner();
             let n_f = e.n_f().into_inner();
             let c = n_t.dot(&n_f);
+            // Eq. 14 sees the fiber direction only through n_t·n_f, flat near n_f ∥ n_t: two weak
+            // prior rows (σ = 1°) keep the fiber angles at their start instead of letting the
+            // solver wander where the data are silent. They move a determined angle by far
+            // less than its σ.
+            // Held: a stiff prior (1 nrad) instead of a zero column, which the solver's column
+            // scaling cannot take.
+            let prior_mrad = if self.hold_fiber { 1e-6 } else { 1f64.to_radians() * 1e3 };
             DVector::from_iterator(
-                self.rows.len(),
-                self.rows.iter().map(|(dp, dl, s)| (c * dl * 1e-3 - n_t.dot(dp)) * 1e3 / s),
+                self.rows.len() + 2,
+                self.rows
+                    .iter()
+                    .map(|(dp, dl, s)| (c * dl * 1e-3 - n_t.dot(dp)) * 1e3 / s)
+                    .chain((2..4).map(|k| (x[k] - self.x0[k]) / prior_mrad)),
             )
         }
     }
@@ -100,7 +119,7 @@ pub fn step_a(chain: &Chain, observations: &[Observation], start: &Extrinsics) -
             Some(self.res(&self.x))
         }
         fn jacobian(&self) -> Option<OMatrix<f64, Dyn, U4>> {
-            let mut j = OMatrix::<f64, Dyn, U4>::zeros(self.rows.len());
+            let mut j = OMatrix::<f64, Dyn, U4>::zeros(self.rows.len() + 2);
             for c in 0..4 {
                 let h = 1e-4;
                 let (mut a, mut b) = (self.x, self.x);
@@ -128,11 +147,14 @@ pub fn step_a(chain: &Chain, observations: &[Observation], start: &Extrinsics) -
         mrad(start.beta_wf_deg),
         mrad(start.theta_wf_deg),
     );
-    let problem = P { rows, ree, base: start, x: x0 };
+    let problem = P { rows, ree, base: start, x: x0, x0, hold_fiber };
     let (problem, report) = LevenbergMarquardt::new().minimize(problem);
-    let r = problem.res(&problem.x);
+    let r_all = problem.res(&problem.x);
+    let r = r_all.rows(0, problem.rows.len());
     let j = problem.jacobian().unwrap();
-    let sv = j.clone().svd(false, false).singular_values;
+    // Singular values of the data rows over all four angles (held ones included: they show
+    // what the data cannot see).
+    let sv = j.rows(0, problem.rows.len()).clone_owned().svd(false, false).singular_values;
     let mut singular_values: Vec<f64> = sv.iter().copied().collect();
     singular_values.sort_by(|a, b| b.total_cmp(a));
     let e = problem.extr(&problem.x);

@@ -186,24 +186,29 @@ impl Extrinsics {
 
     /// The signed cavity length alone (µm), for hot loops: `wte` is the end-effector pose.
     /// Returns NaN when the beam is parallel to the lamella.
+    ///
+    /// With `n_t = R·n_t(e)` and `O_t = R·O_t(e) + p` (the tool frame seen from the end
+    /// effector), `n_t·(O_t - O_f) = n_t(e)·O_t(e) + n_t·(p - O_f)`: one rotation of a vector.
     #[inline]
     pub fn cavity_length_um(&self, wte: &Isometry3<f64>, fiber: &FiberGeometry) -> f64 {
-        let wtt_rot = wte.rotation * fiber.ee_to_tool.rotation;
-        let n_t = wtt_rot * Vector3::z();
-        let o_t = wte * Point3::from(fiber.ee_to_tool.translation.vector);
+        let n_t = wte.rotation * fiber.n_t_in_ee;
         let den = n_t.dot(&fiber.n_f);
         if den.abs() < 1e-12 {
             return f64::NAN;
         }
-        n_t.dot(&(o_t - fiber.origin)) / den
+        (n_t.dot(&(wte.translation.vector - fiber.origin.coords)) + fiber.n_t_dot_o_t_in_ee) / den
     }
 
     /// Precompute the pose-independent geometry for [`Extrinsics::cavity_length_um`].
     pub fn geometry(&self) -> FiberGeometry {
+        let ee_to_tool = self.ee_to_tool();
+        let n_t_in_ee = ee_to_tool.rotation * Vector3::z();
         FiberGeometry {
             origin: Point3::new(self.x_wf_um, self.y_wf_um, self.z_wf_um),
             n_f: self.n_f().into_inner(),
-            ee_to_tool: self.ee_to_tool(),
+            ee_to_tool,
+            n_t_in_ee,
+            n_t_dot_o_t_in_ee: n_t_in_ee.dot(&ee_to_tool.translation.vector),
         }
     }
 
@@ -237,6 +242,32 @@ pub struct FiberGeometry {
     origin: Point3<f64>,
     n_f: Vector3<f64>,
     ee_to_tool: Isometry3<f64>,
+    /// Lamella normal in the end-effector frame.
+    n_t_in_ee: Vector3<f64>,
+    /// n_t·O_t in the end-effector frame (µm): invariant under the end-effector pose.
+    n_t_dot_o_t_in_ee: f64,
+}
+
+impl FiberGeometry {
+    /// Fiber origin O_f in the world (µm).
+    pub fn origin(&self) -> Point3<f64> {
+        self.origin
+    }
+
+    /// Optical axis n_f in the world.
+    pub fn n_f(&self) -> Vector3<f64> {
+        self.n_f
+    }
+
+    /// Lamella normal in the end-effector frame.
+    pub fn n_t_in_ee(&self) -> Vector3<f64> {
+        self.n_t_in_ee
+    }
+
+    /// `eTt`, the tool (lamella) frame in the end-effector frame (µm).
+    pub fn ee_to_tool(&self) -> Isometry3<f64> {
+        self.ee_to_tool
+    }
 }
 
 #[cfg(test)]

@@ -1,6 +1,11 @@
 //! Geometric models of a serial chain: link transforms, direct geometric model (DGM), Jacobian,
 //! the closed-form inverse geometric model (IGM) of the 3P+3R layout, a damped-least-squares IGM and joint limits.
 //!
+//! The DGM is evaluated on a compiled form of the chain (the leading prismatic joints folded
+//! into a constant rotation and an affine translation, one quaternion product per revolute
+//! joint) with a branch-free [`sin_cos`] accurate to an ulp; [`Chain::end_effector_reference`]
+//! keeps the plain product of link transforms it is tested against.
+//!
 //! Units: poses are `Isometry3<f64>` with translations in µm; joint vectors hold µm for prismatic
 //! joints and radians for revolute joints (see [`crate::model::robot`]).
 
@@ -121,6 +126,67 @@ impl CompiledLink {
 pub struct Chain {
     description: RobotDescription,
     links: Vec<CompiledLink>,
+    fast: FastChain,
+}
+
+/// The chain compiled for the DGM hot path (same model as `links`, fewer operations):
+/// - the leading prismatic joints (intrinsic errors included) only translate, so their part
+///   of the chain is a constant rotation and a translation affine in their joint values;
+/// - the remaining links keep a constant rotation, a translation that is skipped when it is
+///   exactly zero, and a joint motion; a nominal revolute joint is a product with the
+///   quaternion (cos q/2, 0, 0, sin q/2) written out (8 products instead of an isometry chain).
+#[derive(Debug, Clone)]
+struct FastChain {
+    prefix_rotation: UnitQuaternion<f64>,
+    /// Prefix translation at q = 0 (µm).
+    prefix_origin: Vector3<f64>,
+    /// d(prefix translation)/dq_j in the world, gain included (µm/µm).
+    prefix_axes: Vec<Vector3<f64>>,
+    rest: Vec<FastLink>,
+}
+
+#[derive(Debug, Clone)]
+struct FastLink {
+    rotation: UnitQuaternion<f64>,
+    /// `None` when the constant translation is exactly zero.
+    translation: Option<Vector3<f64>>,
+    /// Index into `Chain::links` (joint motion with intrinsic errors).
+    link: usize,
+}
+
+impl FastChain {
+    fn new(links: &[CompiledLink]) -> Self {
+        let prefix = links.iter().take_while(|l| l.joint == JointType::Prismatic).count();
+        let mut t = Isometry3::identity();
+        let mut prefix_axes = Vec::with_capacity(prefix);
+        for l in &links[..prefix] {
+            t *= l.constant;
+            let (_, axis) = l.axis();
+            prefix_axes.push(t.rotation * axis.into_inner() * l.gain());
+            t *= Chain::joint_motion(l, 0.0);
+        }
+        let rest = links[prefix..]
+            .iter()
+            .enumerate()
+            .map(|(i, l)| {
+                let v = l.constant.translation.vector;
+                FastLink {
+                    rotation: l.constant.rotation,
+                    translation: (v != Vector3::zeros()).then_some(v),
+                    link: prefix + i,
+                }
+            })
+            .collect();
+        Self { prefix_rotation: t.rotation, prefix_origin: t.translation.vector, prefix_axes, rest }
+    }
+}
+
+/// `r · (cos(a/2), 0, 0, sin(a/2))`: a rotation about the local z axis appended to `r`.
+#[inline(always)]
+fn mul_rot_z(r: &UnitQuaternion<f64>, a: f64) -> UnitQuaternion<f64> {
+    let (s, c) = sin_cos(0.5 * a);
+    let (w, x, y, z) = (r.w, r.i, r.j, r.k);
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s))
 }
 
 /// Rotation about x by `a` rad.
@@ -141,6 +207,97 @@ fn iso_rot(q: UnitQuaternion<f64>) -> Isometry3<f64> {
 }
 fn iso_trans(x: f64, y: f64, z: f64) -> Isometry3<f64> {
     Isometry3::translation(x, y, z)
+}
+
+// fdlibm's constants (e_rem_pio2.c, k_sin.c, k_cos.c), by their bits.
+/// π/2 in three parts: the first 33 bits, the next 33 bits, the rest.
+const PIO2_1: f64 = f64::from_bits(0x3FF9_21FB_5440_0000);
+const PIO2_2: f64 = f64::from_bits(0x3DD0_B461_1A60_0000);
+const PIO2_2T: f64 = f64::from_bits(0x3BA3_198A_2E03_7073);
+/// sin r = r + r³·(S1 + r²·(S2 + …)) on [-π/4, π/4].
+const SIN_POLY: [f64; 6] = [
+    f64::from_bits(0xBFC5_5555_5555_5549),
+    f64::from_bits(0x3F81_1111_1110_F8A6),
+    f64::from_bits(0xBF2A_01A0_19C1_61D5),
+    f64::from_bits(0x3EC7_1DE3_57B1_FE7D),
+    f64::from_bits(0xBE5A_E5E6_8A2B_9CEB),
+    f64::from_bits(0x3DE5_D93A_5ACF_D57C),
+];
+/// cos r = 1 - r²/2 + r⁴·(C1 + r²·(C2 + …)) on [-π/4, π/4].
+const COS_POLY: [f64; 6] = [
+    f64::from_bits(0x3FA5_5555_5555_554C),
+    f64::from_bits(0xBF56_C16C_16C1_5177),
+    f64::from_bits(0x3EFA_01A0_19CB_1590),
+    f64::from_bits(0xBE92_7E4F_809C_52AD),
+    f64::from_bits(0x3E21_EE9E_BDB4_B1C4),
+    f64::from_bits(0xBDA8_FAE9_BE88_38D4),
+];
+/// Arguments beyond this go to the standard library: n·PIO2_1 and n·PIO2_2 stay exact.
+const SIN_COS_LIMIT: f64 = 8.0e5;
+/// Adding 1.5·2^52 rounds a number below 2^51 to an integer (and leaves it in the low bits).
+const ROUNDING_SHIFT: f64 = 6_755_399_441_055_744.0;
+
+/// The argument reduced to [-π/4, π/4] and the multiple of π/2 taken off, as the shifted float
+/// whose low bits hold it: x = n·π/2 + r.
+#[inline(always)]
+fn reduce(x: f64) -> (f64, f64) {
+    let shifted = x * std::f64::consts::FRAC_2_PI + ROUNDING_SHIFT;
+    let n = shifted - ROUNDING_SHIFT;
+    (((x - n * PIO2_1) - n * PIO2_2) - n * PIO2_2T, shifted)
+}
+
+/// fdlibm's __kernel_sin and __kernel_cos (no tail) on [-π/4, π/4].
+#[inline(always)]
+fn sin_cos_kernel(r: f64) -> (f64, f64) {
+    let (s, c) = (&SIN_POLY, &COS_POLY);
+    let z = r * r;
+    let sin_tail = s[1] + z * (s[2] + z * (s[3] + z * (s[4] + z * s[5])));
+    let sin = r + z * r * (s[0] + z * sin_tail);
+    let cos_tail = z * (c[0] + z * (c[1] + z * (c[2] + z * (c[3] + z * (c[4] + z * c[5])))));
+    let hz = 0.5 * z;
+    let w = 1.0 - hz;
+    (sin, w + (((1.0 - w) - hz) + z * cos_tail))
+}
+
+/// (sin x, cos x) from the kernel's values at r and the quadrant n mod 4 in the low bits of
+/// `shifted`: odd quadrants swap sin and cos, quadrants 2, 3 negate sin and 1, 2 cos; chosen
+/// with bit masks, without branches (fringe phases make the quadrant unpredictable).
+#[inline(always)]
+fn place_in_quadrant(sin_r: f64, cos_r: f64, shifted: f64) -> (f64, f64) {
+    let bits = shifted.to_bits();
+    let swap = (bits & 1).wrapping_neg(); // all ones in odd quadrants
+    let pick = |a: f64, b: f64| (a.to_bits() & !swap) | (b.to_bits() & swap);
+    let sin_sign = (bits >> 1) << 63;
+    let cos_sign = ((bits >> 1) ^ bits) << 63;
+    (f64::from_bits(pick(sin_r, cos_r) ^ sin_sign), f64::from_bits(pick(cos_r, sin_r) ^ cos_sign))
+}
+
+/// sin x and cos x together, to about 1 ulp, without a library call: the argument is reduced
+/// by multiples of π/2 (Cody-Waite, π/2 in three parts, exact for |x| < 8e5, which covers
+/// joint angles and fringe phases of gaps up to 100 mm) and the fdlibm kernels evaluate
+/// sin and cos on [-π/4, π/4]; larger or non-finite arguments go to the standard library.
+#[inline]
+pub fn sin_cos(x: f64) -> (f64, f64) {
+    if x.is_nan() || x.abs() > SIN_COS_LIMIT {
+        return x.sin_cos();
+    }
+    let (r, shifted) = reduce(x);
+    let (s, c) = sin_cos_kernel(r);
+    place_in_quadrant(s, c, shifted)
+}
+
+/// [`sin_cos`] of two arguments at once: lane by lane the same operations and results,
+/// written so that the compiler can evaluate both lanes with vector instructions.
+#[inline(always)]
+pub(crate) fn sin_cos_2(x: [f64; 2]) -> ([f64; 2], [f64; 2]) {
+    if x.iter().any(|v| v.is_nan() || v.abs() > SIN_COS_LIMIT) {
+        let (a, b) = (sin_cos(x[0]), sin_cos(x[1]));
+        return ([a.0, b.0], [a.1, b.1]);
+    }
+    let ((r0, shifted0), (r1, shifted1)) = (reduce(x[0]), reduce(x[1]));
+    let ((s0, c0), (s1, c1)) = (sin_cos_kernel(r0), sin_cos_kernel(r1));
+    let ((s0, c0), (s1, c1)) = (place_in_quadrant(s0, c0, shifted0), place_in_quadrant(s1, c1, shifted1));
+    ([s0, s1], [c0, c1])
 }
 
 /// Wrap an angle to (-π, π].
@@ -180,8 +337,9 @@ impl Chain {
                     }
                 }),
             })
-            .collect();
-        Self { description, links }
+            .collect::<Vec<_>>();
+        let fast = FastChain::new(&links);
+        Self { description, links, fast }
     }
 
     /// The paper's robot.
@@ -241,11 +399,76 @@ impl Chain {
     }
 
     /// Direct geometric model: the end-effector pose `wTe = 0Tn`.
+    ///
+    /// Evaluated on the compiled form (affine prefix of prismatic joints, then one quaternion
+    /// product per wrist link); [`Chain::end_effector_reference`] is the plain product of the
+    /// link transforms, equal to it within rounding.
+    #[inline]
     pub fn end_effector(&self, q: &[f64]) -> Isometry3<f64> {
+        self.check_len(q);
+        let f = &self.fast;
+        let mut p = f.prefix_origin;
+        for (axis, &qi) in f.prefix_axes.iter().zip(q) {
+            p += axis * qi;
+        }
+        let mut r = f.prefix_rotation;
+        for fl in &f.rest {
+            if let Some(v) = &fl.translation {
+                p += r * v;
+            }
+            r *= fl.rotation;
+            let l = &self.links[fl.link];
+            let qi = q[fl.link];
+            match (&l.errors, l.joint) {
+                (None, JointType::Revolute) => r = mul_rot_z(&r, qi),
+                (None, JointType::Prismatic) => p += r * Vector3::new(0.0, 0.0, qi),
+                _ => {
+                    let m = Self::joint_motion(l, qi);
+                    p += r * m.translation.vector;
+                    r *= m.rotation;
+                }
+            }
+        }
+        Isometry3::from_parts(Translation3::from(p), r)
+    }
+
+    /// The DGM as the plain product `T(0,1)·T(1,2)···T(n-1,n)` of the link transforms: the
+    /// reference [`Chain::end_effector`] is checked against.
+    pub fn end_effector_reference(&self, q: &[f64]) -> Isometry3<f64> {
         self.check_len(q);
         let mut t = Isometry3::identity();
         for (l, &qi) in self.links.iter().zip(q) {
             t = t * l.constant * Self::joint_motion(l, qi);
+        }
+        t
+    }
+
+    /// The DGM and the geometric Jacobian in one pass, without allocating: `columns[i]`
+    /// receives, per unit of joint i (µm or rad), the velocity of the end-effector origin
+    /// (µm) and the angular velocity (rad), in the world (the columns of [`Chain::jacobian`]).
+    pub fn end_effector_with_jacobian(
+        &self,
+        q: &[f64],
+        columns: &mut [(Vector3<f64>, Vector3<f64>)],
+    ) -> Isometry3<f64> {
+        self.check_len(q);
+        assert_eq!(columns.len(), self.links.len(), "one Jacobian column per joint");
+        let mut t = Isometry3::identity();
+        // First pass: a point on each axis (in .0) and its direction (in .1).
+        for ((l, &qi), col) in self.links.iter().zip(q).zip(columns.iter_mut()) {
+            let before = t * l.constant;
+            let (point, axis) = l.axis();
+            *col = ((before * Point3::from(point)).coords, before.rotation * axis.into_inner());
+            t = before * Self::joint_motion(l, qi);
+        }
+        let pe = t.translation.vector;
+        for (l, col) in self.links.iter().zip(columns.iter_mut()) {
+            let (o, z) = *col;
+            let g = l.gain();
+            *col = match l.joint {
+                JointType::Prismatic => (z * g, Vector3::zeros()),
+                JointType::Revolute => (z.cross(&(pe - o)) * g, z * g),
+            };
         }
         t
     }
@@ -607,6 +830,76 @@ mod tests {
             let dv = (c.end_effector(&qp).translation.vector - c.end_effector(&q).translation.vector) / 1e-6;
             for r in 0..3 {
                 assert!((j[(r, k)] - dv[r]).abs() < 1e-4, "J[{r},{k}] = {} vs {}", j[(r, k)], dv[r]);
+            }
+        }
+    }
+
+    #[test]
+    fn sin_cos_agrees_with_the_standard_library_to_an_ulp() {
+        let check = |x: f64| {
+            let ((s, c), (s0, c0)) = (sin_cos(x), x.sin_cos());
+            // An ulp of a value in [0.5, 1] is 1.1e-16; near zero, sin is relative.
+            assert!((c - c0).abs() <= 2.3e-16, "cos {x}: {c} vs {c0}");
+            assert!((s - s0).abs() <= 2.3e-16 * s0.abs().max(x.abs().min(1.0)), "sin {x}: {s} vs {s0}");
+        };
+        let mut x: f64 = 0.0;
+        for i in 0..200_000 {
+            // A low-discrepancy walk over 0..2e4 rad (fringe phases), scaled to joint angles and below.
+            x = (x + 0.618_033_988_749_894_9 * 7.3).rem_euclid(2.0e4);
+            for v in [x, -x, x * 1e-3, x * 1e-9] {
+                check(v);
+            }
+            check(f64::from(i % 64) * std::f64::consts::FRAC_PI_4);
+        }
+        for x in [0.0, -0.0, 7.9e5, -7.9e5, 8.1e5, 1e10, f64::MIN_POSITIVE] {
+            check(x);
+        }
+        // The two-lane version gives the same bits.
+        let mut x: f64 = 0.1;
+        for _ in 0..100_000 {
+            x = (x + 0.618_033_988_749_894_9 * 7.3).rem_euclid(2.0e4);
+            for pair in [[x, -x * 1e-3], [-x, x * 1e-9], [x, 9e5], [0.0, -0.0]] {
+                let (s, c) = sin_cos_2(pair);
+                for i in 0..2 {
+                    let (s1, c1) = sin_cos(pair[i]);
+                    assert_eq!((s[i].to_bits(), c[i].to_bits()), (s1.to_bits(), c1.to_bits()), "{}", pair[i]);
+                }
+            }
+        }
+        assert!(sin_cos(f64::NAN).0.is_nan() && sin_cos(f64::INFINITY).1.is_nan());
+    }
+
+    /// A chain with intrinsic errors on every kind of joint, and a wrist link with a translation.
+    fn perturbed_chain() -> Chain {
+        let mut d = RobotDescription::femto_6dof();
+        d.links[1].errors.scale_ppm = 800.0;
+        d.links[2].errors.axis_tilt_mrad = [0.3, -0.2];
+        d.links[2].errors.zero_offset = 1.5;
+        d.links[3].errors.axis_offset_um = [0.0, 10.0, 5.0];
+        d.links[4].errors.zero_offset = 0.05;
+        d.links[4].d_um = 3.0;
+        d.links[5].errors.axis_tilt_mrad = [0.1, 0.2];
+        Chain::new(d)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        /// The compiled DGM equals the plain product of the link transforms.
+        #[test]
+        fn compiled_dgm_equals_the_product_of_link_transforms(q in q_in_limits()) {
+            for c in [Chain::femto_6dof(), perturbed_chain()] {
+                let (a, b) = (c.end_effector(&q), c.end_effector_reference(&q));
+                prop_assert!((a.translation.vector - b.translation.vector).norm() < 1e-12);
+                prop_assert!(a.rotation.angle_to(&b.rotation) < 1e-14);
+                let mut cols = [(Vector3::zeros(), Vector3::zeros()); 6];
+                let t = c.end_effector_with_jacobian(&q, &mut cols);
+                prop_assert!((t.translation.vector - b.translation.vector).norm() < 1e-12);
+                let j = c.jacobian(&q);
+                for (k, (lin, ang)) in cols.iter().enumerate() {
+                    for r in 0..3 {
+                        prop_assert!((j[(r, k)] - lin[r]).abs() < 1e-9 && (j[(r + 3, k)] - ang[r]).abs() < 1e-14);
+                    }
+                }
             }
         }
     }

@@ -52,6 +52,10 @@
 //! of the lamella and bounces inside the lamella are neglected; they are smaller than the
 //! back-face beams by a factor r1·|r2| or |r2|·√R_back (≤ 7 % for LiNbO3 on both faces).
 //!
+//! For dense sampling (the virtual bench), [`FringeExpansion`] rewrites the sum as a
+//! polynomial in two exact phasors, the first beam's round-trip phase and the tilt phase, with
+//! slowly varying coefficients and their analytic derivatives.
+//!
 //! # What the SPEC numbers need
 //!
 //! - Two-beam visibility at |L| ≈ 900 µm: 0.23 for LiNbO3 (R2 = 0.142), 0.22 for R2 = 0.132,
@@ -64,6 +68,7 @@
 
 use std::f64::consts::PI;
 
+use crate::model::kinematics::sin_cos;
 use nalgebra::Complex;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -270,6 +275,8 @@ struct Cavity {
     extra_reduced_um: f64,
     /// Round-trip phase added to 2k|L|, rad.
     extra_phase_rad: f64,
+    /// d(extra_phase_rad)/dk along a wavelength change (k the wavenumber in the medium), µm.
+    extra_phase_per_k_um: f64,
 }
 
 /// Below this bound on |term| the remaining beams cannot change the field (relative 1e-17).
@@ -278,7 +285,8 @@ const NEGLIGIBLE_AMPLITUDE: f64 = 1e-17;
 /// The signal model evaluated at one wavelength and medium index, constants precomputed.
 ///
 /// Construction validates the parameters; evaluation allocates nothing and costs two
-/// sin/cos, one exp and a few complex products per beam.
+/// sin/cos (the fast [`sin_cos`], within an ulp of the standard library's), one exp and a few
+/// complex products per beam.
 #[derive(Debug, Clone)]
 pub struct FabryPerot {
     wavelength_nm: f64,
@@ -293,6 +301,8 @@ pub struct FabryPerot {
     r1_direct: f64,
     /// 1 - r1².
     t1_sq: f64,
+    /// (n_fiber·w0·θc/n)²: r1_direct = r1·exp(-this·k²/2).
+    cleave_per_k_sq: f64,
     front: Cavity,
     back: Option<Cavity>,
     beams: u32,
@@ -321,6 +331,7 @@ impl FabryPerot {
                 r: (1.0 - r2 * r2) * b.reflectance.sqrt(),
                 extra_reduced_um: b.thickness_um * medium_index / b.phase_index,
                 extra_phase_rad: 2.0 * kn_t * b.thickness_um,
+                extra_phase_per_k_um: 2.0 * b.group_index * b.thickness_um / medium_index,
             }
         });
         Ok(Self {
@@ -332,7 +343,8 @@ impl FabryPerot {
             r1,
             r1_direct: r1 * (-0.5 * cleave).exp(),
             t1_sq: 1.0 - r1 * r1,
-            front: Cavity { r: r2, extra_reduced_um: 0.0, extra_phase_rad: 0.0 },
+            cleave_per_k_sq: (params.fiber_index * w0 * params.cleave_angle_deg.to_radians() / medium_index).powi(2),
+            front: Cavity { r: r2, extra_reduced_um: 0.0, extra_phase_rad: 0.0, extra_phase_per_k_um: 0.0 },
             back,
             beams: params.beams as u32,
             gouy_phase: params.gouy_phase,
@@ -427,9 +439,9 @@ impl FabryPerot {
         }
         let dist = gap_um + cav.extra_reduced_um;
         let ell = dist / self.rayleigh_um;
-        let (s, c) = (2.0 * self.k_per_um * gap_um + cav.extra_phase_rad).sin_cos();
+        let (s, c) = sin_cos(2.0 * self.k_per_um * gap_um + cav.extra_phase_rad);
         let base = Complex::new(c, -s); // exp(-iΦ)
-        let (zs, zc) = (self.k_per_um * tilt_rad * tilt_rad * dist).sin_cos();
+        let (zs, zc) = sin_cos(self.k_per_um * tilt_rad * tilt_rad * dist);
         let z = Complex::new(zc, zs); // exp(+i·k·θ²·dist)
         let z2 = z * z;
 
@@ -460,6 +472,151 @@ impl FabryPerot {
             z_grow *= z2;
         }
         sum
+    }
+}
+
+/// The field split into two exact phasors and slowly varying coefficients, for evaluators that
+/// sample the signal densely (the virtual bench):
+///
+/// ```text
+/// E_r/E_in = Σ_{m=0..M} B_m · u^m · w^(e_m),   u = exp(-i·Φ), Φ = k·|L|·(2 - θ²),
+///                                               w = exp(+i·ψ), ψ = k·θ²·|L|,  e_m = m(m² - 1)/3
+/// ```
+///
+/// Φ is the round-trip phase of the first beam (2k|L| less its tilt phase k·θ²·|L|) and
+/// e_m·ψ = (a_m - m)·k·θ²·|L| the extra tilt phase of beam m (module documentation): both
+/// move with the gap and the tilt much faster than the rest. B_0 = r1·g_c and, for m ≥ 1,
+/// B_m = Σ_cavities (1 - r1²)·r^m·(-r1)^(m-1)·c_m(d)·exp(-m²·ε)·exp(i·(a_m·k·θ²·d_x - m·φ_x)),
+/// with d = |L| + d_x, d_x and φ_x a cavity's extra reduced distance and round-trip phase
+/// (zero for the front face, whose B_m are then real up to the Gouy phase). B_m changes with
+/// |L| on the scale of z_R and with θ² on the scale of 1/(m·k·w0)². The partial derivatives are
+/// analytic. Beams whose bound |(1 - r1²)·r^m·r1^(m-1)| is below 1e-17 are left out, as the
+/// sum of [`FabryPerot::field`] leaves them.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FringeExpansion {
+    /// B_m, m = 0..=M.
+    pub coefficients: Vec<Complex<f64>>,
+    /// ∂B_m/∂|L|, per µm.
+    pub d_gap: Vec<Complex<f64>>,
+    /// ∂B_m/∂(θ²), per rad².
+    pub d_tilt_sq: Vec<Complex<f64>>,
+    /// ∂²B_m/∂(θ²)², per rad⁴ (each beam is exp(linear in θ²) times a function of |L|).
+    pub d2_tilt_sq: Vec<Complex<f64>>,
+    /// ∂B_m/∂k, per (rad/µm), for a change of wavelength: k = 2π·n/λ the wavenumber in the
+    /// medium, the fiber, lamella, back face and medium index fixed.
+    pub d_wavenumber: Vec<Complex<f64>>,
+}
+
+impl FringeExpansion {
+    /// E_r/E_in at the phasors u = exp(-iΦ) and w = exp(iψ) (Horner in u).
+    pub fn field(&self, u: Complex<f64>, w: Complex<f64>) -> Complex<f64> {
+        let mut acc = Complex::new(0.0, 0.0);
+        for (m, b) in self.coefficients.iter().enumerate().rev() {
+            acc = acc * u + b * w.powi(tilt_phase_order(m) as i32);
+        }
+        acc
+    }
+}
+
+/// e_m = m(m² - 1)/3 = a_m - m, the multiple of ψ = k·θ²·|L| in beam m's tilt phase
+/// ([`FringeExpansion`]); e_{m+1} - e_m = m(m + 1).
+pub fn tilt_phase_order(m: usize) -> u64 {
+    let m = m as u64;
+    m * (m * m).saturating_sub(1) / 3
+}
+
+impl FabryPerot {
+    /// Wavenumber k = 2π·n/λ in the cavity medium, rad/µm.
+    pub fn wavenumber_per_um(&self) -> f64 {
+        self.k_per_um
+    }
+
+    /// Power launched towards the cavity, mW ([`FabryPerot::power`] is this times |E_r/E_in|²).
+    pub fn input_power_mw(&self) -> f64 {
+        self.input_power_mw
+    }
+
+    /// Highest beam order M kept by [`FabryPerot::expansion`].
+    pub fn expansion_order(&self) -> usize {
+        let order = |cav: &Cavity| -> usize {
+            if cav.r == 0.0 {
+                return 0;
+            }
+            let mut coef = self.t1_sq * cav.r;
+            for m in 1..=self.beams {
+                if coef.abs() < NEGLIGIBLE_AMPLITUDE {
+                    return m as usize;
+                }
+                coef *= -self.r1 * cav.r;
+            }
+            self.beams as usize
+        };
+        order(&self.front).max(self.back.as_ref().map_or(0, order))
+    }
+
+    /// The fringe phase Φ = k·|L|·(2 - θ²) and the tilt phase ψ = k·θ²·|L| of
+    /// [`FringeExpansion`], rad.
+    #[inline]
+    pub fn expansion_phases_rad(&self, gap_um: f64, tilt_sq_rad2: f64) -> (f64, f64) {
+        let kg = self.k_per_um * gap_um.abs();
+        (kg * (2.0 - tilt_sq_rad2), kg * tilt_sq_rad2)
+    }
+
+    /// The coefficients B_m of [`FringeExpansion`] and their partial derivatives at gap
+    /// `gap_um` (its sign is ignored) and squared tilt `tilt_sq_rad2` = θ² (rad²), written into
+    /// `out` (resized to M + 1): `field(gap, θ) = out.field(exp(-iΦ), exp(iψ))` with (Φ, ψ) from
+    /// [`FabryPerot::expansion_phases_rad`].
+    pub fn expansion(&self, gap_um: f64, tilt_sq_rad2: f64, out: &mut FringeExpansion) {
+        let n = self.expansion_order() + 1;
+        let zero = Complex::new(0.0, 0.0);
+        for v in [&mut out.coefficients, &mut out.d_gap, &mut out.d_tilt_sq, &mut out.d2_tilt_sq, &mut out.d_wavenumber]
+        {
+            v.clear();
+            v.resize(n, zero);
+        }
+        let (k, t, g) = (self.k_per_um, tilt_sq_rad2, gap_um.abs());
+        out.coefficients[0] = Complex::new(self.r1_direct, 0.0);
+        out.d_wavenumber[0] = Complex::new(-self.r1_direct * self.cleave_per_k_sq * k, 0.0);
+        let i = Complex::new(0.0, 1.0);
+        let q = (-self.half_kw0_sq * t).exp(); // exp(-ε)
+        for cav in std::iter::once(&self.front).chain(self.back.as_ref()) {
+            if cav.r == 0.0 || q == 0.0 {
+                continue;
+            }
+            let dist = g + cav.extra_reduced_um;
+            let mut coef = self.t1_sq * cav.r;
+            let (mut decay, mut decay_step) = (q, q * q * q); // exp(-m²ε), exp(-(2m+1)ε)
+            for m in 1..n {
+                let mf = m as f64;
+                let a_m = mf * (mf * mf + 2.0) / 3.0;
+                let x = mf * dist / self.rayleigh_um;
+                // c_m and d(ln c_m)/dx.
+                let (c, dlnc) = if self.gouy_phase {
+                    let c = Complex::new(1.0, x) / (1.0 + x * x);
+                    (c, i * c)
+                } else {
+                    (Complex::new((1.0 + x * x).sqrt().recip(), 0.0), Complex::new(-x / (1.0 + x * x), 0.0))
+                };
+                let extra = a_m * k * t * cav.extra_reduced_um;
+                let phase = extra - mf * cav.extra_phase_rad;
+                let term = if phase == 0.0 {
+                    c * (coef * decay)
+                } else {
+                    c * (coef * decay) * Complex::new(phase.cos(), phase.sin())
+                };
+                let dln_tilt = i * (a_m * k * cav.extra_reduced_um) - mf * mf * self.half_kw0_sq;
+                out.coefficients[m] += term;
+                out.d_gap[m] += term * dlnc * (mf / self.rayleigh_um);
+                out.d_tilt_sq[m] += term * dln_tilt;
+                out.d2_tilt_sq[m] += term * dln_tilt * dln_tilt;
+                out.d_wavenumber[m] += term
+                    * (-dlnc * (x / k) + i * (extra / k - mf * cav.extra_phase_per_k_um)
+                        - 2.0 * mf * mf * self.half_kw0_sq * t / k);
+                coef *= -self.r1 * cav.r;
+                decay *= decay_step;
+                decay_step *= q * q;
+            }
+        }
     }
 }
 
@@ -759,6 +916,70 @@ mod tests {
                     }
                     let e = fp.field(gap, tilt);
                     assert!((e - direct).norm() < 1e-13, "gap {gap}, tilt {tilt}: {e} vs {direct}");
+                }
+            }
+        }
+    }
+
+    /// The fringe expansion sums to the field, and its derivatives match finite differences
+    /// (the wavenumber derivative against a model rebuilt at a shifted wavelength).
+    #[test]
+    fn fringe_expansion_equals_the_field_and_its_derivatives_are_exact() {
+        let cases = [
+            OpticalParams::default(),
+            OpticalParams { gouy_phase: false, cleave_angle_deg: 0.7, beams: 6, ..OpticalParams::default() },
+            OpticalParams { back_face: Some(BackFace::default()), cleave_angle_deg: 0.3, ..OpticalParams::default() },
+            OpticalParams { beams: 1000, lamella_reflectance: 0.306, ..OpticalParams::default() },
+        ];
+        assert_eq!((1..6).map(tilt_phase_order).collect::<Vec<_>>(), [0, 2, 8, 20, 40]);
+        let mut e = FringeExpansion::default();
+        let mut ep = FringeExpansion::default();
+        let mut em = FringeExpansion::default();
+        for params in cases {
+            let fp = bench(&params);
+            for gap in [0.0, 3.0, 54.0, 333.3, -898.83] {
+                for tilt in [0.0, 0.004, -0.0195, 0.07] {
+                    let t2 = tilt * tilt;
+                    fp.expansion(gap, t2, &mut e);
+                    let (phi, psi) = fp.expansion_phases_rad(gap, t2);
+                    let field = e.field(Complex::new(phi.cos(), -phi.sin()), Complex::new(psi.cos(), psi.sin()));
+                    let exact = fp.field(gap, tilt);
+                    // Both round Φ ≈ 7.3e3 rad at 899 µm to its ulp (9e-13 rad).
+                    assert!((field - exact).norm() < 1e-13, "{params:?} gap {gap} tilt {tilt}: {field} vs {exact}");
+                    let check = |name: &str, d: &[Complex<f64>], p: &FringeExpansion, m: &FringeExpansion, h: f64| {
+                        for (j, dj) in d.iter().enumerate() {
+                            let fd = (p.coefficients[j] - m.coefficients[j]) / (2.0 * h);
+                            let scale = e.coefficients[1].norm().max(1e-300);
+                            assert!(
+                                (fd - dj).norm() * h < 1e-9 * scale + 1e-20,
+                                "{name} m = {j}, gap {gap}, tilt {tilt}: {dj} vs {fd}"
+                            );
+                        }
+                    };
+                    let h = 1e-3;
+                    fp.expansion(gap.abs() + h, t2, &mut ep);
+                    fp.expansion(gap.abs() - h, t2, &mut em);
+                    if gap.abs() > h {
+                        check("d/dgap", &e.d_gap, &ep, &em, h);
+                    }
+                    let h = 1e-7;
+                    fp.expansion(gap, t2 + h, &mut ep);
+                    fp.expansion(gap, t2 - h, &mut em);
+                    check("d/dtilt²", &e.d_tilt_sq, &ep, &em, h);
+                    for j in 0..e.d2_tilt_sq.len() {
+                        let fd = (ep.d_tilt_sq[j] - em.d_tilt_sq[j]) / (2.0 * h);
+                        let tol = 1e-4 * (e.d2_tilt_sq[j].norm() + e.coefficients[1].norm() * 1e3);
+                        assert!((fd - e.d2_tilt_sq[j]).norm() < tol, "d²/dtilt²² m = {j}: {} vs {fd}", e.d2_tilt_sq[j]);
+                    }
+                    let dl = 1e-3; // nm
+                    let (fpp, fpm) = (
+                        FabryPerot::new(&params, WL + dl, N_AIR).unwrap(),
+                        FabryPerot::new(&params, WL - dl, N_AIR).unwrap(),
+                    );
+                    fpp.expansion(gap, t2, &mut ep);
+                    fpm.expansion(gap, t2, &mut em);
+                    let dk = 0.5 * (fpp.wavenumber_per_um() - fpm.wavenumber_per_um());
+                    check("d/dk", &e.d_wavenumber, &ep, &em, dk);
                 }
             }
         }

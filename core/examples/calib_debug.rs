@@ -1,0 +1,208 @@
+//! Debug harness for the calibration: simulate (cached under /tmp), identify, compare with the truth.
+//! `cargo run --release -p photorobot-core --example calib_debug -- <preset> <joint|paper> [seed]`
+use photorobot_core::bench::{BenchPreset, VirtualBench};
+use photorobot_core::identify::calibration::{self, Mode};
+use photorobot_core::identify::joint;
+use photorobot_core::identify::ObservationKind;
+use photorobot_core::measure::PhaseModel;
+use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use photorobot_core::trace::Trace;
+use std::path::PathBuf;
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let preset_name = args.get(1).map(String::as_str).unwrap_or("table2-ideal");
+    let mode = if args.get(2).map(String::as_str) == Some("paper") { Mode::Paper } else { Mode::Joint };
+    let seed: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(1);
+    let preset = BenchPreset::resolve(preset_name).unwrap();
+    let dir = PathBuf::from(format!("/tmp/calib-{preset_name}-{mode:?}-{seed}"));
+    let t0 = Instant::now();
+    let traces: Vec<Trace> = if dir.exists() {
+        let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();
+        files.sort();
+        files.iter().map(|p| Trace::read_csv(p).unwrap()).collect()
+    } else {
+        let mut bench = VirtualBench::new(&preset, Some(seed)).unwrap();
+        let (traces, dur) = calibration::measure(&mut bench, &calibration::plans(mode)).unwrap();
+        println!("measured {} traces, bench time {:.0} s", traces.len(), dur);
+        std::fs::create_dir_all(&dir).unwrap();
+        for (i, t) in traces.iter().enumerate() {
+            t.write_csv(&dir.join(format!("{i:03}.csv"))).unwrap();
+        }
+        traces
+    };
+    println!("traces ready in {:.1} s", t0.elapsed().as_secs_f64());
+    let nominal = PhaseModel::new(
+        preset.robot_description().unwrap(),
+        Extrinsics::nominal_design(),
+        preset.optics,
+        &preset.ambient,
+        preset.laser.wavelength_nm,
+    )
+    .unwrap();
+    if let Ok(i) = std::env::var("TRACE_IDX") {
+        let t = &traces[i.parse::<usize>().unwrap()];
+        let mut m2 = nominal.clone();
+        m2.extrinsics = preset.truth;
+        let truth = m2.hint_nm(t, 1560.0).unwrap();
+        if let Ok(photorobot_core::measure::Measurement::Motion(mm)) = photorobot_core::measure::analyse(t, &m2) {
+            let n = t.len();
+            for k in 0..=40 {
+                let i = k * (n - 1) / 40;
+                println!(
+                    "{i:6} t {:.3} I {:.5} dl {:10.2} truth {:10.2} err {:7.2} σ {:.2}",
+                    t.t_s[i],
+                    t.irradiance[i],
+                    mm.track.dl_nm[i],
+                    truth[i],
+                    mm.track.dl_nm[i] - truth[i],
+                    mm.track.sigma_dl_nm[i]
+                );
+            }
+            println!("warnings {:?}", mm.track.warnings);
+        }
+        return;
+    }
+    if std::env::var("PER_TRACE").is_ok() {
+        let mut m2 = nominal.clone();
+        m2.extrinsics = preset.truth;
+        for (i, t) in traces.iter().enumerate() {
+            for (name, m) in [("nominal", &nominal), ("truth", &m2)] {
+                match photorobot_core::measure::analyse(t, m) {
+                    Ok(photorobot_core::measure::Measurement::Motion(mm)) => println!(
+                        "{i:3} {name:8} {:50} dL {:10.2} nm σ {:.2} (hint {:10.2})",
+                        t.meta.label,
+                        mm.track.dl_nm.last().unwrap(),
+                        mm.track.sigma_total_nm,
+                        mm.hint_nm.last().unwrap()
+                    ),
+                    Ok(_) => {}
+                    Err(e) => println!("{i:3} {name:8} {:50} ERROR {e}", t.meta.label),
+                }
+            }
+        }
+        return;
+    }
+    let t1 = Instant::now();
+    if std::env::var("STEP_A").is_ok() {
+        let mut m2 = nominal.clone();
+        m2.extrinsics = preset.truth;
+        let ex = photorobot_core::identify::measurements::observations_from_traces(&traces, &m2, &Default::default());
+        let tr: Vec<_> = ex
+            .observations
+            .iter()
+            .filter(|o| match o.kind {
+                ObservationKind::GapChange { from_display, to_display, .. } => {
+                    (3..6).all(|i| from_display[i] == to_display[i])
+                }
+                _ => false,
+            })
+            .cloned()
+            .collect();
+        let sweeps: Vec<Trace> = traces.iter().filter(|t| photorobot_core::measure::is_sweep(t)).cloned().collect();
+        let g =
+            photorobot_core::identify::measurements::observations_from_traces(&sweeps, &nominal, &Default::default());
+        for o in &g.observations {
+            if let ObservationKind::AbsoluteGap { at_display, gap_um } = o.kind {
+                let mut o2 = o.clone();
+                o2.kind = ObservationKind::AbsoluteGap { at_display, gap_um: 0.0 };
+                let fp =
+                    photorobot_core::model::optics::FabryPerot::new(&preset.optics, 1560.0, nominal.n_air).unwrap();
+                let p = photorobot_core::identify::predict(&m2, &fp, &preset.truth, &o2, 1.0);
+                println!("gap {:?} {:.4} truth {:.4} σ {:.4} {}", at_display, gap_um, p, o.sigma, o.label);
+            }
+        }
+        let boot = joint::estimate(
+            &nominal,
+            &g.observations,
+            &nominal.extrinsics,
+            &joint::JointOptions { free: [true, true, false, false, false, false, true, false], ..Default::default() },
+        );
+        println!("boot {:?} {}", boot.extrinsics, boot.termination);
+        for (start, name) in [(preset.truth, "truth"), (Extrinsics::nominal_design(), "nominal")] {
+            for hold in [false, true] {
+                let a = photorobot_core::identify::paper::step_a_with(&nominal.chain, &tr, &start, hold);
+                println!("start {name} hold {hold}: {:?} rms {:.2}", a.angles_deg, a.residual_rms_sigma);
+            }
+        }
+        return;
+    }
+    if std::env::var("TIME_EXTRACT").is_ok() {
+        let ex =
+            photorobot_core::identify::measurements::observations_from_traces(&traces, &nominal, &Default::default());
+        for t in &traces {
+            let t3 = Instant::now();
+            let _ = photorobot_core::measure::analyse(t, &nominal);
+            let dt = t3.elapsed().as_secs_f64();
+            if dt > 0.3 {
+                println!("  {:.2} s {} ({} samples)", dt, t.meta.label, t.len());
+            }
+        }
+        println!("extract with nominal: {:.1} s, {} obs", t1.elapsed().as_secs_f64(), ex.observations.len());
+        let t2 = Instant::now();
+        let est = joint::estimate(&nominal, &ex.observations, &preset.truth, &Default::default());
+        println!("estimate {:.3} s, {} evaluations", t2.elapsed().as_secs_f64(), est.evaluations);
+        return;
+    }
+    let id = calibration::identify(&traces, &nominal, mode).unwrap();
+    let (est, obs) = (id.estimate, id.observations);
+    for (l, w) in &id.skipped {
+        println!("skipped {l}: {w}");
+    }
+    println!("identify {:.1} s, converged {}, {}", t1.elapsed().as_secs_f64(), est.converged, est.termination);
+    let report = calibration::analyse_estimate(&est);
+    let rows = calibration::parameter_rows(&est.extrinsics, &report);
+    let truth = preset.truth.to_array();
+    for (i, r) in rows.iter().enumerate() {
+        let err = r.value - truth[i];
+        println!(
+            "{:>9} {:>12.5} {:3} σ {:>10} err {:>10.5} ({:>6.1}σ) {}",
+            r.name,
+            r.value,
+            r.unit,
+            r.sigma.map_or("-".into(), |s| format!("{s:.5}")),
+            err,
+            r.sigma.map_or(f64::NAN, |s| err / s),
+            if r.determined { "" } else { "NOT DETERMINED" }
+        );
+    }
+    let _ = PARAMETER_NAMES;
+    // residuals by kind
+    let mut by_kind: std::collections::BTreeMap<&str, (f64, usize, f64)> = Default::default();
+    for (o, r) in obs.iter().zip(&est.normalised_residuals) {
+        let k = match o.kind {
+            ObservationKind::GapChange { .. } => "gap change",
+            ObservationKind::AbsoluteGap { .. } => "absolute gap",
+            ObservationKind::FringeAmplitude { .. } => "amplitude",
+        };
+        let e = by_kind.entry(k).or_default();
+        e.0 += r * r;
+        e.1 += 1;
+        e.2 = e.2.max(r.abs());
+    }
+    for (k, (s, n, m)) in by_kind {
+        println!("{k:>14}: n {n:4} rms {:.2}σ max {:.1}σ", (s / n as f64).sqrt(), m);
+    }
+    // worst residuals
+    let mut idx: Vec<usize> = (0..obs.len()).collect();
+    idx.sort_by(|a, b| est.normalised_residuals[*b].abs().total_cmp(&est.normalised_residuals[*a].abs()));
+    for &i in idx.iter().take(12) {
+        println!(
+            "  {:>8.1}σ  {:>10.4} {} (σ {:.4}) {}",
+            est.normalised_residuals[i],
+            est.residuals[i],
+            obs[i].unit(),
+            obs[i].sigma,
+            obs[i].label
+        );
+    }
+    // truth check: residuals at the truth
+    let at_truth = joint::evaluate(&nominal, &obs, &preset.truth, &Default::default());
+    let rms = (at_truth.normalised_residuals.iter().map(|r| r * r).sum::<f64>()
+        / at_truth.normalised_residuals.len() as f64)
+        .sqrt();
+    println!("normalised rms at the truth: {rms:.2}; at the estimate: {:.2}", {
+        (est.normalised_residuals.iter().map(|r| r * r).sum::<f64>() / est.normalised_residuals.len() as f64).sqrt()
+    });
+}

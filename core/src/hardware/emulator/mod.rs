@@ -1,0 +1,418 @@
+//! Protocol emulators of the PI E-712 and the SmarAct MCS on loopback TCP: stage state, finite-speed
+//! motion on a (time-scaled) clock, a photodiode fed by a closure, and fault injection.
+//! Owns what the drivers are tested against; [`run_emulator`] serves one from the command line.
+//!
+//! Motion is analytic: every axis keeps the history of its moves (trapezoidal profiles), so its
+//! position at any past time is exact. The PI data recorder therefore computes its samples when they
+//! are read, at their own sample times, and a photodiode closure can ask any emulator where its axes
+//! were at that time.
+
+pub mod pi;
+pub mod smaract;
+
+use crate::plan::TrapezoidProfile;
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+pub use pi::{PiEmulator, PiEmulatorConfig};
+pub use smaract::{SmarActEmulator, SmarActEmulatorConfig};
+
+/// The emulated time: real time since the start, times a scale (100 runs a 10-minute plan in 6 s).
+#[derive(Debug)]
+pub struct EmuClock {
+    start: Instant,
+    scale: f64,
+}
+
+impl EmuClock {
+    /// A clock running `scale` times faster than real time (1 for real time).
+    pub fn new(scale: f64) -> Arc<Self> {
+        Arc::new(EmuClock { start: Instant::now(), scale: if scale.is_finite() && scale > 0.0 { scale } else { 1.0 } })
+    }
+
+    /// Emulated seconds since the start.
+    pub fn now_s(&self) -> f64 {
+        self.start.elapsed().as_secs_f64() * self.scale
+    }
+
+    /// The time scale.
+    pub fn scale(&self) -> f64 {
+        self.scale
+    }
+}
+
+/// One move of an axis: from `from` at `t0_s` to `to`, trapezoidal.
+#[derive(Debug, Clone, Copy)]
+struct Move {
+    t0_s: f64,
+    from: f64,
+    to: f64,
+    profile: TrapezoidProfile,
+}
+
+impl Move {
+    fn at(&self, t_s: f64) -> f64 {
+        let s = self.profile.fraction_at(t_s - self.t0_s);
+        if s >= 1.0 {
+            self.to
+        } else {
+            self.from + s * (self.to - self.from)
+        }
+    }
+
+    fn end_s(&self) -> f64 {
+        self.t0_s + self.profile.duration_s
+    }
+}
+
+/// An emulated axis: its travel range, speed, acceleration and the history of its moves.
+#[derive(Debug, Clone)]
+pub struct EmuAxis {
+    /// Travel range (controller units).
+    pub min: f64,
+    /// Travel range (controller units).
+    pub max: f64,
+    /// Speed (controller units per s).
+    pub speed: f64,
+    /// Acceleration (controller units per s²).
+    pub accel: f64,
+    /// Referenced (absolute position known).
+    pub referenced: bool,
+    /// The axis stopped short of its target (limit); cleared by the next move.
+    pub at_limit: bool,
+    history: Vec<Move>,
+}
+
+impl EmuAxis {
+    /// An axis at `position`, not moving.
+    pub fn new(position: f64, min: f64, max: f64, speed: f64, accel: f64) -> Self {
+        EmuAxis {
+            min,
+            max,
+            speed,
+            accel,
+            referenced: true,
+            at_limit: false,
+            history: vec![Move {
+                t0_s: f64::NEG_INFINITY,
+                from: position,
+                to: position,
+                profile: TrapezoidProfile::INSTANT,
+            }],
+        }
+    }
+
+    fn current(&self, t_s: f64) -> &Move {
+        let k = self.history.partition_point(|m| m.t0_s <= t_s);
+        &self.history[k.saturating_sub(1)]
+    }
+
+    /// Position at emulated time `t_s` (past or present).
+    pub fn position_at(&self, t_s: f64) -> f64 {
+        self.current(t_s).at(t_s)
+    }
+
+    /// The target of the move running (or last run) at `t_s`.
+    pub fn target_at(&self, t_s: f64) -> f64 {
+        self.current(t_s).to
+    }
+
+    /// True while a move runs at `t_s`.
+    pub fn moving_at(&self, t_s: f64) -> bool {
+        t_s < self.current(t_s).end_s()
+    }
+
+    /// Start a move to `target` at `t_s`, from wherever the axis is.
+    pub fn start_move(&mut self, t_s: f64, target: f64) {
+        let from = self.position_at(t_s);
+        let d = (target - from).abs();
+        let profile =
+            if d == 0.0 { TrapezoidProfile::INSTANT } else { TrapezoidProfile::new(self.speed / d, self.accel / d) };
+        self.at_limit = false;
+        self.push(Move { t0_s: t_s, from, to: target, profile });
+    }
+
+    /// Stop now where the axis is.
+    pub fn stop(&mut self, t_s: f64) {
+        let p = self.position_at(t_s);
+        self.push(Move { t0_s: t_s, from: p, to: p, profile: TrapezoidProfile::INSTANT });
+    }
+
+    fn push(&mut self, m: Move) {
+        // Later moves replace any recorded after t0 (never happens with a monotonic clock).
+        let k = self.history.partition_point(|h| h.t0_s <= m.t0_s);
+        self.history.truncate(k);
+        self.history.push(m);
+        // Keep the history bounded: the oldest moves are not needed after an hour of emulated time.
+        if self.history.len() > 100_000 {
+            self.history.drain(..50_000);
+        }
+    }
+}
+
+/// Axes shared between an emulator and whoever needs their positions (a photodiode closure).
+pub type SharedAxes = Arc<Mutex<Vec<EmuAxis>>>;
+
+/// The photodiode signal at emulated time `t_s` (controller input units).
+pub type PhotodiodeFn = Arc<dyn Fn(f64) -> f64 + Send + Sync>;
+
+/// What goes wrong.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Fault {
+    /// Close the connection without replying.
+    DropConnection,
+    /// Swallow the command: no reply, the connection stays open.
+    NoReply,
+    /// Refuse the command with this controller error code (GCS error number, MCS error code).
+    ErrorCode(i64),
+    /// Every moving axis stops where it is, on a limit (PI: error 216 pending; MCS: stopped short).
+    Limit,
+}
+
+/// When it goes wrong.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Trigger {
+    /// At the `(skip + 1)`-th command starting with `prefix` from now on.
+    Command {
+        /// Command prefix, e.g. "MOV", "ONT?", ":GS".
+        prefix: String,
+        /// Matching commands let through first.
+        skip: usize,
+    },
+    /// At the `(skip + 1)`-th command starting with the last of `steps`, once commands starting
+    /// with each of the others have been seen in order (other commands may come between). Pins a
+    /// fault to a point of a step: `["DRT", "ONT?"]` is "the 1st `ONT?` after the recorder is armed".
+    Sequence {
+        /// Command prefixes, in order.
+        steps: Vec<String>,
+        /// Matching commands of the last step let through first.
+        skip: usize,
+    },
+    /// At the first command received at or after this emulated time (s).
+    AtTime(f64),
+}
+
+/// A fault armed in an emulator; it fires once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FaultSpec {
+    /// When.
+    pub trigger: Trigger,
+    /// What.
+    pub fault: Fault,
+}
+
+impl FaultSpec {
+    /// `fault` at the `(skip + 1)`-th command starting with `prefix`.
+    pub fn on_command(prefix: &str, skip: usize, fault: Fault) -> Self {
+        FaultSpec { trigger: Trigger::Command { prefix: prefix.into(), skip }, fault }
+    }
+
+    /// `fault` at a point of a sequence of commands ([`Trigger::Sequence`]).
+    pub fn after(steps: &[&str], skip: usize, fault: Fault) -> Self {
+        FaultSpec { trigger: Trigger::Sequence { steps: steps.iter().map(|s| s.to_string()).collect(), skip }, fault }
+    }
+}
+
+/// Pending faults of an emulator; `take` returns the fault that fires at this command, if any.
+#[derive(Debug, Default)]
+pub(crate) struct Faults {
+    armed: Vec<FaultSpec>,
+    /// Faults that fired, with the command they fired on (for tests).
+    pub fired: Vec<(String, Fault)>,
+}
+
+/// A matching trigger fires once its `skip` count of earlier matches is used up.
+fn count_down(skip: &mut usize) -> bool {
+    if *skip == 0 {
+        true
+    } else {
+        *skip -= 1;
+        false
+    }
+}
+
+impl Faults {
+    pub(crate) fn take(&mut self, command: &str, now_s: f64) -> Option<Fault> {
+        let mut hit = None;
+        for (i, f) in self.armed.iter_mut().enumerate() {
+            let fires = match &mut f.trigger {
+                Trigger::Command { prefix, skip } => command.starts_with(prefix.as_str()) && count_down(skip),
+                Trigger::Sequence { steps, skip } => {
+                    if steps.len() > 1 {
+                        if command.starts_with(steps[0].as_str()) {
+                            steps.remove(0);
+                        }
+                        false
+                    } else {
+                        steps.first().is_some_and(|p| command.starts_with(p.as_str())) && count_down(skip)
+                    }
+                }
+                Trigger::AtTime(t) => now_s >= *t,
+            };
+            if fires && hit.is_none() {
+                hit = Some(i);
+            }
+        }
+        let f = self.armed.remove(hit?);
+        self.fired.push((command.to_string(), f.fault.clone()));
+        Some(f.fault)
+    }
+}
+
+/// A running TCP server: accepts connections on loopback and serves each on its own thread.
+pub(crate) struct Server {
+    pub addr: SocketAddr,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Server {
+    pub(crate) fn start<F>(port: u16, serve: F) -> std::io::Result<Self>
+    where
+        F: Fn(TcpStream) + Send + Sync + 'static,
+    {
+        let listener = TcpListener::bind(("127.0.0.1", port))?;
+        listener.set_nonblocking(true)?;
+        let addr = listener.local_addr()?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop2 = stop.clone();
+        let serve = Arc::new(serve);
+        let thread = std::thread::spawn(move || {
+            while !stop2.load(Ordering::Relaxed) {
+                match listener.accept() {
+                    Ok((stream, _)) => {
+                        let _ = stream.set_nonblocking(false);
+                        let _ = stream.set_nodelay(true);
+                        let serve = serve.clone();
+                        std::thread::spawn(move || serve(stream));
+                    }
+                    Err(_) => std::thread::sleep(std::time::Duration::from_millis(1)),
+                }
+            }
+        });
+        Ok(Server { addr, stop, thread: Some(thread) })
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// An emulated tunable laser on the emulator clock: a fixed wavelength or a linear sweep.
+#[derive(Debug)]
+pub struct EmuLaser {
+    clock: Arc<EmuClock>,
+    /// (start time, from nm, to nm, rate nm/s) of the sweeps; a fixed wavelength is a sweep of rate 0.
+    schedule: Mutex<Vec<(f64, f64, f64, f64)>>,
+}
+
+impl EmuLaser {
+    /// A laser at `wavelength_nm`.
+    pub fn new(clock: Arc<EmuClock>, wavelength_nm: f64) -> Arc<Self> {
+        Arc::new(EmuLaser { clock, schedule: Mutex::new(vec![(f64::NEG_INFINITY, wavelength_nm, wavelength_nm, 0.0)]) })
+    }
+
+    /// Wavelength (nm) at emulated time `t_s`.
+    pub fn wavelength_at(&self, t_s: f64) -> f64 {
+        let s = self.schedule.lock().unwrap_or_else(|e| e.into_inner());
+        let k = s.partition_point(|e| e.0 <= t_s).saturating_sub(1);
+        let (t0, from, to, rate) = s[k];
+        if rate == 0.0 {
+            return to;
+        }
+        let done = (t_s - t0) * rate;
+        if done >= (to - from).abs() {
+            to
+        } else {
+            from + done * (to - from).signum()
+        }
+    }
+
+    /// Start a sweep now; returns the emulated start time.
+    pub fn sweep(&self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> f64 {
+        let t = self.clock.now_s();
+        self.schedule.lock().unwrap_or_else(|e| e.into_inner()).push((t, from_nm, to_nm, rate_nm_per_s.abs()));
+        t
+    }
+
+    /// Set a fixed wavelength now.
+    pub fn set(&self, wavelength_nm: f64) {
+        let t = self.clock.now_s();
+        self.schedule.lock().unwrap_or_else(|e| e.into_inner()).push((t, wavelength_nm, wavelength_nm, 0.0));
+    }
+
+    /// The clock.
+    pub fn clock(&self) -> &Arc<EmuClock> {
+        &self.clock
+    }
+}
+
+/// Which emulator to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EmulatorKind {
+    /// PI E-712 (GCS 2), default port 50000.
+    Pi,
+    /// SmarAct MCS (ASCII), default port 5000.
+    SmarAct,
+}
+
+impl EmulatorKind {
+    /// "pi" or "smaract".
+    pub fn parse(text: &str) -> Option<Self> {
+        match text.to_ascii_lowercase().as_str() {
+            "pi" | "e-712" | "e712" => Some(EmulatorKind::Pi),
+            "smaract" | "mcs" => Some(EmulatorKind::SmarAct),
+            _ => None,
+        }
+    }
+
+    /// The controller's default TCP port.
+    pub fn default_port(self) -> u16 {
+        match self {
+            EmulatorKind::Pi => super::pi_gcs::DEFAULT_PORT,
+            EmulatorKind::SmarAct => super::smaract::DEFAULT_PORT,
+        }
+    }
+}
+
+/// Serve an emulator of `kind` on 127.0.0.1:`port` (the default port for `None`) in real time, with
+/// the femto-6dof bench's axes, until `stop` is set. `on_ready` gets the address once listening.
+/// The PI emulator's photodiode input reads a slow test signal (a sine of its first axis).
+pub fn run_emulator(
+    kind: EmulatorKind,
+    port: Option<u16>,
+    stop: &AtomicBool,
+    on_ready: &mut dyn FnMut(SocketAddr),
+) -> std::io::Result<()> {
+    let clock = EmuClock::new(1.0);
+    let port = port.unwrap_or(kind.default_port());
+    match kind {
+        EmulatorKind::Pi => {
+            let emu = PiEmulator::start_on(port, clock, pi::PiEmulatorConfig::default())?;
+            let axes = emu.axes();
+            emu.set_photodiode(Arc::new(move |t| {
+                let x = axes.lock().map(|a| a.first().map_or(0.0, |a| a.position_at(t))).unwrap_or(0.0);
+                0.5 + 0.2 * (x * 2.0 * std::f64::consts::PI / 0.78).cos()
+            }));
+            on_ready(emu.addr());
+            while !stop.load(Ordering::Relaxed) {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+        }
+        EmulatorKind::SmarAct => {
+            let emu = SmarActEmulator::start_on(port, clock, smaract::SmarActEmulatorConfig::default())?;
+            on_ready(emu.addr());
+            while !stop.load(Ordering::Relaxed) {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+        }
+    }
+    Ok(())
+}

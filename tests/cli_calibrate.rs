@@ -1,0 +1,77 @@
+//! End to end: `photorobot calibrate` on the `table2-ideal` virtual bench measures the paper's
+//! strategies plus the extra measurements, identifies jointly, validates, and writes the
+//! session (issue: identification). The figures asserted are those of the issue.
+
+use photorobot_app::cli::{run, Outcome};
+use photorobot_core::model::extrinsics::Extrinsics;
+use serde_json::Value;
+
+fn calibrate(mode: &str, dir: &std::path::Path) -> Value {
+    let mut out = Vec::new();
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--seed", "7", "--mode", mode, "--json", "--out"];
+    let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
+    argv.push(dir.display().to_string());
+    assert_eq!(run(argv, &mut out).unwrap(), Outcome::Done);
+    serde_json::from_slice(&out).unwrap()
+}
+
+fn parameter<'a>(doc: &'a Value, name: &str) -> &'a Value {
+    doc["parameters"].as_array().unwrap().iter().find(|p| p["name"] == name).unwrap()
+}
+
+fn validation(doc: &Value, motion: &str) -> (f64, f64) {
+    let v = doc["validation"].as_array().unwrap().iter().find(|v| v["motion"] == motion).unwrap();
+    (v["before_nm"].as_f64().unwrap(), v["after_nm"].as_f64().unwrap())
+}
+
+#[test]
+fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates() {
+    let dir = tempfile::tempdir().unwrap();
+    let doc = calibrate("joint", dir.path());
+    eprintln!("{}", serde_json::to_string_pretty(&doc["parameters"]).unwrap());
+    eprintln!("{}", serde_json::to_string_pretty(&doc["validation"]).unwrap());
+    assert_eq!(doc["converged"], true);
+    let truth = Extrinsics::table2().to_array();
+    let index = |n: &str| photorobot_core::model::extrinsics::PARAMETER_NAMES.iter().position(|p| p.0 == n).unwrap();
+    // Required σ per parameter (°, µm).
+    for (name, max_sigma) in
+        [("beta_et", 0.005), ("theta_et", 0.005), ("beta_wf", 0.01), ("theta_wf", 0.01), ("x_wf", 0.2), ("z_wf", 0.2)]
+    {
+        let p = parameter(&doc, name);
+        assert_eq!(p["determined"], true, "{name} determined");
+        let sigma = p["sigma"].as_f64().unwrap();
+        let err = p["value"].as_f64().unwrap() - truth[index(name)];
+        assert!(sigma <= max_sigma, "{name}: σ {sigma} above {max_sigma}");
+        assert!(err.abs() <= 3.0 * sigma, "{name}: error {err} beyond 3σ = {}", 3.0 * sigma);
+    }
+    // The gap y_wf − Z_et within 0.05 µm; the split honest: within 3σ, or flagged.
+    let value = |n: &str| parameter(&doc, n)["value"].as_f64().unwrap();
+    let gap = value("y_wf") - value("Z_et");
+    let true_gap = truth[index("y_wf")] - truth[index("Z_et")];
+    assert!((gap - true_gap).abs() < 0.05, "gap {gap} vs {true_gap}");
+    for name in ["Z_et", "y_wf"] {
+        let p = parameter(&doc, name);
+        if p["determined"] == true {
+            let sigma = p["sigma"].as_f64().unwrap();
+            assert!((value(name) - truth[index(name)]).abs() <= 3.0 * sigma, "{name} beyond 3σ ({sigma})");
+        }
+    }
+    // Validation after calibration: circle ≤ 10 nm, X_f/Y_f rotations ≤ 20 nm, optical axis ≤ 20 nm.
+    let circle = validation(&doc, "circle r = 100 µm in the lamella plane");
+    assert!(circle.1 <= 10.0, "circle after: {} nm", circle.1);
+    assert!(circle.0 > 10.0 * circle.1, "the nominal extrinsics do much worse: {} nm", circle.0);
+    for (m, limit) in [
+        ("rotation 6° about X_f through P_r", 20.0),
+        ("rotation 6° about Z_f (paper: Y_f) through P_r", 20.0),
+        ("rotation 45.5° about the optical axis through P_r", 20.0),
+    ] {
+        let (_, after) = validation(&doc, m);
+        assert!(after <= limit, "{m}: {after} nm");
+    }
+    // The session: every trace, the extrinsics, the report.
+    let traces = std::fs::read_dir(dir.path().join("traces")).unwrap().count();
+    assert!(traces > 60, "{traces} traces written");
+    let e = Extrinsics::load(&dir.path().join("extrinsics.ron")).unwrap();
+    assert!((e.beta_et_deg - value("beta_et")).abs() < 1e-12);
+    assert!(dir.path().join("report.json").exists());
+}
