@@ -655,6 +655,12 @@ impl ControllerBench {
                         _ => now >= t_start + seg.duration_s,
                     };
                     if finished {
+                        // The stages stand still from here: a poll now is exact whatever its round
+                        // trip, and bounds the interpolation at the end of the motion (polls during
+                        // the motion may all have been dropped on a busy host).
+                        if let Some(a) = acq.as_mut() {
+                            self.poll(a, true)?;
+                        }
                         done_at = Some(now + settle_s);
                     } else if now > deadline {
                         return Err(HwError::WaitTimeout {
