@@ -4,4 +4,9 @@
 pub mod cli;
 pub mod cli_calibrate;
 pub mod cli_emulate;
+pub mod decimate;
+pub mod dialogs;
 pub mod gui;
+pub mod state;
+pub mod views;
+pub mod worker;

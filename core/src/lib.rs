@@ -1,6 +1,7 @@
 //! photorobot core: the science of photo-robotic calibration, without any GUI.
 //! Data flows one way: plan -> bench -> trace -> measurements -> estimates -> validation, diagnosis, reports.
 
+pub mod alignment;
 pub mod bench;
 pub mod files;
 pub mod fringes;

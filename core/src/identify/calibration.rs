@@ -297,6 +297,20 @@ pub fn parameter_rows(e: &Extrinsics, report: &IdentifiabilityReport) -> Vec<Par
 /// Measure, identify, report and validate on a bench.
 pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Result<CalibrationReport, String> {
     let (traces, duration) = measure(bench, &plans(mode))?;
+    let mut report = report_from_traces(traces, duration, bench.name(), nominal, mode)?;
+    report.validation = validation_rows(bench, nominal, &report.extrinsics);
+    Ok(report)
+}
+
+/// Identify from recorded traces and build the report (without validation, which needs a
+/// bench: see [`validation_rows`]). `bench_name` says where the traces come from.
+pub fn report_from_traces(
+    traces: Vec<Trace>,
+    duration_s: f64,
+    bench_name: String,
+    nominal: &PhaseModel,
+    mode: Mode,
+) -> Result<CalibrationReport, String> {
     let id = identify(&traces, nominal, mode)?;
     let (est, obs) = (id.estimate, id.observations);
     let report = analyse_estimate(&est);
@@ -308,29 +322,12 @@ pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Res
         warnings
             .push(format!("the solver did not converge ({}): the values below are not a calibration", est.termination));
     }
-    let after_model = model_with(nominal, est.extrinsics);
-    let mut validation = Vec::new();
-    for m in ValidationMotion::ALL {
-        let before = run_validation(bench, &after_model, &nominal.extrinsics, m, [0.0; 6]);
-        let after = run_validation(bench, &after_model, &est.extrinsics, m, [0.0; 6]);
-        let note = match (&before, &after) {
-            (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
-            _ => None,
-        };
-        validation.push(ValidationRow {
-            motion: m.name().to_string(),
-            before_nm: before.ok().map(|f| f.peak_to_peak_nm),
-            after_nm: after.ok().map(|f| f.peak_to_peak_nm),
-            paper_nm: m.paper_after_nm(),
-            note,
-        });
-    }
     let rms = (est.normalised_residuals.iter().map(|r| r * r).sum::<f64>()
         / est.normalised_residuals.len().max(1) as f64)
         .sqrt();
     Ok(CalibrationReport {
         mode,
-        bench: bench.name(),
+        bench: bench_name,
         parameters: parameter_rows(&est.extrinsics, &report),
         identifiability: report,
         converged: est.converged,
@@ -341,11 +338,35 @@ pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Res
             .zip(&est.residuals)
             .map(|(o, r)| (o.label.clone(), o.unit().to_string(), *r, o.sigma))
             .collect(),
-        validation,
-        measurement_duration_s: duration,
+        validation: Vec::new(),
+        measurement_duration_s: duration_s,
         observations: obs.len(),
         warnings,
         extrinsics: est.extrinsics,
         traces,
     })
+}
+
+/// The validation motions planned with the nominal extrinsics (before) and with `identified`
+/// (after), run on the bench and measured with the identified model.
+pub fn validation_rows(bench: &mut dyn Bench, nominal: &PhaseModel, identified: &Extrinsics) -> Vec<ValidationRow> {
+    let after_model = model_with(nominal, *identified);
+    ValidationMotion::ALL
+        .iter()
+        .map(|&m| {
+            let before = run_validation(bench, &after_model, &nominal.extrinsics, m, [0.0; 6]);
+            let after = run_validation(bench, &after_model, identified, m, [0.0; 6]);
+            let note = match (&before, &after) {
+                (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
+                _ => None,
+            };
+            ValidationRow {
+                motion: m.name().to_string(),
+                before_nm: before.ok().map(|f| f.peak_to_peak_nm),
+                after_nm: after.ok().map(|f| f.peak_to_peak_nm),
+                paper_nm: m.paper_after_nm(),
+                note,
+            }
+        })
+        .collect()
 }
