@@ -61,6 +61,8 @@ pub struct Workbench {
     pub inspector: Inspector,
     /// Settings being edited (applied on "Apply").
     editing: Option<Settings>,
+    /// The theme the visuals were last set to.
+    applied_dark: Option<bool>,
 }
 
 impl Workbench {
@@ -73,6 +75,7 @@ impl Workbench {
             tab: Tab::Wizard,
             inspector: Inspector::default(),
             editing: None,
+            applied_dark: None,
         })
     }
 
@@ -80,7 +83,11 @@ impl Workbench {
     pub fn show(&mut self, ui: &mut egui::Ui) {
         self.state.poll_worker();
         let ctx = ui.ctx().clone();
-        ctx.set_theme(if self.state.settings.dark { egui::Theme::Dark } else { egui::Theme::Light });
+        if self.applied_dark != Some(self.state.settings.dark) {
+            let dark = self.state.settings.dark;
+            ctx.set_visuals(if dark { egui::Visuals::dark() } else { egui::Visuals::light() });
+            self.applied_dark = Some(dark);
+        }
         self.shortcuts(&ctx);
         egui::Panel::top("top bar").show(ui, |ui| {
             ui.horizontal(|ui| {

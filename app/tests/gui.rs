@@ -280,7 +280,18 @@ fn settings_persist_between_runs_and_the_theme_toggles() {
     h.run_steps(2);
     assert!(!h.state().state.settings.dark);
     h.get_by_label("Dark theme");
+    let mean_brightness = |h: &mut Harness<'_, Workbench>| {
+        let image = h.render().unwrap();
+        image.pixels().map(|p| (p.0[0] as f64 + p.0[1] as f64 + p.0[2] as f64) / 3.0).sum::<f64>()
+            / (image.width() * image.height()) as f64
+    };
+    assert!(mean_brightness(&mut h) > 180.0, "the light theme is light");
     screenshot(&mut h, "light-theme");
+    h.get_by_label("Dark theme").click();
+    h.run_steps(2);
+    assert!(mean_brightness(&mut h) < 80.0, "the dark theme is dark");
+    h.get_by_label("Light theme").click();
+    h.run_steps(2);
     h.state_mut().state.settings.seed = 42;
     let mut app = App { workbench: h.into_state() };
     let mut storage = MemoryStorage::default();
