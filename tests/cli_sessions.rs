@@ -1,0 +1,180 @@
+//! End to end (issue 7): one paper-mode calibration on the virtual bench writes a session; the
+//! session loads and re-identifies to identical results; its traces, read back from the folder as
+//! they are and re-mapped into another acquisition system's columns and units, identify to the
+//! same results through `photorobot calibrate --traces`; `photorobot report` turns it into one
+//! self-contained HTML file. The identification runs once per route and is reused.
+
+use photorobot_app::cli::{run, Outcome};
+use photorobot_core::identify::calibration::{report_from_traces, Mode};
+use photorobot_core::measure::PhaseModel;
+use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use photorobot_core::session::Session;
+use photorobot_core::trace::Trace;
+use serde_json::Value;
+use std::path::Path;
+
+fn cli(args: &[&str]) -> String {
+    let mut out = Vec::new();
+    let argv: Vec<String> = std::iter::once("photorobot").chain(args.iter().copied()).map(String::from).collect();
+    let outcome = run(argv, &mut out).unwrap_or_else(|e| panic!("photorobot {}: {e}", args.join(" ")));
+    assert_eq!(outcome, Outcome::Done);
+    String::from_utf8(out).unwrap()
+}
+
+fn calibrate(extra: &[&str], out: &Path) -> Value {
+    let out = out.display().to_string();
+    let mut args = vec!["calibrate", "--bench", "table2-ideal", "--seed", "7", "--mode", "paper", "--json", "--out", &out];
+    args.extend_from_slice(extra);
+    serde_json::from_str(&cli(&args)).unwrap()
+}
+
+fn values(doc: &Value) -> Vec<f64> {
+    doc["parameters"].as_array().unwrap().iter().map(|p| p["value"].as_f64().unwrap()).collect()
+}
+
+/// Write the traces as another acquisition system would: other names, order and units, no
+/// metadata (labels only in the file names), and a mapping back.
+fn write_foreign(traces: &[Trace], dir: &Path) -> std::path::PathBuf {
+    std::fs::create_dir_all(dir.join("run")).unwrap();
+    for (i, t) in traces.iter().enumerate() {
+        let mut s = String::from("pd_mW;time_ms;Z_nm;Y_nm;X_nm;a_mrad;b_mrad;c_deg;lambda_um;temp_C\n".replace(';', ","));
+        for k in 0..t.len() {
+            let q = t.joints_display(k);
+            s.push_str(&format!(
+                "{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},21.5\n",
+                t.irradiance[k],
+                t.t_s[k] * 1e3,
+                q[0] * 1e3,
+                q[1] * 1e3,
+                q[2] * 1e3,
+                q[3].to_radians() * 1e3,
+                q[4].to_radians() * 1e3,
+                q[5],
+                t.wavelength_nm[k] * 1e-3,
+            ));
+        }
+        let name = format!("rec {i:03} {}.csv", t.meta.label.replace(['/', ':', '>', '\\'], "_"));
+        std::fs::write(dir.join("run").join(name), s).unwrap();
+    }
+    let mapping = r#"ColumnMapping(
+        format_version: 1,
+        columns: {
+            "t_s": (source: Column("time_ms"), unit: "ms"),
+            "q1_um": (source: Column("Z_nm"), unit: "nm"),
+            "q2_um": (source: Column("Y_nm"), unit: "nm"),
+            "q3_um": (source: Column("X_nm"), unit: "nm"),
+            "q4_deg": (source: Column("a_mrad"), unit: "mrad"),
+            "q5_deg": (source: Column("b_mrad"), unit: "mrad"),
+            "q6_deg": (source: Column("c_deg"), unit: "deg"),
+            "wavelength_nm": (source: Column("lambda_um"), unit: "um"),
+            "irradiance": (source: Column("pd_mW"), unit: "mW"),
+        },
+    )"#;
+    let path = dir.join("mapping.ron");
+    std::fs::write(&path, mapping).unwrap();
+    path
+}
+
+#[test]
+fn session_round_trip_import_and_report() {
+    let root = tempfile::tempdir().unwrap();
+    let s1 = root.path().join("measured");
+    let t0 = std::time::Instant::now();
+    let measured = calibrate(&[], &s1);
+    eprintln!("measure + identify + validate: {:.1} s", t0.elapsed().as_secs_f64());
+    assert_eq!(measured["converged"], true);
+
+    // 1. The session file: bench, robot, plans, every trace referenced, the calibration.
+    let session = Session::load(&s1).unwrap();
+    assert_eq!(session.format_version, 1);
+    assert_eq!(session.bench.preset.as_deref(), Some("table2-ideal"));
+    assert_eq!(session.plans.len(), 2);
+    assert!(session.measured());
+    let recorded: usize = session.plans.iter().map(|p| p.segments.iter().filter(|s| s.is_recorded()).count()).sum();
+    assert_eq!(session.traces.len(), recorded);
+    let calibration = session.calibration.clone().expect("a calibration in the session");
+    assert_eq!(serde_json::to_value(&calibration.parameters).unwrap(), measured["parameters"]);
+    assert!(s1.join("extrinsics.ron").exists() && s1.join("report.json").exists());
+    assert!(!s1.join("session.autosave.ron").exists());
+
+    // 6. Round trip: load, re-identify: identical results (bit for bit).
+    let t1 = std::time::Instant::now();
+    let traces = session.load_traces(&s1).unwrap();
+    let preset = session.bench.description.clone().unwrap();
+    let nominal = PhaseModel::new(
+        session.robot.clone(),
+        Extrinsics::nominal_design(),
+        preset.optics,
+        &preset.ambient,
+        preset.laser.wavelength_nm,
+    )
+    .unwrap();
+    let again = report_from_traces(traces.clone(), 0.0, "again".into(), &nominal, Mode::Paper).unwrap();
+    eprintln!("re-identify: {:.1} s", t1.elapsed().as_secs_f64());
+    assert_eq!(again.extrinsics, calibration.extrinsics);
+    assert_eq!(again.parameters, calibration.parameters);
+    assert_eq!(again.identifiability, calibration.identifiability);
+    assert_eq!(again.residuals, calibration.residuals);
+    // Saving what was loaded writes the same file.
+    let copy = root.path().join("copy");
+    session.save(&copy).unwrap();
+    assert_eq!(std::fs::read(copy.join("session.ron")).unwrap(), std::fs::read(s1.join("session.ron")).unwrap());
+
+    // 3a. The session's traces folder through `calibrate --traces`: the same results.
+    let t2 = std::time::Instant::now();
+    let s2 = root.path().join("from-traces");
+    let traces_dir = s1.join("traces").display().to_string();
+    let imported = calibrate(&["--traces", &traces_dir], &s2);
+    eprintln!("--traces: {:.1} s", t2.elapsed().as_secs_f64());
+    assert_eq!(values(&imported), values(&measured));
+    assert_eq!(imported["residuals"], measured["residuals"]);
+    assert_eq!(imported["validation_predicted"], true);
+    let s2_session = Session::load(&s2).unwrap();
+    assert_eq!(s2_session.traces.len(), traces.len());
+    assert!(s2_session.traces.iter().all(|r| r.step.is_none()));
+
+    // 3b. Re-mapped and renamed, as another acquisition system writes them: the same results to
+    // rounding (ms → s and nm → µm are not exact in binary), far inside σ.
+    let t3 = std::time::Instant::now();
+    let mapping = write_foreign(&traces, &root.path().join("foreign"));
+    let s3 = root.path().join("from-foreign");
+    let foreign_dir = root.path().join("foreign/run").display().to_string();
+    let mapping = mapping.display().to_string();
+    let remapped = calibrate(&["--traces", &foreign_dir, "--mapping", &mapping], &s3);
+    eprintln!("--traces --mapping: {:.1} s", t3.elapsed().as_secs_f64());
+    for (k, p) in measured["parameters"].as_array().unwrap().iter().enumerate() {
+        let (a, b) = (p["value"].as_f64().unwrap(), remapped["parameters"][k]["value"].as_f64().unwrap());
+        let scale = p["sigma"].as_f64().unwrap_or(1.0).max(1e-9);
+        assert!((a - b).abs() <= 1e-3 * scale.max(a.abs() * 1e-9), "{}: {a} vs {b} (σ {scale})", PARAMETER_NAMES[k].0);
+        assert_eq!(p["determined"], remapped["parameters"][k]["determined"]);
+    }
+    let s3_session = Session::load(&s3).unwrap();
+    let labels: Vec<&str> = s3_session.traces.iter().map(|r| r.label.as_str()).collect();
+    assert!(labels[0].starts_with("rec 000 "), "labels from file names: {labels:?}");
+    let kinds_match = s3_session.traces.iter().zip(&session.traces).all(|(a, b)| a.kind == b.kind);
+    assert!(kinds_match, "sweeps recognised from the data");
+
+    // 7. The report: one self-contained HTML file.
+    let html_path = root.path().join("report.html");
+    cli(&["report", &s1.display().to_string(), "--out", &html_path.display().to_string()]);
+    let html = std::fs::read_to_string(&html_path).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
+    assert!(!html.contains("http://") && !html.contains("https://"), "no external reference");
+    assert!(!html.contains("<script") && !html.contains("<link") && !html.contains("src="), "nothing loaded");
+    for p in &calibration.parameters {
+        assert!(html.contains(&format!("<tr><td>{}</td>", p.name)), "a row for {}", p.name);
+        if !p.determined {
+            assert!(html.contains(&format!("<tr><td>{}</td><td class=\"muted\">not determined</td>", p.name)));
+        }
+    }
+    let svgs = html.matches("<svg ").count();
+    assert_eq!(svgs, 1 + calibration.validation.iter().filter(|v| !v.before_curve_nm.is_empty()).count(), "residual + validation plots");
+    assert!(html.matches("<circle ").count() >= calibration.residuals.len() / 2, "residual markers");
+    assert!(html.contains("<polyline "), "validation curves");
+    assert!(html.contains(env!("CARGO_PKG_VERSION")), "software version");
+    assert!(html.contains("No diagnosis was run"));
+    for w in &calibration.warnings {
+        assert!(html.contains(&photorobot_core::report::escape(w)), "warning shown: {w}");
+    }
+    eprintln!("total: {:.1} s", t0.elapsed().as_secs_f64());
+}
