@@ -23,7 +23,8 @@ fn cli(args: &[&str]) -> String {
 
 fn calibrate(extra: &[&str], out: &Path) -> Value {
     let out = out.display().to_string();
-    let mut args = vec!["calibrate", "--bench", "table2-ideal", "--seed", "7", "--mode", "paper", "--json", "--out", &out];
+    let mut args =
+        vec!["calibrate", "--bench", "table2-ideal", "--seed", "7", "--mode", "paper", "--json", "--out", &out];
     args.extend_from_slice(extra);
     serde_json::from_str(&cli(&args)).unwrap()
 }
@@ -37,7 +38,7 @@ fn values(doc: &Value) -> Vec<f64> {
 fn write_foreign(traces: &[Trace], dir: &Path) -> std::path::PathBuf {
     std::fs::create_dir_all(dir.join("run")).unwrap();
     for (i, t) in traces.iter().enumerate() {
-        let mut s = String::from("pd_mW;time_ms;Z_nm;Y_nm;X_nm;a_mrad;b_mrad;c_deg;lambda_um;temp_C\n".replace(';', ","));
+        let mut s = String::from("pd_mW,time_ms,Z_nm,Y_nm,X_nm,a_mrad,b_mrad,c_deg,lambda_um,temp_C\n");
         for k in 0..t.len() {
             let q = t.joints_display(k);
             s.push_str(&format!(

@@ -79,7 +79,8 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         ModeArg::Paper => Mode::Paper,
         ModeArg::Joint => Mode::Joint,
     };
-    let failed = |problem: String| CliError::Argument { argument: "--bench", problem: format!("calibration failed: {problem}") };
+    let failed =
+        |problem: String| CliError::Argument { argument: "--bench", problem: format!("calibration failed: {problem}") };
     let (mut session, report) = match &a.traces {
         Some(dir) => {
             let mapping = a.mapping.as_deref().map(ColumnMapping::load).transpose()?;
@@ -87,7 +88,10 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
             if std::fs::canonicalize(dir).ok() == std::fs::canonicalize(a.out.join("traces")).ok() {
                 return Err(CliError::Argument {
                     argument: "--out",
-                    problem: format!("{} would overwrite the traces it reads from; choose another folder", a.out.display()),
+                    problem: format!(
+                        "{} would overwrite the traces it reads from; choose another folder",
+                        a.out.display()
+                    ),
                 });
             }
             let bench = BenchInfo {

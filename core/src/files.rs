@@ -46,7 +46,9 @@ pub enum FileError {
         problem: String,
     },
     /// The file is larger than the limit for its kind; it was refused from its size, unread.
-    #[error("{file}: {size_bytes} bytes, above the limit of {limit_bytes} bytes for {what}; refusing to read it ({advice})")]
+    #[error(
+        "{file}: {size_bytes} bytes, above the limit of {limit_bytes} bytes for {what}; refusing to read it ({advice})"
+    )]
     TooLarge {
         /// The file.
         file: PathBuf,
@@ -130,7 +132,12 @@ pub fn check_size(path: &Path, limit_bytes: u64, what: &'static str, advice: &'s
 
 /// Read a text file of at most `limit_bytes` (checked from its size first, so a huge file is
 /// never read into memory); the error names the file.
-pub fn read_text_limited(path: &Path, limit_bytes: u64, what: &'static str, advice: &'static str) -> Result<String, FileError> {
+pub fn read_text_limited(
+    path: &Path,
+    limit_bytes: u64,
+    what: &'static str,
+    advice: &'static str,
+) -> Result<String, FileError> {
     check_size(path, limit_bytes, what, advice)?;
     let mut text = String::new();
     std::fs::File::open(path)

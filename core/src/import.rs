@@ -127,7 +127,10 @@ impl ColumnMapping {
                     c if c.ends_with("_deg") => "deg",
                     _ => "nm",
                 };
-                (c.to_string(), ColumnSource { source: Source::Column(c.into()), unit: unit.into(), scale: 1.0, offset: 0.0 })
+                (
+                    c.to_string(),
+                    ColumnSource { source: Source::Column(c.into()), unit: unit.into(), scale: 1.0, offset: 0.0 },
+                )
             })
             .collect();
         Self { format_version: MAPPING_VERSION, columns }
@@ -135,7 +138,12 @@ impl ColumnMapping {
 
     /// Load and check a mapping file (refused unread above [`MAX_MAPPING_BYTES`]).
     pub fn load(path: &Path) -> Result<Self, FileError> {
-        let text = files::read_text_limited(path, MAX_MAPPING_BYTES, "a column mapping", "a mapping is a few hundred bytes: is this the right file?")?;
+        let text = files::read_text_limited(
+            path,
+            MAX_MAPPING_BYTES,
+            "a column mapping",
+            "a mapping is a few hundred bytes: is this the right file?",
+        )?;
         Self::from_ron_str(&text, path)
     }
 
@@ -158,7 +166,10 @@ impl ColumnMapping {
         if self.format_version != MAPPING_VERSION {
             return Err(FieldError::new(
                 "format_version",
-                format!("expected {MAPPING_VERSION} (this program reads mapping version {MAPPING_VERSION}), found {}", self.format_version),
+                format!(
+                    "expected {MAPPING_VERSION} (this program reads mapping version {MAPPING_VERSION}), found {}",
+                    self.format_version
+                ),
             ));
         }
         for key in self.columns.keys() {
@@ -184,7 +195,10 @@ impl ColumnMapping {
                 ));
             };
             if !(c.scale.is_finite() && c.scale != 0.0) {
-                return Err(FieldError::new(field(".scale"), format!("expected a finite, non-zero factor, found {}", c.scale)));
+                return Err(FieldError::new(
+                    field(".scale"),
+                    format!("expected a finite, non-zero factor, found {}", c.scale),
+                ));
             }
             if !c.offset.is_finite() {
                 return Err(FieldError::new(field(".offset"), format!("expected a finite number, found {}", c.offset)));
@@ -349,6 +363,7 @@ pub fn read_folder(dir: &Path, mapping: Option<&ColumnMapping>) -> Result<Vec<Tr
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
 
     fn foreign_mapping() -> ColumnMapping {
         let text = r#"ColumnMapping(
@@ -373,8 +388,9 @@ mod tests {
         let csv = "pd_V,time_ms,X_nm,Z_nm,a_mrad,lambda_pm,temperature_C\n\
                    0.5,0,1000,-2000,1000,1560000,21.5\n\
                    0.25,10,1500,-2000,0,1560500,21.6\n";
-        let t = import_reader(csv.as_bytes(), Path::new("f.csv"), &foreign_mapping(), "from file", &ReadOptions::default())
-            .unwrap();
+        let t =
+            import_reader(csv.as_bytes(), Path::new("f.csv"), &foreign_mapping(), "from file", &ReadOptions::default())
+                .unwrap();
         assert_eq!(t.t_s, [0.0, 0.01]);
         assert_eq!(t.q3_um, [1.0, 1.5]);
         assert_eq!(t.q1_um, [-2.0, -2.0]);
@@ -399,7 +415,60 @@ mod tests {
             t.push_sample(i as f64 * 0.1, [i as f64, 0.0, 1.0, 0.0, 0.5, 0.0], 1560.0, 0.25 * i as f64);
         }
         let bytes = t.to_csv_bytes(Path::new("x.csv")).unwrap();
-        let back = import_reader(&bytes[..], Path::new("x.csv"), &ColumnMapping::identity(), "y", &ReadOptions::default()).unwrap();
+        let back =
+            import_reader(&bytes[..], Path::new("x.csv"), &ColumnMapping::identity(), "y", &ReadOptions::default())
+                .unwrap();
         assert_eq!(back, t);
+    }
+
+    fn mapping_text() -> String {
+        files::to_ron_string(&foreign_mapping(), Path::new("m.ron")).unwrap()
+    }
+
+    /// Splice `token` into `text` at `at`, cut `cut` bytes there, or truncate: the fuzz mutations.
+    fn mutate(text: &[u8], edits: &[(usize, usize, u8)]) -> Vec<u8> {
+        let tokens: [&[u8]; 10] =
+            [b",", b"\n", b"NaN", b"-inf", b"1e999", b"\"", b"(", b")", b"time_ms", b"# kind: x\n"];
+        let mut b = text.to_vec();
+        for &(at, cut, tok) in edits {
+            let a = at % (b.len() + 1);
+            match tok % 3 {
+                0 => {
+                    let e = (a + cut % 8).min(b.len());
+                    b.drain(a..e);
+                }
+                1 => b.truncate(a),
+                _ => {
+                    b.splice(a..a, tokens[cut % tokens.len()].iter().copied());
+                }
+            }
+        }
+        b
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 1000, failure_persistence: None, ..ProptestConfig::default() })]
+
+        #[test]
+        fn mapping_parser_never_panics(edits in prop::collection::vec((any::<usize>(), any::<usize>(), any::<u8>()), 1..5)) {
+            let text = mutate(mapping_text().as_bytes(), &edits);
+            match ColumnMapping::from_ron_str(&String::from_utf8_lossy(&text), Path::new("fuzz.ron")) {
+                Ok(m) => prop_assert!(m.validate().is_ok()),
+                Err(e) => prop_assert!(e.to_string().starts_with("fuzz.ron"), "{}", e),
+            }
+        }
+
+        #[test]
+        fn import_never_panics(edits in prop::collection::vec((any::<usize>(), any::<usize>(), any::<u8>()), 1..5)) {
+            let csv = b"pd_V,time_ms,X_nm,Z_nm,a_mrad,lambda_pm,temperature_C\n0.5,0,1000,-2000,1000,1560000,21.5\n0.25,10,1500,-2000,0,1560500,21.6\n";
+            let bytes = mutate(csv, &edits);
+            match import_reader(&bytes[..], Path::new("fuzz.csv"), &foreign_mapping(), "f", &ReadOptions::default()) {
+                Ok(t) => {
+                    prop_assert!(t.validate().is_ok());
+                    prop_assert!(!t.is_empty());
+                }
+                Err(e) => prop_assert!(e.to_string().starts_with("fuzz.csv"), "{}", e),
+            }
+        }
     }
 }

@@ -56,7 +56,9 @@ pub fn render_html(session: &Session) -> String {
             residual_plot(&mut h, c);
             validation(&mut h, c);
         }
-        None => h.push_str("<p class=\"warn\">No calibration in this session yet: only the measurements are listed.</p>\n"),
+        None => {
+            h.push_str("<p class=\"warn\">No calibration in this session yet: only the measurements are listed.</p>\n")
+        }
     }
     diagnosis(&mut h, session);
     notes_and_traces(&mut h, session);
@@ -207,7 +209,14 @@ struct Series<'a> {
 }
 
 /// An SVG plot with axes, ticks, labels and a legend; y range from the data (and `y_include`).
-fn svg_plot(title: &str, x_label: &str, y_label: &str, series: &[Series<'_>], y_include: &[f64], guides: &[f64]) -> String {
+fn svg_plot(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series<'_>],
+    y_include: &[f64],
+    guides: &[f64],
+) -> String {
     let (w, hgt) = (640.0, 300.0);
     let (left, right, top, bottom) = (70.0, 16.0, 34.0, 46.0);
     let all = series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
@@ -328,7 +337,11 @@ fn svg_plot(title: &str, x_label: &str, y_label: &str, series: &[Series<'_>], y_
 
 fn residual_plot(h: &mut String, c: &CalibrationReport) {
     h.push_str("<h2>Residuals</h2>\n");
-    let colors = [("nm", "#1f77b4", "gap changes (nm)"), ("µm", "#d62728", "absolute gaps (µm)"), ("mW", "#2ca02c", "fringe amplitudes (mW)")];
+    let colors = [
+        ("nm", "#1f77b4", "gap changes (nm)"),
+        ("µm", "#d62728", "absolute gaps (µm)"),
+        ("mW", "#2ca02c", "fringe amplitudes (mW)"),
+    ];
     let mut series: Vec<Series<'_>> = Vec::new();
     for (unit, color, name) in colors {
         let points: Vec<(f64, f64)> = c
@@ -357,7 +370,14 @@ fn residual_plot(h: &mut String, c: &CalibrationReport) {
         "<figure>{}<figcaption>Measured minus predicted for every observation, divided by its standard uncertainty σ. \
          With a good model most points lie between the dashed lines at ±3 σ; a pattern or many points outside \
          means something the model does not describe (see the diagnosis).</figcaption></figure>",
-        svg_plot("Residual per observation", "observation number", "residual / σ", &series, &[-3.5, 3.5], &[-3.0, 0.0, 3.0])
+        svg_plot(
+            "Residual per observation",
+            "observation number",
+            "residual / σ",
+            &series,
+            &[-3.5, 3.5],
+            &[-3.0, 0.0, 3.0]
+        )
     );
 }
 

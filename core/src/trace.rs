@@ -594,7 +594,8 @@ fn check_names(rec: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<St
 
 /// Check that a header starts with the [`REQUIRED_COLUMNS`] in order.
 fn check_required(names: &[String], file: &Path, line: usize) -> Result<(), TraceError> {
-    let missing: Vec<String> = REQUIRED_COLUMNS.iter().filter(|r| !names.iter().any(|n| n == *r)).map(|r| r.to_string()).collect();
+    let missing: Vec<String> =
+        REQUIRED_COLUMNS.iter().filter(|r| !names.iter().any(|n| n == *r)).map(|r| r.to_string()).collect();
     if !missing.is_empty() {
         let unknown = names
             .iter()

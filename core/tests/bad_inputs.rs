@@ -51,7 +51,12 @@ fn mapping_text() -> String {
 
 fn session_text() -> String {
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
-    let info = BenchInfo { name: "virtual bench table2-ideal".into(), preset: Some("table2-ideal".into()), description: None, seed: Some(1) };
+    let info = BenchInfo {
+        name: "virtual bench table2-ideal".into(),
+        preset: Some("table2-ideal".into()),
+        description: None,
+        seed: Some(1),
+    };
     let mut s = Session::new(info, preset.robot_description().unwrap());
     s.plans = vec![Plan::strategy2()];
     s.diagnosis = Some(DiagnosisRecord {
@@ -189,13 +194,20 @@ fn every_bad_input_class_gives_a_clear_error_naming_file_and_place() {
             Ok(Ok(())) => panic!("{name}: accepted"),
             Ok(Err(e)) => e,
         };
-        assert!(err.starts_with(&path.display().to_string()), "{name}: the message does not start with the file: {err}");
+        assert!(
+            err.starts_with(&path.display().to_string()),
+            "{name}: the message does not start with the file: {err}"
+        );
         for want in &wants {
             if !err.contains(want.as_str()) {
                 failures.push(format!("{name}: got `{err}`, want `{want}`"));
             }
         }
-        assert!(start.elapsed().as_secs_f64() < 2.0, "{name}: took {:?} (a huge file must be refused unread)", start.elapsed());
+        assert!(
+            start.elapsed().as_secs_f64() < 2.0,
+            "{name}: took {:?} (a huge file must be refused unread)",
+            start.elapsed()
+        );
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
     // The valid files behind the cases are accepted.

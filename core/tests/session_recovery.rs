@@ -115,7 +115,11 @@ fn a_crash_mid_strategy_loses_no_completed_step_and_the_run_resumes() {
         }));
         assert!(crashed.is_err(), "the bench crashed");
         let completed = bench.returned.clone();
-        assert!(!completed.is_empty() && completed.len() < recorded_steps, "{} steps before the crash", completed.len());
+        assert!(
+            !completed.is_empty() && completed.len() < recorded_steps,
+            "{} steps before the crash",
+            completed.len()
+        );
         drop(session); // the crashed process's memory is gone
 
         // Recovery is offered, and it holds every completed step, bit for bit.
@@ -143,11 +147,8 @@ fn a_crash_mid_strategy_loses_no_completed_step_and_the_run_resumes() {
         assert_eq!(traces.len(), recorded_steps);
         assert_eq!(&traces[..completed.len()], &completed[..]);
         let labels: Vec<&str> = traces.iter().map(|t| t.meta.label.as_str()).collect();
-        let expected: Vec<&str> = all
-            .plans
-            .iter()
-            .flat_map(|p| p.segments.iter().filter(|s| s.is_recorded()).map(|s| s.label()))
-            .collect();
+        let expected: Vec<&str> =
+            all.plans.iter().flat_map(|p| p.segments.iter().filter(|s| s.is_recorded()).map(|s| s.label())).collect();
         assert_eq!(labels, expected);
         let steps: Vec<(usize, usize)> = all.traces.iter().map(|r| r.step.unwrap()).collect();
         assert_eq!(steps, [(0, 1), (0, 2), (0, 3), (0, 4), (1, 1), (1, 2), (1, 3)]);

@@ -325,12 +325,10 @@ impl Session {
         create_dir(dir)?;
         files::save_ron(&path, self)?;
         match std::fs::remove_file(autosave_path(dir)) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(FileError::Io {
-                file: autosave_path(dir),
-                action: "cannot remove the autosave file",
-                source: e,
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                Err(FileError::Io { file: autosave_path(dir), action: "cannot remove the autosave file", source: e }
+                    .into())
             }
-            .into()),
             _ => Ok(()),
         }
     }
@@ -386,7 +384,11 @@ impl Session {
             ))
             .into());
         }
-        let bytes = std::fs::read(&path).map_err(|source| FileError::Io { file: path.clone(), action: "cannot read", source })?;
+        let bytes = std::fs::read(&path).map_err(|source| FileError::Io {
+            file: path.clone(),
+            action: "cannot read",
+            source,
+        })?;
         let crc = crc32fast::hash(&bytes);
         if crc != r.crc32 {
             return Err(wrong(format!(
@@ -397,7 +399,12 @@ impl Session {
         }
         let trace = Trace::from_csv_reader(&bytes[..], &path)?;
         if trace.len() != r.samples {
-            return Err(wrong(format!("{} samples, expected {} as recorded in {SESSION_FILE}", trace.len(), r.samples)).into());
+            return Err(wrong(format!(
+                "{} samples, expected {} as recorded in {SESSION_FILE}",
+                trace.len(),
+                r.samples
+            ))
+            .into());
         }
         Ok(trace)
     }
@@ -416,7 +423,10 @@ impl Session {
     /// unique and consistent, progress within the plans, finite results.
     pub fn validate(&self) -> Result<(), FieldError> {
         if self.format_version != FORMAT_VERSION {
-            return Err(FieldError::new("format_version", format!("expected {FORMAT_VERSION}, found {}", self.format_version)));
+            return Err(FieldError::new(
+                "format_version",
+                format!("expected {FORMAT_VERSION}, found {}", self.format_version),
+            ));
         }
         self.robot.validate().map_err(|e| FieldError::new(format!("robot.{}", e.field), e.problem))?;
         if let Some(p) = &self.bench.description {
@@ -439,7 +449,10 @@ impl Session {
                 ));
             }
             if let Some(j) = self.traces[..k].iter().position(|o| o.file == r.file) {
-                return Err(FieldError::new(field("file"), format!("`{}` is also traces[{j}]; expected each file once", r.file)));
+                return Err(FieldError::new(
+                    field("file"),
+                    format!("`{}` is also traces[{j}]; expected each file once", r.file),
+                ));
             }
             if let Some((plan, segment)) = r.step {
                 let n = self.plans.get(plan).map(|p| p.segments.len());
@@ -472,7 +485,10 @@ impl Session {
         if let Some(c) = &self.calibration {
             for (k, p) in c.parameters.iter().enumerate() {
                 if !p.value.is_finite() {
-                    return Err(FieldError::new(format!("calibration.parameters[{k}].value"), "expected a finite number"));
+                    return Err(FieldError::new(
+                        format!("calibration.parameters[{k}].value"),
+                        "expected a finite number",
+                    ));
                 }
                 if p.sigma.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
                     return Err(FieldError::new(
@@ -481,13 +497,18 @@ impl Session {
                     ));
                 }
             }
-            c.extrinsics.validate().map_err(|e| FieldError::new(format!("calibration.extrinsics.{}", e.field), e.problem))?;
+            c.extrinsics
+                .validate()
+                .map_err(|e| FieldError::new(format!("calibration.extrinsics.{}", e.field), e.problem))?;
         }
         if let Some(d) = &self.diagnosis {
             for (k, e) in d.effects.iter().enumerate() {
                 for (name, v) in [("estimate", Some(e.estimate)), ("sigma", e.sigma), ("score", Some(e.score))] {
                     if v.is_some_and(|v| !v.is_finite()) {
-                        return Err(FieldError::new(format!("diagnosis.effects[{k}].{name}"), "expected a finite number"));
+                        return Err(FieldError::new(
+                            format!("diagnosis.effects[{k}].{name}"),
+                            "expected a finite number",
+                        ));
                     }
                 }
             }

@@ -66,7 +66,8 @@ pub fn record(
             return Ok(Recorded { duration_s: bench.clock_s() - start_s, outcome: Err(e) });
         }
     }
-    session.progress = Some(Progress { plan: plans.len(), next_segment: 0, plan_start_display: bench.position_display() });
+    session.progress =
+        Some(Progress { plan: plans.len(), next_segment: 0, plan_start_display: bench.position_display() });
     session.autosave(dir)?;
     Ok(Recorded { duration_s: bench.clock_s() - start_s, outcome: Ok(()) })
 }
