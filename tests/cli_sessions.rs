@@ -165,7 +165,9 @@ fn session_round_trip_import_and_report() {
     for p in &calibration.parameters {
         assert!(html.contains(&format!("<tr><td>{}</td>", p.name)), "a row for {}", p.name);
         if !p.determined {
-            assert!(html.contains(&format!("<tr><td>{}</td><td class=\"muted\">not determined</td>", p.name)));
+            let row = html.lines().find(|l| l.starts_with(&format!("<tr><td>{}</td>", p.name))).unwrap();
+            assert!(row.contains("<td class=\"muted\">not determined</td>"), "{row}");
+            assert!(!row.contains(&format!("{:.4}", p.value)), "no bare number for an undetermined parameter: {row}");
         }
     }
     let svgs = html.matches("<svg ").count();

@@ -119,28 +119,45 @@ fn parameter_table(h: &mut String, c: &CalibrationReport) {
     h.push_str(
         "<h2>Identified parameters</h2>\n<p>The extrinsic parameters of the paper's Table II: where the fiber and \
          the lamella are. σ is the standard uncertainty (68 %). A parameter the measurements do not determine is \
-         shown as such, never as a number.</p>\n<table>\n<tr><th>parameter</th><th>value</th><th>σ</th><th>unit</th><th>determined</th></tr>\n",
+         shown as such, never as a number.</p>\n<table>\n<tr><th>parameter</th><th>what it is</th><th>value</th><th>σ</th><th>unit</th><th>determined</th></tr>\n",
     );
     for p in &c.parameters {
         if p.determined {
             let (v, s) = with_sigma(p.value, p.sigma);
             let _ = writeln!(
                 h,
-                "<tr><td>{}</td><td class=\"num\">{v}</td><td class=\"num\">{s}</td><td>{}</td><td class=\"yes\">yes</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td class=\"num\">{v}</td><td class=\"num\">{s}</td><td>{}</td><td class=\"yes\">yes</td></tr>",
                 escape(&p.name),
+                meaning(&p.name),
                 escape(&p.unit)
             );
         } else {
             let _ = writeln!(
                 h,
-                "<tr><td>{}</td><td class=\"muted\">not determined</td><td class=\"num\">–</td><td>{}</td><td><span class=\"no\">no</span>: {}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td class=\"muted\">not determined</td><td class=\"num\">–</td><td>{}</td><td><span class=\"no\">no</span>: {}</td></tr>",
                 escape(&p.name),
+                meaning(&p.name),
                 escape(&p.unit),
                 escape(p.reason.as_deref().unwrap_or("not determined by these data"))
             );
         }
     }
     h.push_str("</table>\n");
+}
+
+/// What a parameter of the paper's Table II is, in words (docs/conventions.md).
+fn meaning(name: &str) -> &'static str {
+    match name {
+        "beta_et" => "lamella tilt about the end-effector X axis",
+        "theta_et" => "lamella tilt about the end-effector Y axis",
+        "beta_wf" => "fiber axis tilt about the world X axis",
+        "theta_wf" => "fiber axis tilt about the fiber Z axis",
+        "Z_et" => "lamella offset along the end-effector Z axis",
+        "x_wf" => "fiber end, world X (across the beam)",
+        "y_wf" => "fiber end, world Y (along the beam)",
+        "z_wf" => "fiber end, world Z (across the beam)",
+        _ => "",
+    }
 }
 
 fn identifiability(h: &mut String, c: &CalibrationReport) {
