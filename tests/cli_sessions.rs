@@ -95,6 +95,14 @@ fn session_round_trip_import_and_report() {
     assert_eq!(measured["validation_predicted"], true);
     assert_eq!(measured["observations"].as_u64().unwrap() as usize, measured["residuals"].as_array().unwrap().len());
 
+    // A folder holding a session is never overwritten.
+    let mut sink = Vec::new();
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", &sim_dir, "--out"];
+    let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
+    argv.push(s1.display().to_string());
+    let err = run(argv, &mut sink).unwrap_err().to_string();
+    assert!(err.contains("already holds a session (session.ron); choose another folder"), "{err}");
+
     // 1. The session file: bench, robot, every trace referenced and identical, the calibration.
     let session = Session::load(&s1).unwrap();
     assert_eq!(session.format_version, 1);

@@ -79,6 +79,13 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         ModeArg::Paper => Mode::Paper,
         ModeArg::Joint => Mode::Joint,
     };
+    // Never overwrite recorded data: a folder that holds a saved session is left alone.
+    if photorobot_core::session::session_path(&a.out).exists() && !a.resume {
+        return Err(CliError::Argument {
+            argument: "--out",
+            problem: format!("{} already holds a session (session.ron); choose another folder", a.out.display()),
+        });
+    }
     let failed =
         |problem: String| CliError::Argument { argument: "--bench", problem: format!("calibration failed: {problem}") };
     let (mut session, report) = match &a.traces {

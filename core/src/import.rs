@@ -293,25 +293,14 @@ pub fn import_reader<R: Read>(
         meta.label = label.to_string();
     }
     meta.irradiance_unit = mapping.columns["irradiance"].unit.trim().to_string();
-    let mut trace = Trace::new(meta);
-    let mut cols = out.into_iter();
-    let mut next = || cols.next().unwrap_or_default();
-    trace.t_s = next();
-    trace.q1_um = next();
-    trace.q2_um = next();
-    trace.q3_um = next();
-    trace.q4_deg = next();
-    trace.q5_deg = next();
-    trace.q6_deg = next();
-    trace.wavelength_nm = next();
-    trace.irradiance = next();
-    trace.extra = table
+    let extra = table
         .names
         .iter()
         .zip(table.columns)
         .filter(|(n, _)| !used.contains(&n.as_str()) && !REQUIRED_COLUMNS.contains(&n.as_str()))
         .map(|(n, values)| ExtraColumn { name: n.clone(), values })
         .collect();
+    let mut trace = Trace::from_columns(meta, out, extra);
     trace.meta.kind = if crate::measure::is_sweep(&trace) { TraceKind::WavelengthSweep } else { TraceKind::Motion };
     // Scaling keeps time increasing only up to rounding: say so rather than pass on a bad trace.
     trace.validate().map_err(|e| TraceError::Imported { file: origin.to_path_buf(), problem: e.to_string() })?;

@@ -934,23 +934,34 @@ impl Trace {
             check_required(names, origin, line)?;
             Ok(0)
         })?;
-        let mut columns = table.columns.into_iter();
-        let mut next = || columns.next().unwrap_or_default();
-        let mut trace = Trace::new(table.meta);
-        trace.t_s = next();
-        trace.q1_um = next();
-        trace.q2_um = next();
-        trace.q3_um = next();
-        trace.q4_deg = next();
-        trace.q5_deg = next();
-        trace.q6_deg = next();
-        trace.wavelength_nm = next();
-        trace.irradiance = next();
-        trace.extra = table.names[REQUIRED_COLUMNS.len()..]
+        let mut columns = table.columns;
+        let extra_values = columns.split_off(REQUIRED_COLUMNS.len().min(columns.len()));
+        let extra = table.names[REQUIRED_COLUMNS.len()..]
             .iter()
-            .map(|name| ExtraColumn { name: name.clone(), values: next() })
+            .zip(extra_values)
+            .map(|(name, values)| ExtraColumn { name: name.clone(), values })
             .collect();
-        Ok(trace)
+        Ok(Trace::from_columns(table.meta, columns, extra))
+    }
+
+    /// A trace from its required columns in [`REQUIRED_COLUMNS`] order (missing ones empty)
+    /// and its extra columns; see [`Trace::validate`].
+    pub fn from_columns(meta: TraceMeta, required: Vec<Vec<f64>>, extra: Vec<ExtraColumn>) -> Self {
+        let mut columns = required.into_iter();
+        let mut next = || columns.next().unwrap_or_default();
+        Self {
+            meta,
+            t_s: next(),
+            q1_um: next(),
+            q2_um: next(),
+            q3_um: next(),
+            q4_deg: next(),
+            q5_deg: next(),
+            q6_deg: next(),
+            wavelength_nm: next(),
+            irradiance: next(),
+            extra,
+        }
     }
 
     /// The `#` metadata lines, each ending in `\n`.
