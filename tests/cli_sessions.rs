@@ -103,6 +103,20 @@ fn session_round_trip_import_and_report() {
     let err = run(argv, &mut sink).unwrap_err().to_string();
     assert!(err.contains("already holds a session (session.ron); choose another folder"), "{err}");
 
+    // A folder holding an unfinished measurement is offered for --resume, not overwritten.
+    let unfinished = root.path().join("unfinished");
+    let mut partial = Session::load(&s1).unwrap();
+    partial.calibration = None;
+    partial.autosave(&unfinished).unwrap();
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--mode", "paper", "--out"];
+    let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
+    argv.push(unfinished.display().to_string());
+    let err = run(argv, &mut sink).unwrap_err().to_string();
+    assert!(
+        err.contains("holds an unfinished measurement (session.autosave.ron); add --resume to continue it"),
+        "{err}"
+    );
+
     // 1. The session file: bench, robot, every trace referenced and identical, the calibration.
     let session = Session::load(&s1).unwrap();
     assert_eq!(session.format_version, 1);
