@@ -9,6 +9,12 @@ pub trait Dialogs {
     fn open_traces(&mut self) -> Vec<PathBuf>;
     /// Pick where to save a CSV trace (`None` when cancelled).
     fn save_trace(&mut self, suggested_name: &str) -> Option<PathBuf>;
+    /// Pick a session folder to open (`None` when cancelled).
+    fn open_session(&mut self) -> Option<PathBuf>;
+    /// Pick (or create) the folder to save a session in (`None` when cancelled).
+    fn save_session(&mut self) -> Option<PathBuf>;
+    /// Pick where to write the HTML report (`None` when cancelled).
+    fn save_report(&mut self) -> Option<PathBuf>;
 }
 
 /// Native dialogs (rfd).
@@ -23,6 +29,18 @@ impl Dialogs for NativeDialogs {
     fn save_trace(&mut self, suggested_name: &str) -> Option<PathBuf> {
         rfd::FileDialog::new().add_filter("CSV trace", &["csv"]).set_file_name(suggested_name).save_file()
     }
+
+    fn open_session(&mut self) -> Option<PathBuf> {
+        rfd::FileDialog::new().set_title("Open a session folder").pick_folder()
+    }
+
+    fn save_session(&mut self) -> Option<PathBuf> {
+        rfd::FileDialog::new().set_title("Save the session in a folder").pick_folder()
+    }
+
+    fn save_report(&mut self) -> Option<PathBuf> {
+        rfd::FileDialog::new().add_filter("HTML report", &["html"]).set_file_name("report.html").save_file()
+    }
 }
 
 /// Answers given in advance (tests, headless runs): each call takes the next one.
@@ -30,8 +48,18 @@ impl Dialogs for NativeDialogs {
 pub struct ScriptedDialogs {
     /// Answers to [`Dialogs::open_traces`], first first.
     pub opens: Vec<Vec<PathBuf>>,
-    /// Answers to [`Dialogs::save_trace`], first first.
+    /// Answers to [`Dialogs::save_trace`] and [`Dialogs::save_report`], first first.
     pub saves: Vec<Option<PathBuf>>,
+    /// Answers to [`Dialogs::open_session`] and [`Dialogs::save_session`], first first.
+    pub folders: Vec<Option<PathBuf>>,
+}
+
+fn next<T>(answers: &mut Vec<Option<T>>) -> Option<T> {
+    if answers.is_empty() {
+        None
+    } else {
+        answers.remove(0)
+    }
 }
 
 impl Dialogs for ScriptedDialogs {
@@ -44,10 +72,18 @@ impl Dialogs for ScriptedDialogs {
     }
 
     fn save_trace(&mut self, _suggested_name: &str) -> Option<PathBuf> {
-        if self.saves.is_empty() {
-            None
-        } else {
-            self.saves.remove(0)
-        }
+        next(&mut self.saves)
+    }
+
+    fn open_session(&mut self) -> Option<PathBuf> {
+        next(&mut self.folders)
+    }
+
+    fn save_session(&mut self) -> Option<PathBuf> {
+        next(&mut self.folders)
+    }
+
+    fn save_report(&mut self) -> Option<PathBuf> {
+        next(&mut self.saves)
     }
 }

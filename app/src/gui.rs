@@ -63,6 +63,23 @@ pub struct Workbench {
     editing: Option<Settings>,
     /// The theme the visuals were last set to.
     applied_dark: Option<bool>,
+    /// An action waiting for the unsaved-changes answer.
+    pub pending: Option<Pending>,
+    /// A session folder whose autosave may be recovered (and how many traces it holds).
+    pub recovery: Option<(std::path::PathBuf, usize)>,
+    /// The window may close (nothing unsaved, or the user said so).
+    pub quit: bool,
+}
+
+/// An action that would lose unsaved changes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Pending {
+    /// Start a new session.
+    New,
+    /// Open a session folder.
+    Open(std::path::PathBuf),
+    /// Close the window.
+    Quit,
 }
 
 impl Workbench {
@@ -76,6 +93,9 @@ impl Workbench {
             inspector: Inspector::default(),
             editing: None,
             applied_dark: None,
+            pending: None,
+            recovery: None,
+            quit: false,
         })
     }
 
@@ -92,7 +112,15 @@ impl Workbench {
         egui::Panel::top("top bar").show(ui, |ui| {
             ui.horizontal(|ui| {
                 ui.heading("photorobot");
+                ui.menu_button("File", |ui| self.file_menu(ui));
                 ui.label(format!("bench: {}", self.state.worker.bench_name));
+                let name = self
+                    .state
+                    .session_dir
+                    .as_ref()
+                    .and_then(|d| d.file_name())
+                    .map_or("untitled".to_string(), |n| n.to_string_lossy().into_owned());
+                ui.label(format!("session: {name}{}", if self.state.dirty { " (unsaved)" } else { "" }));
                 ui.separator();
                 for t in Tab::ALL {
                     ui.selectable_value(&mut self.tab, t, RichText::new(t.title()).size(16.0));
@@ -128,6 +156,7 @@ impl Workbench {
             });
         });
         self.settings_window(&ctx);
+        self.prompts(&ctx);
         let mut go_to_align = false;
         egui::CentralPanel::default().show(ui, |ui| match self.tab {
             Tab::Live => views::live::ui(ui, &mut self.state),
@@ -151,7 +180,181 @@ impl Workbench {
         }
     }
 
+    fn file_menu(&mut self, ui: &mut egui::Ui) {
+        if ui.button("New session").clicked() {
+            self.request(Pending::New);
+        }
+        if ui.button("Open session… (Ctrl+O)").clicked() {
+            self.open_dialog();
+        }
+        ui.menu_button("Open recent", |ui| {
+            if self.state.settings.recent.is_empty() {
+                ui.label("none yet");
+            }
+            for r in self.state.settings.recent.clone() {
+                if ui.button(&r).clicked() {
+                    self.request(Pending::Open(r.into()));
+                }
+            }
+        });
+        if ui.button("Save (Ctrl+S)").clicked() {
+            self.save(false);
+        }
+        if ui.button("Save as…").clicked() {
+            self.save(true);
+        }
+        if ui.button("Export report…").clicked() {
+            if let Some(path) = self.state.dialogs.save_report() {
+                self.state.status = match crate::session_io::export_report(&self.state, &path) {
+                    Ok(()) => format!("report written to {}", path.display()),
+                    Err(e) => format!("report not written: {e}"),
+                };
+            }
+        }
+    }
+
+    fn open_dialog(&mut self) {
+        if let Some(dir) = self.state.dialogs.open_session() {
+            self.request(Pending::Open(dir));
+        }
+    }
+
+    /// Save in the session folder (asking for one the first time, or with `as_new`).
+    pub fn save(&mut self, as_new: bool) {
+        let untitled = self
+            .state
+            .session_dir
+            .as_ref()
+            .is_none_or(|d| d.file_name().is_some_and(|n| n.to_string_lossy().starts_with("untitled-")));
+        let dir = if as_new || untitled { self.state.dialogs.save_session() } else { self.state.session_dir.clone() };
+        if let Some(dir) = dir {
+            self.state.session_dir = Some(dir.clone());
+            self.state.save_in_background(dir, false);
+        }
+    }
+
+    /// Do `action` now, or after the unsaved-changes prompt.
+    pub fn request(&mut self, action: Pending) {
+        if self.state.dirty {
+            self.pending = Some(action);
+        } else {
+            self.perform(action);
+        }
+    }
+
+    fn perform(&mut self, action: Pending) {
+        match action {
+            Pending::New => {
+                for st in &mut self.state.steps {
+                    st.traces.clear();
+                    st.state = StepState::Pending;
+                }
+                self.state.imported.clear();
+                self.state.report = None;
+                self.state.validation = None;
+                self.state.analyses.clear();
+                self.state.extrinsics = self.state.worker.nominal.extrinsics;
+                self.state.session_dir = None;
+                self.state.dirty = false;
+                self.state.status = "new session".into();
+            }
+            Pending::Open(dir) => match crate::session_io::recoverable(&dir) {
+                Some(n) => self.recovery = Some((dir, n)),
+                None => self.open(&dir, false),
+            },
+            Pending::Quit => {
+                self.state.dirty = false;
+                self.quit = true;
+            }
+        }
+    }
+
+    fn open(&mut self, dir: &std::path::Path, recover: bool) {
+        match crate::session_io::load(dir, recover) {
+            Ok(loaded) => {
+                crate::session_io::apply(&mut self.state, loaded, dir);
+                // A recovered session is newer than what is saved: it needs a save.
+                self.state.dirty = recover;
+                self.state.status = format!("{} {}", if recover { "recovered" } else { "opened" }, dir.display());
+                self.tab = if self.state.report.is_some() { Tab::Results } else { Tab::Wizard };
+            }
+            Err(e) => self.state.status = format!("cannot open: {e}"),
+        }
+    }
+
+    fn prompts(&mut self, ctx: &egui::Context) {
+        if let Some(action) = self.pending.clone() {
+            let mut answer = None;
+            egui::Window::new("Unsaved changes").collapsible(false).resizable(false).show(ctx, |ui| {
+                ui.label("The session has measurements or results that are not saved.");
+                ui.horizontal(|ui| {
+                    if ui.button("Save").clicked() {
+                        answer = Some(0);
+                    }
+                    if ui.button("Discard").clicked() {
+                        answer = Some(1);
+                    }
+                    if ui.button("Cancel").clicked() {
+                        answer = Some(2);
+                    }
+                });
+            });
+            match answer {
+                Some(0) => {
+                    self.save(false);
+                    self.pending = None;
+                    if !self.state.dirty {
+                        self.perform(action);
+                    }
+                }
+                Some(1) => {
+                    self.pending = None;
+                    self.state.dirty = false;
+                    self.perform(action);
+                }
+                Some(_) => self.pending = None,
+                None => {}
+            }
+        }
+        if let Some((dir, n)) = self.recovery.clone() {
+            let mut answer = None;
+            egui::Window::new("Recover the autosave?").collapsible(false).resizable(false).show(ctx, |ui| {
+                ui.label(format!(
+                    "{} holds an autosave with {n} traces: the last run there did not end with a save (a crash?).",
+                    dir.display()
+                ));
+                ui.horizontal(|ui| {
+                    if ui.button("Recover the autosave").clicked() {
+                        answer = Some(true);
+                    }
+                    if ui.button("Open the saved session").clicked() {
+                        answer = Some(false);
+                    }
+                    if ui.button("Cancel").clicked() {
+                        self.recovery = None;
+                    }
+                });
+            });
+            if let Some(recover) = answer {
+                self.recovery = None;
+                self.open(&dir, recover);
+            }
+        }
+    }
+
     fn shortcuts(&mut self, ctx: &egui::Context) {
+        let (save, open) = ctx.input_mut(|i| {
+            (
+                i.consume_key(egui::Modifiers::COMMAND, egui::Key::S),
+                i.consume_key(egui::Modifiers::COMMAND, egui::Key::O),
+            )
+        });
+        if save {
+            self.save(false);
+        }
+        if open {
+            self.open_dialog();
+        }
         let typing = ctx.egui_wants_keyboard_input();
         let (f5, esc, space) = ctx.input(|i| {
             (i.key_pressed(egui::Key::F5), i.key_pressed(egui::Key::Escape), i.key_pressed(egui::Key::Space))
@@ -230,7 +433,16 @@ pub struct App {
 
 impl eframe::App for App {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        let ctx = ui.ctx().clone();
+        if ctx.input(|i| i.viewport().close_requested()) && !self.workbench.quit && self.workbench.state.dirty {
+            ctx.send_viewport_cmd(egui::ViewportCommand::CancelClose);
+            self.workbench.pending = Some(Pending::Quit);
+        }
         self.workbench.show(ui);
+        // Close once every save has finished writing.
+        if self.workbench.quit && self.workbench.state.saving == 0 {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
     }
 
     fn save(&mut self, storage: &mut dyn eframe::Storage) {

@@ -7,6 +7,7 @@ pub mod cli_emulate;
 pub mod decimate;
 pub mod dialogs;
 pub mod gui;
+pub mod session_io;
 pub mod state;
 pub mod views;
 pub mod worker;

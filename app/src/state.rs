@@ -31,11 +31,21 @@ pub struct Settings {
     pub speed: f64,
     /// Width of the scrolling live window (s).
     pub live_window_s: f64,
+    /// Recently opened or saved session folders, newest first.
+    pub recent: Vec<String>,
 }
 
 impl Default for Settings {
     fn default() -> Self {
-        Self { dark: true, preset: "table2-ideal".into(), seed: 7, joint_mode: true, speed: 0.0, live_window_s: 5.0 }
+        Self {
+            dark: true,
+            preset: "table2-ideal".into(),
+            seed: 7,
+            joint_mode: true,
+            speed: 0.0,
+            live_window_s: 5.0,
+            recent: vec![],
+        }
     }
 }
 
@@ -270,6 +280,16 @@ pub struct AppState {
     pub analyses: HashMap<usize, Result<Box<Measurement>, String>>,
     /// File dialogs (a real portal in the app, scripted in tests).
     pub dialogs: Box<dyn Dialogs>,
+    /// The session folder (`None` until saved, or autosaved as untitled).
+    pub session_dir: Option<std::path::PathBuf>,
+    /// Changes since the last save.
+    pub dirty: bool,
+    /// The technician's notes, saved with the session.
+    pub notes: String,
+    /// Saves running on other threads report here.
+    saves: (std::sync::mpsc::Sender<String>, std::sync::mpsc::Receiver<String>),
+    /// Number of saves still running.
+    pub saving: usize,
 }
 
 impl AppState {
@@ -297,6 +317,11 @@ impl AppState {
             imported: vec![],
             analyses: HashMap::new(),
             dialogs,
+            session_dir: None,
+            dirty: false,
+            notes: String::new(),
+            saves: std::sync::mpsc::channel(),
+            saving: 0,
         }
     }
 
@@ -347,11 +372,35 @@ impl AppState {
         self.worker.send(Command::Identify { traces, duration_s, mode });
     }
 
-    /// Apply every pending event of the worker.
+    /// Apply every pending event of the worker and of the saves.
     pub fn poll_worker(&mut self) {
         for e in self.worker.drain() {
             self.apply(e);
         }
+        while let Ok(msg) = self.saves.1.try_recv() {
+            self.saving -= 1;
+            self.status = msg;
+        }
+    }
+
+    /// Save the session in `dir` on another thread (`autosave`: the autosave file, else
+    /// `session.ron`); the result comes back as a status message.
+    pub fn save_in_background(&mut self, dir: std::path::PathBuf, autosave: bool) {
+        let snap = crate::session_io::snapshot(self);
+        let tx = self.saves.0.clone();
+        self.saving += 1;
+        if !autosave {
+            self.dirty = false;
+            crate::session_io::remember(self, &dir);
+        }
+        std::thread::spawn(move || {
+            let result = if autosave { snap.autosave(&dir) } else { snap.save(&dir) };
+            let what = if autosave { "autosaved" } else { "saved" };
+            let _ = tx.send(match result {
+                Ok(()) => format!("{what} {}", dir.display()),
+                Err(e) => format!("NOT {what}: {e}"),
+            });
+        });
     }
 
     /// Apply one event.
@@ -381,6 +430,10 @@ impl AppState {
                     self.status = format!("{}: {} traces recorded", step.title, step.traces.len());
                 }
                 self.running = None;
+                // Autosave after every measured step: a crash never costs a measurement.
+                self.dirty = true;
+                let dir = self.session_dir.get_or_insert_with(crate::session_io::untitled_dir).clone();
+                self.save_in_background(dir, true);
             }
             Event::Identified(r) => match r {
                 Ok(report) => {
@@ -388,6 +441,7 @@ impl AppState {
                     self.status = format!("identified from {} observations", report.observations);
                     self.report = Some(report);
                     self.validation = None;
+                    self.dirty = true;
                 }
                 Err(e) => self.identify_error = Some(e),
             },

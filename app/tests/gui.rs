@@ -138,8 +138,9 @@ fn live_view_streams_counts_fringes_and_the_gauge_says_ready() {
 fn wizard_runs_every_step_identifies_and_validates() {
     let dir = tempfile::tempdir().unwrap();
     let exported = dir.path().join("exported.csv");
-    let dialogs = ScriptedDialogs { opens: vec![], saves: vec![Some(exported.clone())] };
+    let dialogs = ScriptedDialogs { opens: vec![], saves: vec![Some(exported.clone())], folders: vec![] };
     let mut h = harness(workbench(Settings::default(), dialogs));
+    h.state_mut().state.session_dir = Some(dir.path().join("session"));
     open(&mut h, Tab::Wizard);
     h.get_by_label_contains("Strategy 1: translations");
     h.get_by_label("Identify"); // present, disabled until the steps ran
@@ -219,11 +220,69 @@ fn wizard_runs_every_step_identifies_and_validates() {
 }
 
 #[test]
+fn sessions_autosave_save_open_recover_and_export_through_the_file_menu() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (work, saved, report) = (tmp.path().join("work"), tmp.path().join("saved"), tmp.path().join("report.html"));
+    let dialogs =
+        ScriptedDialogs { opens: vec![], saves: vec![Some(report.clone())], folders: vec![Some(saved.clone())] };
+    let mut h = harness(workbench(Settings::default(), dialogs));
+    h.state_mut().state.session_dir = Some(work.clone());
+    open(&mut h, Tab::Wizard);
+    h.get_by_label("Run step 2 (F5)").click();
+    wait_until(&mut h, "strategy 2 and its autosave", Duration::from_secs(300), |w| {
+        w.state.steps[1].state == StepState::Done && w.state.saving == 0 && w.state.status.starts_with("autosaved")
+    });
+    let recorded = h.state().state.steps[1].traces.clone();
+    // Autosaved after the step: a crash now would lose nothing.
+    assert_eq!(photorobot_app::session_io::recoverable(&work), Some(recorded.len()));
+    h.get_by_label_contains("(unsaved)");
+    // Save as: the folder dialog, then session.ron there.
+    h.get_by_label("File").click();
+    h.run_steps(2);
+    h.get_by_label("Save as…").click();
+    wait_until(&mut h, "the save", Duration::from_secs(60), |w| w.state.saving == 0);
+    assert!(saved.join("session.ron").is_file(), "{}", h.state().state.status);
+    assert!(h.query_by_label_contains("(unsaved)").is_none());
+    assert_eq!(h.state().state.settings.recent[0], saved.display().to_string());
+    // Export the report.
+    h.get_by_label("File").click();
+    h.run_steps(2);
+    h.get_by_label("Export report…").click();
+    h.run_steps(2);
+    let html = std::fs::read_to_string(&report).expect("the report is written");
+    assert!(html.contains("<html") && html.contains("virtual bench table2-ideal"), "{}", &html[..html.len().min(300)]);
+    // New (nothing unsaved: no prompt), then open the saved folder again: the same traces.
+    h.state_mut().request(photorobot_app::gui::Pending::New);
+    h.run_steps(2);
+    assert!(h.state().state.steps[1].traces.is_empty());
+    h.state_mut().request(photorobot_app::gui::Pending::Open(saved.clone()));
+    h.run_steps(2);
+    assert_eq!(h.state().state.steps[1].state, StepState::Done);
+    assert_eq!(h.state().state.steps[1].traces, recorded);
+    // The work folder has only an autosave: opening it offers recovery.
+    h.state_mut().request(photorobot_app::gui::Pending::Open(work.clone()));
+    h.run_steps(2);
+    h.get_by_label_contains("holds an autosave with");
+    h.get_by_label("Recover the autosave").click();
+    h.run_steps(2);
+    assert_eq!(h.state().state.steps[1].traces, recorded);
+    assert!(h.state().state.dirty, "a recovered session still needs a save");
+    // Unsaved changes: New asks first; Discard goes ahead.
+    h.state_mut().request(photorobot_app::gui::Pending::New);
+    h.run_steps(2);
+    h.get_by_label_contains("not saved");
+    h.get_by_label("Discard").click();
+    h.run_steps(2);
+    assert!(h.state().state.steps[1].traces.is_empty() && !h.state().state.dirty);
+}
+
+#[test]
 fn cancelling_a_step_keeps_what_was_recorded_and_imports_go_through_the_dialog() {
     let dir = tempfile::tempdir().unwrap();
     // Real time: the step is still running when Esc arrives.
     let settings = Settings { speed: 1.0, ..Settings::default() };
     let mut h = harness(workbench(settings, ScriptedDialogs::default()));
+    h.state_mut().state.session_dir = Some(dir.path().join("session"));
     open(&mut h, Tab::Wizard);
     h.get_by_label("Run step 1 (F5)").click();
     wait_until(&mut h, "the first recorded samples", Duration::from_secs(60), |w| w.state.live.trace.len() > 500);
@@ -238,7 +297,7 @@ fn cancelling_a_step_keeps_what_was_recorded_and_imports_go_through_the_dialog()
     // Import: the trace recorded so far, written to a file and opened through the dialog.
     let path = dir.path().join("partial.csv");
     step.traces[0].write_csv(&path).unwrap();
-    h.state_mut().state.dialogs = Box::new(ScriptedDialogs { opens: vec![vec![path.clone()]], saves: vec![] });
+    h.state_mut().state.dialogs = Box::new(ScriptedDialogs { opens: vec![vec![path.clone()]], ..Default::default() });
     open(&mut h, Tab::Traces);
     h.get_by_label("Import CSV traces…").click();
     h.run_steps(2);
@@ -247,7 +306,7 @@ fn cancelling_a_step_keeps_what_was_recorded_and_imports_go_through_the_dialog()
     // A bad file is refused with a message naming it; nothing is added.
     let bad = dir.path().join("bad.csv");
     std::fs::write(&bad, "t_s,q1_um\n0,1\n").unwrap();
-    h.state_mut().state.dialogs = Box::new(ScriptedDialogs { opens: vec![vec![bad.clone()]], saves: vec![] });
+    h.state_mut().state.dialogs = Box::new(ScriptedDialogs { opens: vec![vec![bad.clone()]], ..Default::default() });
     h.get_by_label("Import CSV traces…").click();
     h.run_steps(2);
     assert_eq!(h.state().state.imported.len(), 1);
