@@ -2,6 +2,7 @@
 //! Data flows one way: plan -> bench -> trace -> measurements -> estimates -> validation, diagnosis, reports.
 
 pub mod bench;
+pub mod diagnose;
 pub mod files;
 pub mod fringes;
 pub mod hardware;
