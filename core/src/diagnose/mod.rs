@@ -647,12 +647,21 @@ impl Diagnosis {
             return self.do_finish();
         };
         let f = self.fit.clone().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
-        let ambiguous_idx = scoring::ambiguity_set(best, &self.projected);
+        let mut ambiguous_idx = scoring::ambiguity_set(best, &self.projected);
         if let Some(r) = runner {
             if self.separate(best, &ambiguous_idx, r)? {
                 return Ok(());
             }
         }
+        // Among candidates the data cannot tell apart with nearly equal evidence, the one that
+        // needs the least of its typical size is named (the others stay in the ambiguity set).
+        let plausible = |k: usize| (self.scores[k].estimate / self.candidates[k].typical).abs();
+        let f_best = self.scores[best].score;
+        let best = std::iter::once(best)
+            .chain(ambiguous_idx.iter().copied().filter(|&k| self.scores[k].significant && self.scores[k].score >= 0.9 * f_best))
+            .min_by(|&a, &b| plausible(a).total_cmp(&plausible(b)))
+            .unwrap_or(best);
+        ambiguous_idx = scoring::ambiguity_set(best, &self.projected);
         let sc = self.scores[best].clone();
         let ambiguous: Vec<String> = ambiguous_idx.into_iter().map(|k| self.candidates[k].name.clone()).collect();
         let mut start = f.state.clone();
