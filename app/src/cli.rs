@@ -40,6 +40,8 @@ pub enum Command {
     Fringes(FringesArgs),
     /// Measure, identify and validate end to end on a bench; write the session.
     Calibrate(crate::cli_calibrate::CalibrateArgs),
+    /// Find where model and data disagree on a calibration session, name the missing effect, add it.
+    Diagnose(crate::cli_diagnose::DiagnoseArgs),
     /// Start the workbench GUI (the default when no command is given).
     Gui,
     /// Serve a stage-controller protocol emulator (PI E-712 or SmarAct MCS) on 127.0.0.1.
@@ -180,6 +182,7 @@ where
         Some(Command::Simulate(a)) => simulate(&a, out).map(|()| Outcome::Done),
         Some(Command::Fringes(a)) => fringes(&a, out).map(|()| Outcome::Done),
         Some(Command::Calibrate(a)) => crate::cli_calibrate::calibrate(&a, out).map(|()| Outcome::Done),
+        Some(Command::Diagnose(a)) => crate::cli_diagnose::diagnose(&a, out).map(|()| Outcome::Done),
         Some(Command::Emulate(a)) => crate::cli_emulate::emulate(&a, out).map(|()| Outcome::Done),
     }
 }

@@ -3,5 +3,6 @@
 
 pub mod cli;
 pub mod cli_calibrate;
+pub mod cli_diagnose;
 pub mod cli_emulate;
 pub mod gui;

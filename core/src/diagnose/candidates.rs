@@ -98,7 +98,13 @@ pub fn library(robot: &RobotDescription) -> Vec<Candidate> {
                 out.push(c(format!("joint scale error {j}"), "ppm", 800.0, 10.0, CandidateKind::JointScale(j.clone())))
             }
             JointType::Revolute => {
-                out.push(c(format!("joint zero offset {j}"), "°", 0.05, 0.001, CandidateKind::JointZeroOffset(j.clone())));
+                out.push(c(
+                    format!("joint zero offset {j}"),
+                    "°",
+                    0.05,
+                    0.001,
+                    CandidateKind::JointZeroOffset(j.clone()),
+                ));
                 for (a, axis) in AXES.iter().enumerate() {
                     out.push(c(
                         format!("pivot offset {j} along {axis}"),
@@ -111,7 +117,13 @@ pub fn library(robot: &RobotDescription) -> Vec<Candidate> {
             }
         }
         for (k, toward) in ["x", "y"].iter().enumerate() {
-            out.push(c(format!("axis tilt {j} toward link {toward}"), "mrad", 0.6, 0.01, CandidateKind::AxisTilt(j.clone(), k)));
+            out.push(c(
+                format!("axis tilt {j} toward link {toward}"),
+                "mrad",
+                0.6,
+                0.01,
+                CandidateKind::AxisTilt(j.clone(), k),
+            ));
         }
     }
     out
@@ -133,7 +145,14 @@ mod tests {
             assert_eq!(e.gap_change_nm(100.0, 900.0), 0.0);
         }
         let names: Vec<&str> = cands.iter().map(|c| c.effect(1.0).name()).collect();
-        for n in ["thermal drift", "optical path scale", "joint scale error", "joint zero offset", "pivot offset", "axis tilt"] {
+        for n in [
+            "thermal drift",
+            "optical path scale",
+            "joint scale error",
+            "joint zero offset",
+            "pivot offset",
+            "axis tilt",
+        ] {
             assert!(names.contains(&n), "{n} missing");
         }
     }

@@ -278,7 +278,8 @@ pub fn fit(
     let groups = gain_groups(obs);
     let mut template = start.clone();
     template.gains.resize(groups, 1.0);
-    let layout = Layout { free: (0..N_EXTRINSICS).filter(|&i| free[i]).collect(), effects: start.effects.len(), gains: groups };
+    let layout =
+        Layout { free: (0..N_EXTRINSICS).filter(|&i| free[i]).collect(), effects: start.effects.len(), gains: groups };
     let mut x = layout.pack(&template);
     let mut r = p.whitened_residuals(&template, obs)?;
     let mut cost = r.norm_squared();

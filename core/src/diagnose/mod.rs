@@ -42,6 +42,17 @@ pub const NOISE_FLOOR_FACTOR: f64 = 1.5;
 pub const DETECTABLE_SCORE: f64 = 25.0;
 /// Absorbed share from which a candidate counts as equivalent to an extrinsic change.
 pub const EQUIVALENT_SHARE: f64 = 0.999;
+/// How the diagnosis turns traces into observations: σ floors at SPEC section 9's noise (dL
+/// 2 nm, absolute gaps 20 nm), what a bench reaches beyond the fringe analysis' own σ (stage
+/// noise, sweep-model limits); the identifier's floors are tighter.
+pub const EXTRACT_OPTIONS: crate::identify::measurements::ExtractOptions =
+    crate::identify::measurements::ExtractOptions {
+        points_per_motion: 4,
+        sigma_floor_nm: 2.0,
+        gap_sigma_floor_um: 0.02,
+    };
+/// Label prefix of the discriminating motions ([`motions::pool`]).
+pub const DISCRIMINATING_PREFIX: &str = "D ";
 /// At most this many effects are added.
 pub const MAX_EFFECTS: usize = 4;
 
@@ -188,7 +199,10 @@ impl Step {
                     "{fitted} observations fitted, {held_out} held out; residual rms {rms_sigma:.2}× the noise ({rms_nm:.2} nm on gap changes)"
                 );
                 for g in worst.iter().take(4) {
-                    s += &format!("\n  worst {} `{}`: rms {:.2}σ, mean {:+.2}σ (n = {})", g.by, g.key, g.rms_sigma, g.mean_sigma, g.count);
+                    s += &format!(
+                        "\n  worst {} `{}`: rms {:.2}σ, mean {:+.2}σ (n = {})",
+                        g.by, g.key, g.rms_sigma, g.mean_sigma, g.count
+                    );
                 }
                 if !invisible.is_empty() {
                     s += &format!("\n  no motion can see: {}", invisible.join(", "));
@@ -213,10 +227,15 @@ impl Step {
                 s.trim_end().to_string()
             }
             Step::Designed { needy, motions, ran_on, added_observations, rms_sigma } => {
-                let mut s = format!("candidates the data cannot see at typical size: {}", if needy.is_empty() { "none".into() } else { needy.join(", ") });
+                let mut s = format!(
+                    "candidates the data cannot see at typical size: {}",
+                    if needy.is_empty() { "none".into() } else { needy.join(", ") }
+                );
                 s += &format!("\nmotions chosen ({}): {}", motions.len(), motions.join("; "));
                 match ran_on {
-                    Some(b) => s += &format!("\nran on {b}: {added_observations} observations added; baseline refitted, rms {rms_sigma:.2}σ"),
+                    Some(b) => s += &format!(
+                        "\nran on {b}: {added_observations} observations added; baseline refitted, rms {rms_sigma:.2}σ"
+                    ),
                     None => s += "\nno bench to run them: they are proposed, not run",
                 }
                 s
@@ -243,7 +262,9 @@ impl Step {
             Step::Finished { verdict } => match verdict {
                 Verdict::Named => "named: the effects above bring the residual to the noise floor".into(),
                 Verdict::None => "no significant missing effect".into(),
-                Verdict::Unexplained => "unexplained structure remains: no candidate of the library explains the residual".into(),
+                Verdict::Unexplained => {
+                    "unexplained structure remains: no candidate of the library explains the residual".into()
+                }
             },
         }
     }
@@ -291,6 +312,7 @@ pub struct Diagnosis {
     need_motions: Vec<String>,
     equivalent: Vec<String>,
     separated: Vec<String>,
+    session_traces: Vec<crate::trace::Trace>,
     stage: Stage,
     /// The steps done so far.
     pub steps: Vec<Step>,
@@ -312,10 +334,14 @@ fn obs_rms_nm(obs: &[Observation], r: &DVector<f64>) -> f64 {
 }
 
 fn held_out_mask(obs: &[Observation]) -> Vec<bool> {
-    // Every fifth gap-change motion (by label, in order of appearance) is held out.
+    // Every fifth recorded gap-change motion (by label, in order of appearance) is held out;
+    // discriminating motions (labels "D …") never are.
     let mut labels: Vec<&str> = Vec::new();
     for o in obs {
-        if matches!(o.kind, ObservationKind::GapChange { .. }) && !labels.contains(&o.label.as_str()) {
+        if matches!(o.kind, ObservationKind::GapChange { .. })
+            && !o.label.starts_with(DISCRIMINATING_PREFIX)
+            && !labels.contains(&o.label.as_str())
+        {
             labels.push(&o.label);
         }
     }
@@ -330,9 +356,15 @@ fn held_out_mask(obs: &[Observation]) -> Vec<bool> {
 impl Diagnosis {
     /// A diagnosis of `observations` on the nominal model `base` (robot, optics, air), starting
     /// from the calibrated `extrinsics`, with the library's candidates for the robot.
-    pub fn new(base: &PhaseModel, observations: Vec<Observation>, extrinsics: Extrinsics) -> Result<Self, DiagnoseError> {
-        let observations: Vec<Observation> =
-            observations.into_iter().filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0).collect();
+    pub fn new(
+        base: &PhaseModel,
+        observations: Vec<Observation>,
+        extrinsics: Extrinsics,
+    ) -> Result<Self, DiagnoseError> {
+        let observations: Vec<Observation> = observations
+            .into_iter()
+            .filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0)
+            .collect();
         if observations.len() < 20 {
             return Err(DiagnoseError::TooFewObservations(observations.len()));
         }
@@ -355,10 +387,32 @@ impl Diagnosis {
             need_motions: Vec::new(),
             equivalent: Vec::new(),
             separated: Vec::new(),
+            session_traces: Vec::new(),
             stage: Stage::Baseline,
             steps: Vec::new(),
             result: None,
         })
+    }
+
+    /// A diagnosis of recorded traces: observations extracted with the calibrated model (the
+    /// fringe analysis' motion hint), then [`Diagnosis::new`]. Traces that cannot be analysed
+    /// are returned with why.
+    pub fn from_traces(
+        base: &PhaseModel,
+        traces: &[crate::trace::Trace],
+        extrinsics: Extrinsics,
+    ) -> Result<(Self, Vec<(String, String)>), DiagnoseError> {
+        use crate::identify::measurements::observations_from_traces;
+        let model = PhaseModel { extrinsics, ..base.clone() };
+        let extracted = observations_from_traces(traces, &model, &EXTRACT_OPTIONS);
+        let mut d = Self::new(base, extracted.observations, extrinsics)?;
+        d.session_traces = traces.to_vec();
+        Ok((d, extracted.skipped))
+    }
+
+    /// The end of the recorded observations in bench time (s).
+    pub fn end_time_s(&self) -> f64 {
+        self.observations.iter().map(|o| o.time_s[1]).fold(0.0, f64::max)
     }
 
     /// The result, once the last step has run.
@@ -372,7 +426,10 @@ impl Diagnosis {
     }
 
     /// Run every step.
-    pub fn run<'r>(mut self, mut runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(DiagnosisResult, Vec<Step>), DiagnoseError> {
+    pub fn run<'r>(
+        mut self,
+        mut runner: Option<&mut (dyn MotionRunner + 'r)>,
+    ) -> Result<(DiagnosisResult, Vec<Step>), DiagnoseError> {
         while self.step(runner.as_deref_mut())?.is_some() {}
         let result = self.result.clone().ok_or_else(|| DiagnoseError::Model("no result".into()))?;
         Ok((result, self.steps))
@@ -387,7 +444,8 @@ impl Diagnosis {
     }
 
     fn refit(&self, start: &ModelState) -> Result<Fit, DiagnoseError> {
-        fit::fit(&self.predictor, &self.fit_set(), start, &[true; N_EXTRINSICS]).map_err(|e| DiagnoseError::Model(e.to_string()))
+        fit::fit(&self.predictor, &self.fit_set(), start, &[true; N_EXTRINSICS])
+            .map_err(|e| DiagnoseError::Model(e.to_string()))
     }
 
     fn held_rms(&self, state: &ModelState) -> Result<f64, DiagnoseError> {
@@ -566,7 +624,8 @@ impl Diagnosis {
             .collect();
         let needy_motion: Vec<Vec<f64>> = per_motion.iter().map(|m| needy.iter().map(|&c| m[c]).collect()).collect();
         let have: Vec<f64> = needy.iter().map(|&c| self.scores[c].detectability_at_typical).collect();
-        let motions: Vec<DesignedMotion> = Self::choose(&needy_motion, &have).into_iter().map(|m| pool[m].clone()).collect();
+        let motions: Vec<DesignedMotion> =
+            Self::choose(&needy_motion, &have).into_iter().map(|m| pool[m].clone()).collect();
         let needy_names: Vec<String> = needy
             .iter()
             .filter(|&&c| !self.equivalent.contains(&self.candidates[c].name))
@@ -638,7 +697,41 @@ impl Diagnosis {
         Ok(true)
     }
 
-    fn do_name<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
+    /// Analyse the traces again with the current model (effects included in the motion hint of
+    /// the fringe analysis), then refit and rescore. Nothing to do without traces.
+    fn reanalyse<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
+        let Some(f) = self.fit.clone() else { return Ok(()) };
+        let robot =
+            crate::model::effects::apply_all(&f.state.library_effects(), self.predictor.base().chain.description())
+                .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let analysis = PhaseModel {
+            chain: crate::model::kinematics::Chain::new(robot),
+            extrinsics: f.state.extrinsics,
+            ..self.predictor.base().clone()
+        };
+        let again = runner.and_then(|r| r.reanalyse(&analysis));
+        if self.session_traces.is_empty() && again.is_none() {
+            return Ok(());
+        }
+        let (recorded, designed): (Vec<Observation>, Vec<Observation>) =
+            self.observations.drain(..).partition(|o| !o.label.starts_with(DISCRIMINATING_PREFIX));
+        let mut obs = if self.session_traces.is_empty() {
+            recorded
+        } else {
+            use crate::identify::measurements::observations_from_traces;
+            observations_from_traces(&self.session_traces, &analysis, &EXTRACT_OPTIONS).observations
+        };
+        obs.extend(again.unwrap_or(designed));
+        obs.retain(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0);
+        self.predictor.extend(&obs).map_err(DiagnoseError::Model)?;
+        self.held_out = held_out_mask(&obs);
+        self.observations = obs;
+        let nf = self.refit(&f.state)?;
+        self.fit = Some(nf);
+        self.rescore()
+    }
+
+    fn do_name<'r>(&mut self, mut runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
         let best = (0..self.scores.len())
             .filter(|&k| self.scores[k].significant)
             .max_by(|&a, &b| self.scores[a].score.total_cmp(&self.scores[b].score));
@@ -648,7 +741,7 @@ impl Diagnosis {
         };
         let f = self.fit.clone().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
         let mut ambiguous_idx = scoring::ambiguity_set(best, &self.projected);
-        if let Some(r) = runner {
+        if let Some(r) = runner.as_deref_mut() {
             if self.separate(best, &ambiguous_idx, r)? {
                 return Ok(());
             }
@@ -658,7 +751,12 @@ impl Diagnosis {
         let plausible = |k: usize| (self.scores[k].estimate / self.candidates[k].typical).abs();
         let f_best = self.scores[best].score;
         let best = std::iter::once(best)
-            .chain(ambiguous_idx.iter().copied().filter(|&k| self.scores[k].significant && self.scores[k].score >= 0.9 * f_best))
+            .chain(
+                ambiguous_idx
+                    .iter()
+                    .copied()
+                    .filter(|&k| self.scores[k].significant && self.scores[k].score >= 0.9 * f_best),
+            )
             .min_by(|&a, &b| plausible(a).total_cmp(&plausible(b)))
             .unwrap_or(best);
         ambiguous_idx = scoring::ambiguity_set(best, &self.projected);
@@ -682,14 +780,21 @@ impl Diagnosis {
             absorbed_share: sc.absorbed_share,
             ambiguous_with: ambiguous,
         };
-        self.steps.push(Step::Added { effect: effect.clone(), rms_sigma: [f.rms(), nf.rms()], held_out_rms_sigma: held, confirmed });
+        self.steps.push(Step::Added {
+            effect: effect.clone(),
+            rms_sigma: [f.rms(), nf.rms()],
+            held_out_rms_sigma: held,
+            confirmed,
+        });
         if confirmed {
             self.added.push(effect);
             self.fit = Some(nf);
+            self.rescore()?;
+            self.reanalyse(runner)?;
         } else {
             self.excluded.push(best);
+            self.rescore()?;
         }
-        self.rescore()?;
         // Refresh the estimates and σ of every added effect from the latest fit.
         if let Some(f) = &self.fit {
             for (k, (c, v)) in f.state.effects.iter().enumerate() {

@@ -170,7 +170,11 @@ pub fn pool() -> Vec<DesignedMotion> {
         out.push(mv(format!("D {name} -150 -> +150 µm (reversal, out)"), a, b));
         out.push(mv(format!("D {name} +150 -> -150 µm (reversal, back)"), b, a));
     }
-    out.push(mv("D q2 -100 -> +100 µm".into(), pose(0.0, -100.0, 0.0, 0.0, 0.0, 0.0), pose(0.0, 100.0, 0.0, 0.0, 0.0, 0.0)));
+    out.push(mv(
+        "D q2 -100 -> +100 µm".into(),
+        pose(0.0, -100.0, 0.0, 0.0, 0.0, 0.0),
+        pose(0.0, 100.0, 0.0, 0.0, 0.0, 0.0),
+    ));
     out.push(DesignedMotion {
         label: "D return to q = 0 after 30 s".into(),
         kind: MotionKind::Dwell { at_display: [0.0; 6], duration_s: 30.0 },
@@ -185,6 +189,11 @@ pub trait MotionRunner {
     /// Run the motions and return their observations; `analysis` is the current model (the
     /// fringe analysis needs its motion hint).
     fn run(&mut self, motions: &[DesignedMotion], analysis: &PhaseModel) -> Result<Vec<Observation>, String>;
+    /// The observations of everything run so far, analysed again with a better model (the
+    /// fringe analysis follows the model's motion hint); `None` when the runner keeps no traces.
+    fn reanalyse(&self, _analysis: &PhaseModel) -> Option<Vec<Observation>> {
+        None
+    }
 }
 
 /// A hidden perturbation outside the effect library, added to the simulated value of an
@@ -207,7 +216,10 @@ pub struct SimulatedBench {
 impl SimulatedBench {
     /// A simulated bench on the nominal model `base` with the hidden `truth` and `effects`.
     pub fn new(base: &PhaseModel, truth: Extrinsics, effects: Vec<Effect>, seed: u64) -> Result<Self, String> {
-        let probe = templates(&[DesignedMotion { label: String::new(), kind: MotionKind::Sweep { at_display: [0.0; 6] } }], 0.0);
+        let probe = templates(
+            &[DesignedMotion { label: String::new(), kind: MotionKind::Sweep { at_display: [0.0; 6] } }],
+            0.0,
+        );
         Ok(Self {
             predictor: Predictor::new(base, &probe)?,
             truth,
@@ -272,17 +284,45 @@ impl MotionRunner for SimulatedBench {
 pub fn paper_calibration() -> Vec<Observation> {
     let mut motions = Vec::new();
     for lateral in [-150.0, 0.0, 150.0] {
-        motions.push(mv(format!("S1 X at q1 = {lateral}"), pose(lateral, 0.0, -150.0, 0.0, 0.0, 0.0), pose(lateral, 10.0, 150.0, 0.0, 0.0, 0.0)));
-        motions.push(mv(format!("S1 Z at q3 = {lateral}"), pose(-150.0, -10.0, lateral, 0.0, 0.0, 0.0), pose(150.0, 10.0, lateral, 0.0, 0.0, 0.0)));
-        motions.push(mv(format!("S1 XZ at q2 = {lateral}"), pose(-150.0, lateral / 15.0, -150.0, 0.0, 0.0, 0.0), pose(150.0, lateral / 15.0, 150.0, 0.0, 0.0, 0.0)));
+        motions.push(mv(
+            format!("S1 X at q1 = {lateral}"),
+            pose(lateral, 0.0, -150.0, 0.0, 0.0, 0.0),
+            pose(lateral, 10.0, 150.0, 0.0, 0.0, 0.0),
+        ));
+        motions.push(mv(
+            format!("S1 Z at q3 = {lateral}"),
+            pose(-150.0, -10.0, lateral, 0.0, 0.0, 0.0),
+            pose(150.0, 10.0, lateral, 0.0, 0.0, 0.0),
+        ));
+        motions.push(mv(
+            format!("S1 XZ at q2 = {lateral}"),
+            pose(-150.0, lateral / 15.0, -150.0, 0.0, 0.0, 0.0),
+            pose(150.0, lateral / 15.0, 150.0, 0.0, 0.0, 0.0),
+        ));
     }
     for v in [-4.0, -2.0, 0.0, 2.0, 4.0] {
-        motions.push(mv(format!("S2 q4 at q5 = {v}"), pose(0.0, 0.0, 0.0, -4.0, v, 0.0), pose(0.0, 0.0, 0.0, 4.0, v, 0.0)));
-        motions.push(mv(format!("S2 q5 at q4 = {v}"), pose(0.0, 0.0, 0.0, v, -4.0, 0.0), pose(0.0, 0.0, 0.0, v, 4.0, 0.0)));
+        motions.push(mv(
+            format!("S2 q4 at q5 = {v}"),
+            pose(0.0, 0.0, 0.0, -4.0, v, 0.0),
+            pose(0.0, 0.0, 0.0, 4.0, v, 0.0),
+        ));
+        motions.push(mv(
+            format!("S2 q5 at q4 = {v}"),
+            pose(0.0, 0.0, 0.0, v, -4.0, 0.0),
+            pose(0.0, 0.0, 0.0, v, 4.0, 0.0),
+        ));
     }
     for q2 in [-100.0, 100.0] {
-        motions.push(mv(format!("R q4 at q2 = {q2}"), pose(0.0, q2, 0.0, -4.0, 0.0, 0.0), pose(0.0, q2, 0.0, 4.0, 0.0, 0.0)));
-        motions.push(mv(format!("R q5 at q2 = {q2}"), pose(0.0, q2, 0.0, 0.0, -4.0, 0.0), pose(0.0, q2, 0.0, 0.0, 4.0, 0.0)));
+        motions.push(mv(
+            format!("R q4 at q2 = {q2}"),
+            pose(0.0, q2, 0.0, -4.0, 0.0, 0.0),
+            pose(0.0, q2, 0.0, 4.0, 0.0, 0.0),
+        ));
+        motions.push(mv(
+            format!("R q5 at q2 = {q2}"),
+            pose(0.0, q2, 0.0, 0.0, -4.0, 0.0),
+            pose(0.0, q2, 0.0, 0.0, 4.0, 0.0),
+        ));
     }
     for (k, at) in [
         pose(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
@@ -320,6 +360,26 @@ pub struct BenchRunner<'a> {
     pub bench: &'a mut dyn Bench,
     /// How traces become observations.
     pub options: ExtractOptions,
+    /// Added to the bench times of the observations (s): a bench started afresh after the
+    /// recorded session puts its motions after the session's.
+    pub time_offset_s: f64,
+    /// The traces run so far.
+    pub traces: Vec<crate::trace::Trace>,
+}
+
+impl<'a> BenchRunner<'a> {
+    /// A runner on `bench` whose observations come after bench time `time_offset_s`.
+    pub fn new(bench: &'a mut dyn Bench, time_offset_s: f64) -> Self {
+        Self { bench, options: crate::diagnose::EXTRACT_OPTIONS, time_offset_s, traces: Vec::new() }
+    }
+
+    fn extract(&self, traces: &[crate::trace::Trace], analysis: &PhaseModel) -> Vec<Observation> {
+        let mut obs = observations_from_traces(traces, analysis, &self.options).observations;
+        for o in &mut obs {
+            o.time_s = [o.time_s[0] + self.time_offset_s, o.time_s[1] + self.time_offset_s];
+        }
+        obs
+    }
 }
 
 /// The plan that runs motions: an unrecorded setup move to each start, then the recorded motion.
@@ -356,7 +416,12 @@ impl MotionRunner for BenchRunner<'_> {
         let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
         let run = run_plan(self.bench, &plan_of(motions), &mut control);
         run.outcome.map_err(|e| format!("discriminating motions on {}: {e}", self.bench.name()))?;
-        let extracted = observations_from_traces(&run.traces, analysis, &self.options);
-        Ok(extracted.observations)
+        let obs = self.extract(&run.traces, analysis);
+        self.traces.extend(run.traces);
+        Ok(obs)
+    }
+
+    fn reanalyse(&self, analysis: &PhaseModel) -> Option<Vec<Observation>> {
+        Some(self.extract(&self.traces, analysis))
     }
 }

@@ -64,7 +64,9 @@ pub fn localise(obs: &[Observation], r: &DVector<f64>) -> Vec<ResidualGroup> {
         keys.push(("motion".to_string(), o.label.clone(), ri));
         let kind = match (&o.kind, moved(o)) {
             (ObservationKind::GapChange { .. }, Some(m)) if m.is_empty() => "none (dwell)".to_string(),
-            (ObservationKind::GapChange { .. }, Some(m)) => m.iter().map(|(j, _)| names[*j]).collect::<Vec<_>>().join("+"),
+            (ObservationKind::GapChange { .. }, Some(m)) => {
+                m.iter().map(|(j, _)| names[*j]).collect::<Vec<_>>().join("+")
+            }
             (ObservationKind::AbsoluteGap { .. }, _) => "absolute gaps".to_string(),
             _ => "fringe amplitudes".to_string(),
         };

@@ -41,7 +41,9 @@ fn name_of(e: &Effect) -> String {
         }
         Effect::JointZeroOffset { joint, .. } => format!("joint zero offset {joint}"),
         Effect::JointScale { joint, .. } => format!("joint scale error {joint}"),
-        Effect::AxisTilt { joint, tilt_mrad } => format!("axis tilt {joint} toward link {}", if tilt_mrad[0] != 0.0 { "x" } else { "y" }),
+        Effect::AxisTilt { joint, tilt_mrad } => {
+            format!("axis tilt {joint} toward link {}", if tilt_mrad[0] != 0.0 { "x" } else { "y" })
+        }
         Effect::ThermalDrift { .. } => "thermal drift rate".into(),
         Effect::PathScale { .. } => "optical path scale".into(),
     }
@@ -83,7 +85,11 @@ fn check_named(e: &Effect, r: &DiagnosisResult, first: Option<String>) {
     let z = if named.name == want {
         (named.estimate - size_of(e)) / sigma
     } else {
-        assert!(named.ambiguous_with.contains(&want), "{e:?}: named {} without {want} in its ambiguity set", named.name);
+        assert!(
+            named.ambiguous_with.contains(&want),
+            "{e:?}: named {} without {want} in its ambiguity set",
+            named.name
+        );
         (named.estimate.abs() - size_of(e).abs()) / sigma
     };
     eprintln!(
@@ -131,7 +137,11 @@ fn two_hidden_effects_are_both_found() {
     let (r, steps) = diagnose(hidden.clone(), 7, true);
     assert_eq!(r.verdict, Verdict::Named, "{steps:#?}");
     for e in &hidden {
-        let n = r.effects.iter().find(|n| n.name == name_of(e)).unwrap_or_else(|| panic!("{e:?} not found: {:?}", r.effects));
+        let n = r
+            .effects
+            .iter()
+            .find(|n| n.name == name_of(e))
+            .unwrap_or_else(|| panic!("{e:?} not found: {:?}", r.effects));
         assert!((n.estimate - size_of(e)).abs() <= 3.0 * n.sigma.unwrap(), "{n:?}");
     }
     assert!(r.residual_rms_after_sigma <= NOISE_FLOOR_FACTOR);
@@ -158,13 +168,13 @@ fn an_effect_outside_the_library_is_unexplained_not_misnamed() {
     // in the stage position, which no library effect (all linear in the joints) produces.
     let bow = |q: &[f64; 6]| 30.0 * (q[2] / 150.0).powi(2);
     let b = base();
-    let mut bench = SimulatedBench::new(&b, Extrinsics::table2(), vec![], 3)
-        .unwrap()
-        .with_perturbation(Box::new(move |o: &Observation| match &o.kind {
+    let mut bench = SimulatedBench::new(&b, Extrinsics::table2(), vec![], 3).unwrap().with_perturbation(Box::new(
+        move |o: &Observation| match &o.kind {
             ObservationKind::GapChange { from_display, to_display, .. } => bow(to_display) - bow(from_display),
             ObservationKind::AbsoluteGap { at_display, .. } => bow(at_display) * 1e-3,
             ObservationKind::FringeAmplitude { .. } => 0.0,
-        }));
+        },
+    ));
     let obs = bench.simulate(&paper_calibration()).unwrap();
     let (r, steps) = Diagnosis::new(&b, obs, Extrinsics::table2()).unwrap().run(Some(&mut bench)).unwrap();
     assert_eq!(r.verdict, Verdict::Unexplained, "{steps:#?}");
@@ -183,7 +193,11 @@ fn joint6_zero_offset_is_equivalent_to_an_extrinsic_change() {
     let (r, steps) = diagnose(vec![hidden], 11, true);
     assert_eq!(r.verdict, Verdict::None, "{steps:#?}");
     assert!(r.effects.is_empty() && r.partial.is_empty());
-    assert!(r.equivalent_to_extrinsics.contains(&"joint zero offset q6".to_string()), "{:?}", r.equivalent_to_extrinsics);
+    assert!(
+        r.equivalent_to_extrinsics.contains(&"joint zero offset q6".to_string()),
+        "{:?}",
+        r.equivalent_to_extrinsics
+    );
     // Oracle: the fitted tool frame's normal is the true one turned by 0.1° about the end
     // effector's z axis.
     let fitted = r.extrinsics.ee_to_tool().rotation * nalgebra::Vector3::z();
@@ -203,7 +217,9 @@ fn joint5_pivot_offset_along_x_is_absorbed_by_the_calibration_and_seen_by_optica
     let dx = r.extrinsics.x_wf_um - Extrinsics::table2().x_wf_um;
     assert!((dx.abs() - 20.0).abs() < 0.5, "x_wf carries the offset: moved by {dx} µm");
     let (r, steps) = diagnose(vec![hidden.clone()], 11, true);
-    assert!(steps.iter().any(|s| matches!(s, Step::Designed { motions, .. } if motions.iter().any(|m| m.contains("q6")))));
+    assert!(steps
+        .iter()
+        .any(|s| matches!(s, Step::Designed { motions, .. } if motions.iter().any(|m| m.contains("q6")))));
     check_named(&hidden, &r, first_added(&steps));
 }
 

@@ -190,8 +190,7 @@ pub fn predict_with_path(
         }
         ObservationKind::AbsoluteGap { at_display, .. } => cavity(at_display)
             .map_or(f64::NAN, |c| optical_gap_um(c.length_um, t_mid) * (1.0 - c.tilt_rad * c.tilt_rad / 2.0)),
-        ObservationKind::FringeAmplitude { at_display, .. } => cavity(at_display).map_or(f64::NAN, |c| {
-            gain * half_peak_to_peak_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)
-        }),
+        ObservationKind::FringeAmplitude { at_display, .. } => cavity(at_display)
+            .map_or(f64::NAN, |c| gain * half_peak_to_peak_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)),
     }
 }
