@@ -140,7 +140,8 @@ mod tests {
         assert_eq!(cands.len(), 30);
         for c in &cands {
             let e = c.effect(0.0);
-            let r = crate::model::effects::apply_all(&[e.clone()], &RobotDescription::femto_6dof()).unwrap();
+            let r =
+                crate::model::effects::apply_all(std::slice::from_ref(&e), &RobotDescription::femto_6dof()).unwrap();
             assert_eq!(r, RobotDescription::femto_6dof(), "{} not neutral at zero", c.name);
             assert_eq!(e.gap_change_nm(100.0, 900.0), 0.0);
         }

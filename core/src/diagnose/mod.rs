@@ -233,9 +233,11 @@ impl Step {
                 );
                 s += &format!("\nmotions chosen ({}): {}", motions.len(), motions.join("; "));
                 match ran_on {
-                    Some(b) => s += &format!(
+                    Some(b) => {
+                        s += &format!(
                         "\nran on {b}: {added_observations} observations added; baseline refitted, rms {rms_sigma:.2}σ"
-                    ),
+                    )
+                    }
                     None => s += "\nno bench to run them: they are proposed, not run",
                 }
                 s
@@ -293,6 +295,9 @@ enum Stage {
     Finish,
     Done,
 }
+
+/// The pool, each motion's contribution per target, and each target's absorbed share.
+type PoolContributions = (Vec<DesignedMotion>, Vec<Vec<f64>>, Vec<f64>);
 
 /// The workflow, stepped by [`Diagnosis::step`].
 pub struct Diagnosis {
@@ -529,10 +534,7 @@ impl Diagnosis {
     /// projected signature's contribution per pool motion at typical size, the extrinsics (and
     /// the other candidates of the target) fitted on the data and the whole pool; and each
     /// target's absorbed share on data and pool.
-    fn pool_contributions(
-        &self,
-        targets: &[(usize, Vec<usize>)],
-    ) -> Result<(Vec<DesignedMotion>, Vec<Vec<f64>>, Vec<f64>), DiagnoseError> {
+    fn pool_contributions(&self, targets: &[(usize, Vec<usize>)]) -> Result<PoolContributions, DiagnoseError> {
         let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("design before the baseline".into()))?;
         let obs = self.fit_set();
         let t_end = self.observations.iter().map(|o| o.time_s[1]).fold(0.0, f64::max);
