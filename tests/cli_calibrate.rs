@@ -74,4 +74,15 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
     let e = Extrinsics::load(&dir.path().join("extrinsics.ron")).unwrap();
     assert!((e.beta_et_deg - value("beta_et")).abs() < 1e-12);
     assert!(dir.path().join("report.json").exists());
+    // The session file (issue 7): every trace referenced and checked, the calibration as printed.
+    let session = photorobot_core::session::Session::load(dir.path()).unwrap();
+    assert!(session.measured());
+    assert_eq!(session.plans.len(), 3);
+    assert_eq!(session.traces.len(), traces);
+    assert!(!dir.path().join(photorobot_core::session::AUTOSAVE_FILE).exists());
+    let calibration = session.calibration.expect("the calibration in session.ron");
+    for p in &calibration.parameters {
+        assert!((p.value - value(&p.name)).abs() <= 1e-14 * p.value.abs().max(1e-12), "{}", p.name);
+    }
+    assert_eq!(calibration.extrinsics, e);
 }

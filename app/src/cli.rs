@@ -42,10 +42,22 @@ pub enum Command {
     Calibrate(crate::cli_calibrate::CalibrateArgs),
     /// Find where model and data disagree on a calibration session, name the missing effect, add it.
     Diagnose(crate::cli_diagnose::DiagnoseArgs),
+    /// Write a session's calibration report as one self-contained HTML file.
+    Report(ReportArgs),
     /// Start the workbench GUI (the default when no command is given).
     Gui,
     /// Serve a stage-controller protocol emulator (PI E-712 or SmarAct MCS) on 127.0.0.1.
     Emulate(crate::cli_emulate::EmulateArgs),
+}
+
+/// Arguments of `photorobot report`.
+#[derive(Debug, clap::Args)]
+pub struct ReportArgs {
+    /// The session: its folder or its session.ron.
+    pub session: PathBuf,
+    /// The HTML file to write.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
 }
 
 /// Arguments of `photorobot simulate`.
@@ -161,6 +173,9 @@ pub enum CliError {
     /// A trace file could not be read or written.
     #[error(transparent)]
     Trace(#[from] TraceError),
+    /// A session could not be read or written.
+    #[error(transparent)]
+    Session(#[from] photorobot_core::session::SessionError),
     /// A trace could not be analysed.
     #[error(transparent)]
     Measure(#[from] MeasureError),
@@ -183,8 +198,18 @@ where
         Some(Command::Fringes(a)) => fringes(&a, out).map(|()| Outcome::Done),
         Some(Command::Calibrate(a)) => crate::cli_calibrate::calibrate(&a, out).map(|()| Outcome::Done),
         Some(Command::Diagnose(a)) => crate::cli_diagnose::diagnose(&a, out).map(|()| Outcome::Done),
+        Some(Command::Report(a)) => report(&a, out).map(|()| Outcome::Done),
         Some(Command::Emulate(a)) => crate::cli_emulate::emulate(&a, out).map(|()| Outcome::Done),
     }
+}
+
+/// `photorobot report`: the session's HTML report, written atomically.
+fn report(a: &ReportArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let session = photorobot_core::session::Session::load(&a.session)?;
+    let html = photorobot_core::report::render_html(&session);
+    photorobot_core::files::write_atomic(&a.out, html.as_bytes())?;
+    writeln!(out, "report written to {}", a.out.display())?;
+    Ok(())
 }
 
 fn load_robot(path: &Option<PathBuf>) -> Result<RobotDescription, CliError> {

@@ -1,19 +1,28 @@
 //! `photorobot calibrate --bench <preset> [--seed N] [--mode paper|joint] --out <session> [--json]`: measure,
-//! identify and validate end to end. Owns only argument parsing, the session folder and printing; the work is
-//! `photorobot_core::identify::calibration`.
+//! identify and validate end to end; with `--traces <dir> [--mapping <file>]`, identify from traces recorded
+//! elsewhere. Owns only argument parsing and printing; the work is `photorobot_core::identify::calibration`,
+//! `photorobot_core::session` and `photorobot_core::import`.
 //!
-//! The session folder gets every recorded trace (`traces/NNN.csv`), the identified extrinsics
-//! (`extrinsics.ron`, loadable by `photorobot frames --extrinsics`) and the whole report
-//! (`report.json`). Every file is written atomically.
+//! The session folder gets `session.ron` (the session: bench, robot, plans, trace references,
+//! the calibration), every recorded trace (`traces/NNN.csv`, each saved as soon as it is
+//! measured, with the session autosaved after it), the identified extrinsics (`extrinsics.ron`,
+//! loadable by `photorobot frames --extrinsics`) and the whole report (`report.json`). Every file
+//! is written atomically. `--resume` continues a measurement a crash interrupted.
 
 use crate::cli::CliError;
-use photorobot_core::bench::{BenchPreset, VirtualBench};
+use photorobot_core::bench::{BenchPreset, RunControl, VirtualBench};
 use photorobot_core::files::{save_ron, write_atomic};
-use photorobot_core::identify::calibration::{calibrate as run_calibration, CalibrationReport, Mode};
+use photorobot_core::identify::calibration::{
+    plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
+};
+use photorobot_core::import::{read_folder, ColumnMapping};
 use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::session::{find_recovery, recording::record, BenchInfo, Session, AUTOSAVE_FILE};
+use photorobot_core::trace::Trace;
 use std::io::Write;
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 
 /// Which identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -27,7 +36,8 @@ pub enum ModeArg {
 /// Arguments of `photorobot calibrate`.
 #[derive(Debug, clap::Args)]
 pub struct CalibrateArgs {
-    /// Bench preset: an embedded name (table2-ideal, femto-lab) or a preset file (RON).
+    /// Bench preset: an embedded name (table2-ideal, femto-lab) or a preset file (RON). With
+    /// --traces, the model of the bench that recorded them (robot, optics, laser).
     #[arg(long, value_name = "PRESET")]
     pub bench: String,
     /// Random seed of the virtual bench (default: the preset's).
@@ -36,9 +46,18 @@ pub struct CalibrateArgs {
     /// Identifier.
     #[arg(long, value_enum, default_value_t = ModeArg::Joint)]
     pub mode: ModeArg,
-    /// Session folder to create (traces, extrinsics.ron, report.json).
+    /// Session folder to create (session.ron, traces, extrinsics.ron, report.json).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Identify from a folder of CSV traces (one motion or sweep per file) instead of measuring.
+    #[arg(long, value_name = "DIR", conflicts_with = "resume")]
+    pub traces: Option<PathBuf>,
+    /// Column mapping (RON) for traces from another acquisition system (default: our format).
+    #[arg(long, value_name = "FILE", requires = "traces")]
+    pub mapping: Option<PathBuf>,
+    /// Continue the measurement autosaved in --out (after a crash) instead of starting anew.
+    #[arg(long)]
+    pub resume: bool,
     /// Print the report as JSON instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -47,7 +66,6 @@ pub struct CalibrateArgs {
 /// Run the calibration and write the session.
 pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let preset = BenchPreset::resolve(&a.bench)?;
-    let mut bench = VirtualBench::new(&preset, a.seed)?;
     // The software's model: the bench's robot description and optics, the design extrinsics.
     let nominal = PhaseModel::new(
         preset.robot_description()?,
@@ -61,14 +79,91 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         ModeArg::Paper => Mode::Paper,
         ModeArg::Joint => Mode::Joint,
     };
-    let report = run_calibration(&mut bench, &nominal, mode).map_err(|problem| CliError::Argument {
-        argument: "--bench",
-        problem: format!("calibration failed: {problem}"),
-    })?;
-    write_session(a, &report)?;
+    // Never overwrite recorded data: a folder that holds a saved session is left alone.
+    if photorobot_core::session::session_path(&a.out).exists() && !a.resume {
+        return Err(CliError::Argument {
+            argument: "--out",
+            problem: format!("{} already holds a session (session.ron); choose another folder", a.out.display()),
+        });
+    }
+    let failed =
+        |problem: String| CliError::Argument { argument: "--bench", problem: format!("calibration failed: {problem}") };
+    let (mut session, report) = match &a.traces {
+        Some(dir) => {
+            let mapping = a.mapping.as_deref().map(ColumnMapping::load).transpose()?;
+            let traces = read_folder(dir, mapping.as_ref())?;
+            if std::fs::canonicalize(dir).ok() == std::fs::canonicalize(a.out.join("traces")).ok() {
+                return Err(CliError::Argument {
+                    argument: "--out",
+                    problem: format!(
+                        "{} would overwrite the traces it reads from; choose another folder",
+                        a.out.display()
+                    ),
+                });
+            }
+            let bench = BenchInfo {
+                name: format!("recorded traces from {}", dir.display()),
+                preset: Some(a.bench.clone()),
+                description: Some(preset.clone()),
+                seed: None,
+            };
+            let mut session = Session::new(bench, preset.robot_description()?);
+            session.notes = match &a.mapping {
+                Some(m) => format!("traces imported from {} with the column mapping {}", dir.display(), m.display()),
+                None => format!("traces imported from {}", dir.display()),
+            };
+            for t in &traces {
+                session.add_trace(&a.out, t, None, true)?;
+            }
+            let duration_s = traces.iter().map(span_s).sum();
+            let name = session.bench.name.clone();
+            let mut report = report_from_traces(traces, duration_s, name, &nominal, mode).map_err(failed)?;
+            report.validation = predicted_validation_rows(&preset, &nominal, &report.extrinsics).map_err(failed)?;
+            report.validation_predicted = true;
+            (session, report)
+        }
+        None => {
+            let mut bench = VirtualBench::new(&preset, a.seed)?;
+            let mut session = if a.resume {
+                Session::recover(&a.out)?
+            } else {
+                if find_recovery(&a.out)?.is_some() {
+                    return Err(CliError::Argument {
+                        argument: "--out",
+                        problem: format!(
+                            "{} holds an unfinished measurement ({AUTOSAVE_FILE}); add --resume to continue it, or choose another folder",
+                            a.out.display()
+                        ),
+                    });
+                }
+                let info = BenchInfo {
+                    name: photorobot_core::bench::Bench::name(&bench),
+                    preset: Some(a.bench.clone()),
+                    description: Some(preset.clone()),
+                    seed: Some(a.seed.unwrap_or(preset.seed)),
+                };
+                let mut s = Session::new(info, preset.robot_description()?);
+                s.plans = plans(mode);
+                s
+            };
+            let cancel = AtomicBool::new(false);
+            let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+            let recorded = record(&mut bench, &mut session, &a.out, &mut control)?;
+            recorded.outcome?;
+            let traces = session.load_traces(&a.out)?;
+            let name = session.bench.name.clone();
+            let mut report = report_from_traces(traces, recorded.duration_s, name, &nominal, mode).map_err(failed)?;
+            report.validation = validation_rows(&mut bench, &nominal, &report.extrinsics);
+            (session, report)
+        }
+    };
+    session.calibration = Some(CalibrationReport { traces: Vec::new(), ..report.clone() });
+    session.save(&a.out)?;
+    save_ron(&a.out.join("extrinsics.ron"), &report.extrinsics)?;
+    let json = serde_json::to_string_pretty(&report).map_err(std::io::Error::other)?;
+    write_atomic(&a.out.join("report.json"), json.as_bytes())?;
     if a.json {
-        let text = serde_json::to_string_pretty(&report).map_err(std::io::Error::other)?;
-        writeln!(out, "{text}")?;
+        writeln!(out, "{json}")?;
     } else {
         print_report(&report, out)?;
         writeln!(out, "\nsession written to {}", a.out.display())?;
@@ -76,16 +171,12 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
     Ok(())
 }
 
-fn write_session(a: &CalibrateArgs, report: &CalibrationReport) -> Result<(), CliError> {
-    let traces = a.out.join("traces");
-    std::fs::create_dir_all(&traces)?;
-    for (i, t) in report.traces.iter().enumerate() {
-        t.write_csv(&traces.join(format!("{i:03}.csv")))?;
+/// Duration of a trace (s).
+fn span_s(t: &Trace) -> f64 {
+    match (t.t_s.first(), t.t_s.last()) {
+        (Some(a), Some(b)) => b - a,
+        _ => 0.0,
     }
-    save_ron(&a.out.join("extrinsics.ron"), &report.extrinsics)?;
-    let json = serde_json::to_string_pretty(report).map_err(std::io::Error::other)?;
-    write_atomic(&a.out.join("report.json"), json.as_bytes())?;
-    Ok(())
 }
 
 /// The report as text: the Table II-style table, identifiability, residuals, validation.
@@ -152,7 +243,11 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
         let n = n as f64;
         writeln!(out, "  {:>10.4} {:<3} {:>6.2} σ  {}", (ss / n).sqrt(), unit, (ss_n / n).sqrt(), label)?;
     }
-    writeln!(out, "\nvalidation (FP cavity variation, peak to peak):")?;
+    if r.validation_predicted {
+        writeln!(out, "\nvalidation PREDICTED on a virtual bench with the identified extrinsics (no bench was run):")?;
+    } else {
+        writeln!(out, "\nvalidation (FP cavity variation, peak to peak):")?;
+    }
     writeln!(out, "  {:<28} {:>12} {:>12} {:>12}", "motion", "before (nm)", "after (nm)", "paper (nm)")?;
     for v in &r.validation {
         let f = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.1}"));

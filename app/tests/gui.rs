@@ -1,23 +1,53 @@
-//! GUI tests (egui_kittest, headless): drive the workbench and check what it shows by accessible labels.
-//! With PHOTOROBOT_SCREENSHOTS=1 the rendered views are also written to screenshots/.
+//! GUI tests (egui_kittest, headless): drive the workbench on the virtual bench and check what it
+//! shows by accessible labels. With PHOTOROBOT_SCREENSHOTS=1 every view is also written to
+//! screenshots/ (rendered on Mesa llvmpipe): `PHOTOROBOT_SCREENSHOTS=1 cargo test -p photorobot --test gui`.
 
 use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
-use photorobot_app::gui::Workbench;
+use photorobot_app::dialogs::ScriptedDialogs;
+use photorobot_app::gui::{App, Tab, Workbench};
+use photorobot_app::state::{Settings, StepState};
+use std::time::{Duration, Instant};
 
-fn harness() -> Harness<'static, Workbench> {
-    Harness::builder()
-        .with_size(egui::vec2(1100.0, 700.0))
-        .wgpu()
-        .build_ui_state(|ui, app: &mut Workbench| app.show(ui), Workbench::default())
+const SIZE: egui::Vec2 = egui::vec2(1400.0, 900.0);
+
+fn workbench(settings: Settings, dialogs: ScriptedDialogs) -> Workbench {
+    Workbench::new(settings, Box::new(dialogs), Box::new(|| {})).expect("the embedded virtual bench starts")
 }
 
-fn save_screenshot(h: &mut Harness<'_, Workbench>, name: &str) {
+fn harness(app: Workbench) -> Harness<'static, Workbench> {
+    Harness::builder().with_size(SIZE).wgpu().build_ui_state(|ui, app: &mut Workbench| app.show(ui), app)
+}
+
+/// Step the UI (the worker runs in its own thread) until `done` holds, or fail after `timeout`.
+fn wait_until(h: &mut Harness<'_, Workbench>, what: &str, timeout: Duration, done: impl Fn(&Workbench) -> bool) {
+    let start = Instant::now();
+    loop {
+        h.run_steps(1);
+        if done(h.state()) {
+            h.run_steps(2);
+            return;
+        }
+        assert!(
+            start.elapsed() < timeout,
+            "timed out after {timeout:?} waiting for {what}; status: {}",
+            h.state().state.status
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn open(h: &mut Harness<'_, Workbench>, tab: Tab) {
+    h.get_by_label(tab.title()).click();
+    h.run_steps(3);
+    assert_eq!(h.state().tab, tab);
+}
+
+fn screenshot(h: &mut Harness<'_, Workbench>, name: &str) {
     let image = h.render().expect("the headless renderer (Mesa llvmpipe) renders the window");
-    assert_eq!((image.width(), image.height()), (1100, 700));
-    // Not a blank frame: the window has many distinct colours (text, panels, sliders).
+    assert_eq!((image.width(), image.height()), (SIZE.x as u32, SIZE.y as u32));
     let distinct: std::collections::HashSet<[u8; 4]> = image.pixels().map(|p| p.0).collect();
-    assert!(distinct.len() > 20, "the rendered frame looks blank");
+    assert!(distinct.len() > 20, "the rendered frame of {name} looks blank");
     if std::env::var_os("PHOTOROBOT_SCREENSHOTS").is_some() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../screenshots");
         std::fs::create_dir_all(&dir).unwrap();
@@ -26,27 +56,247 @@ fn save_screenshot(h: &mut Harness<'_, Workbench>, name: &str) {
 }
 
 #[test]
-fn the_window_opens_on_the_virtual_bench_and_shows_the_cavity() {
-    let mut h = harness();
-    h.run();
-    h.get_by_label_contains("L = -898.830 µm");
-    h.get_by_label_contains("P_r (world) = (104.243, 1.280, 101.818) µm");
+fn robot_view_shows_the_frames_and_selecting_a_node_highlights_it() {
+    let mut h = harness(workbench(Settings::default(), ScriptedDialogs::default()));
+    open(&mut h, Tab::Robot);
+    // Before calibration the view uses the design extrinsics: the lamella 900 µm from the fiber.
+    h.get_by_label_contains("L = -900.000 µm");
+    h.get_by_label_contains("P_r (world) = (100.000, 0.000, 100.000) µm");
     for frame in ["world", "link 6 (q6)", "end effector", "fiber", "tool (lamella)", "reflection point P_r"] {
         assert!(h.query_all_by_label_contains(frame).next().is_some(), "frame {frame} is not shown");
     }
-    save_screenshot(&mut h, "foundation-frames");
+    h.get_by_label("fiber").click();
+    h.run_steps(2);
+    h.get_by_label("selected: fiber");
+    // Orbit: a drag on the scene turns the camera; reset brings it back.
+    let before = h.state().state.camera;
+    let centre = h.get_by_label("Reset view").rect().center() + egui::vec2(300.0, 300.0);
+    h.drag_at(centre);
+    h.hover_at(centre + egui::vec2(60.0, 20.0));
+    h.drop_at(centre + egui::vec2(60.0, 20.0));
+    h.run_steps(2);
+    assert_ne!(h.state().state.camera, before, "dragging the scene orbits the camera");
+    screenshot(&mut h, "robot");
+    h.get_by_label("Reset view").click();
+    h.run_steps(2);
+    assert_eq!(h.state().state.camera, before);
+    // Jog: the bench moves and the readouts follow.
+    h.state_mut().state.jog_target = [10.0, -20.0, 30.0, 1.0, -2.0, 3.0];
+    h.get_by_label("Move to targets").click();
+    wait_until(&mut h, "the jog", Duration::from_secs(30), |w| (w.state.q_display[0] - 10.0).abs() < 1e-9);
+    let chain = photorobot_core::model::kinematics::Chain::femto_6dof();
+    let q = chain.description().q_from_display(&[10.0, -20.0, 30.0, 1.0, -2.0, 3.0]);
+    let cavity =
+        photorobot_core::model::extrinsics::Extrinsics::nominal_design().cavity(&chain.end_effector(&q)).unwrap();
+    h.get_by_label_contains(&format!("L = {:.3} µm", cavity.length_um));
+    h.get_by_label_contains("q1 = 10.000 µm");
+    h.get_by_label("Home (all joints 0)").click();
+    wait_until(&mut h, "homing", Duration::from_secs(30), |w| w.state.q_display == [0.0; 6]);
+    h.get_by_label_contains("L = -900.000 µm");
 }
 
 #[test]
-fn home_button_returns_the_joints_to_zero() {
-    let mut app = Workbench::default();
-    app.set_joints_display(&[10.0, -20.0, 30.0, 1.0, -2.0, 3.0]);
-    let mut h = Harness::builder()
-        .with_size(egui::vec2(1100.0, 700.0))
-        .build_ui_state(|ui, app: &mut Workbench| app.show(ui), app);
-    h.run();
-    h.get_by_label_contains("L = -923.295 µm");
-    h.get_by_label("Home (all joints 0)").click();
-    h.run();
-    h.get_by_label_contains("L = -898.830 µm");
+fn live_view_streams_counts_fringes_and_the_gauge_says_ready() {
+    let mut h = harness(workbench(Settings::default(), ScriptedDialogs::default()));
+    open(&mut h, Tab::Live);
+    h.get_by_label("Start live signal").click();
+    // Real time: a dither half-cycle (2 µm along the beam, about 5 extrema) lasts about a second.
+    let start = Instant::now();
+    let (mut most, mut saw_down) = (0i64, false);
+    while !(most >= 4 && saw_down) {
+        h.run_steps(1);
+        let c = &h.state().state.live.counter;
+        most = most.max(c.steps.abs());
+        saw_down |= c.direction == -1 && most >= 4;
+        assert!(start.elapsed() < Duration::from_secs(60), "no fringes counted: most {most}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h.run_steps(2);
+    let steps = h.state().state.live.counter.steps;
+    h.get_by_label_contains(&format!("{:+.1} fringes", steps as f64 / 2.0));
+    assert!(h.query_by_label_contains("gap opening").is_some() || h.query_by_label_contains("gap closing").is_some());
+    let gap = h.state().state.live.gap_um.expect("the model gap is shown");
+    assert!((gap - 900.0).abs() < 2.5, "the design gap, dithered by 2 µm: {gap}");
+    h.get_by_label_contains(&format!("gap (model) = {gap:.3} µm"));
+    h.get_by_label_contains("visibility = 0.");
+    // Space pauses the scrolling view (the buffer keeps filling).
+    h.key_press(egui::Key::Space);
+    h.run_steps(2);
+    assert!(h.state().state.live.paused);
+    h.get_by_label("Resume scrolling (Space)");
+    screenshot(&mut h, "live");
+    open(&mut h, Tab::Align);
+    h.get_by_label_contains("fringe visibility ≥ 0.05");
+    h.get_by_label("READY TO CALIBRATE");
+    screenshot(&mut h, "align");
+    h.state_mut().state.worker.live.store(false, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The whole calibration by hand: every wizard step, identification, results, validation,
+/// trace inspection and the diagnosis entry point, on the virtual bench as fast as it runs.
+#[test]
+fn wizard_runs_every_step_identifies_and_validates() {
+    let dir = tempfile::tempdir().unwrap();
+    let exported = dir.path().join("exported.csv");
+    let dialogs = ScriptedDialogs { opens: vec![], saves: vec![Some(exported.clone())] };
+    let mut h = harness(workbench(Settings::default(), dialogs));
+    open(&mut h, Tab::Wizard);
+    h.get_by_label_contains("Strategy 1: translations");
+    h.get_by_label("Identify"); // present, disabled until the steps ran
+                                // F5 runs the next step; a button runs the others.
+    h.key_press(egui::Key::F5);
+    wait_until(&mut h, "strategy 1", Duration::from_secs(300), |w| w.state.steps[0].state == StepState::Done);
+    let step = &h.state().state.steps[0];
+    let recorded = step.plan.segments.iter().filter(|g| g.is_recorded()).count();
+    assert_eq!(step.traces.len(), recorded, "one trace per recorded segment");
+    h.get_by_label_contains(&format!("done: {recorded} traces"));
+    h.get_by_label("Run step 2 (F5)").click();
+    h.run_steps(2);
+    screenshot(&mut h, "wizard-running");
+    wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.steps[1].state == StepState::Done);
+    h.get_by_label("Run step 3 (F5)").click();
+    wait_until(&mut h, "the extra measurements", Duration::from_secs(300), |w| {
+        w.state.steps[2].state == StepState::Done
+    });
+    h.get_by_label("Redo step 1");
+    h.get_by_label("Identify").click();
+    wait_until(&mut h, "the identification", Duration::from_secs(600), |w| {
+        w.state.report.is_some() || w.state.identify_error.is_some()
+    });
+    assert!(h.state().state.identify_error.is_none(), "{:?}", h.state().state.identify_error);
+    screenshot(&mut h, "wizard");
+
+    open(&mut h, Tab::Results);
+    h.get_by_label_contains("Identified extrinsics (Joint mode");
+    for name in ["β_et", "θ_et", "β_wf", "θ_wf", "x_wf", "z_wf", "Z_et", "y_wf"] {
+        assert!(h.query_all_by_label(name).next().is_some(), "row {name} missing");
+    }
+    let report = h.state().state.report.clone().unwrap();
+    let determined = report.parameters.iter().filter(|p| p.determined).count();
+    assert_eq!(h.query_all_by_label("yes").count(), determined);
+    assert!(determined >= 6, "{determined} parameters determined");
+    assert!(h.query_all_by_label_contains("condition number").next().is_some());
+    h.get_by_label_contains("Residuals per equation");
+    h.get_by_label_contains("Correlation of the estimates");
+    screenshot(&mut h, "results");
+
+    open(&mut h, Tab::Validation);
+    h.get_by_label("Run validation").click();
+    wait_until(&mut h, "the validation", Duration::from_secs(600), |w| w.state.validation.is_some());
+    let pairs = h.state().state.validation.clone().unwrap();
+    let shown = |h: &Harness<'_, Workbench>, text: &str| h.query_all_by_label(text).next().is_some();
+    for p in &pairs {
+        assert!(shown(&h, p.motion.name()), "{}", p.motion.name());
+        let (b, a) = (p.before.as_ref().unwrap(), p.after.as_ref().unwrap());
+        assert!(shown(&h, &format!("{:.1} nm", b.peak_to_peak_nm)), "{p:?}");
+        assert!(shown(&h, &format!("{:.1} nm", a.peak_to_peak_nm)), "{p:?}");
+        assert!(shown(&h, &format!("{:.0} nm", p.motion.paper_after_nm())), "{p:?}");
+        // Calibration pays off on the circle (the paper's headline motion).
+        if p.motion.name().contains("circle") {
+            assert!(a.peak_to_peak_nm < 0.1 * b.peak_to_peak_nm, "{p:?}");
+        }
+    }
+    screenshot(&mut h, "validation");
+
+    // The first trace is the sweep before strategy 1's first move, the second that move.
+    open(&mut h, Tab::Traces);
+    wait_until(&mut h, "the sweep analysis", Duration::from_secs(120), |w| w.state.analyses.contains_key(&0));
+    h.get_by_label_contains("absolute gap = ");
+    h.state_mut().inspector.selected = 1;
+    h.run_steps(1);
+    wait_until(&mut h, "the motion analysis", Duration::from_secs(120), |w| w.state.analyses.contains_key(&1));
+    h.get_by_label_contains("(phase tracking); extremum counting");
+    screenshot(&mut h, "traces");
+    h.get_by_label("Export CSV…").click();
+    h.run_steps(2);
+    let back = photorobot_core::trace::Trace::read_csv(&exported).expect("the exported trace reads back");
+    assert_eq!(back.irradiance, h.state().state.steps[0].traces[1].irradiance);
+
+    open(&mut h, Tab::Diagnosis);
+    h.get_by_label("Largest residuals");
+    h.get_by_label("RMS residual per equation");
+    screenshot(&mut h, "diagnosis");
+}
+
+#[test]
+fn cancelling_a_step_keeps_what_was_recorded_and_imports_go_through_the_dialog() {
+    let dir = tempfile::tempdir().unwrap();
+    // Real time: the step is still running when Esc arrives.
+    let settings = Settings { speed: 1.0, ..Settings::default() };
+    let mut h = harness(workbench(settings, ScriptedDialogs::default()));
+    open(&mut h, Tab::Wizard);
+    h.get_by_label("Run step 1 (F5)").click();
+    wait_until(&mut h, "the first recorded samples", Duration::from_secs(60), |w| w.state.live.trace.len() > 500);
+    h.get_by_label("Cancel (Esc)");
+    h.key_press(egui::Key::Escape);
+    wait_until(&mut h, "the cancel", Duration::from_secs(60), |w| w.state.running.is_none());
+    let step = &h.state().state.steps[0];
+    assert!(matches!(step.state, StepState::Stopped(_)), "{:?}", step.state);
+    assert!(!step.traces.is_empty() && !step.traces[0].is_empty(), "the partial trace is kept");
+    h.get_by_label_contains("stopped: ");
+    h.get_by_label("Redo step 1");
+    // Import: the trace recorded so far, written to a file and opened through the dialog.
+    let path = dir.path().join("partial.csv");
+    step.traces[0].write_csv(&path).unwrap();
+    h.state_mut().state.dialogs = Box::new(ScriptedDialogs { opens: vec![vec![path.clone()]], saves: vec![] });
+    open(&mut h, Tab::Traces);
+    h.get_by_label("Import CSV traces…").click();
+    h.run_steps(2);
+    assert_eq!(h.state().state.imported.len(), 1);
+    h.get_by_label_contains(&format!("imported {}", path.display()));
+    // A bad file is refused with a message naming it; nothing is added.
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, "t_s,q1_um\n0,1\n").unwrap();
+    h.state_mut().state.dialogs = Box::new(ScriptedDialogs { opens: vec![vec![bad.clone()]], saves: vec![] });
+    h.get_by_label("Import CSV traces…").click();
+    h.run_steps(2);
+    assert_eq!(h.state().state.imported.len(), 1);
+    h.get_by_label_contains("import refused: ");
+    h.get_by_label_contains("bad.csv");
+}
+
+/// eframe storage in memory.
+#[derive(Default)]
+struct MemoryStorage(std::collections::HashMap<String, String>);
+
+impl eframe::Storage for MemoryStorage {
+    fn get_string(&self, key: &str) -> Option<String> {
+        self.0.get(key).cloned()
+    }
+    fn set_string(&mut self, key: &str, value: String) {
+        self.0.insert(key.to_string(), value);
+    }
+    fn remove_string(&mut self, key: &str) {
+        self.0.remove(key);
+    }
+    fn flush(&mut self) {}
+}
+
+#[test]
+fn settings_persist_between_runs_and_the_theme_toggles() {
+    let mut h = harness(workbench(Settings::default(), ScriptedDialogs::default()));
+    assert!(h.state().state.settings.dark);
+    h.get_by_label("Light theme").click();
+    h.run_steps(2);
+    assert!(!h.state().state.settings.dark);
+    h.get_by_label("Dark theme");
+    let mean_brightness = |h: &mut Harness<'_, Workbench>| {
+        let image = h.render().unwrap();
+        image.pixels().map(|p| (p.0[0] as f64 + p.0[1] as f64 + p.0[2] as f64) / 3.0).sum::<f64>()
+            / (image.width() * image.height()) as f64
+    };
+    assert!(mean_brightness(&mut h) > 180.0, "the light theme is light");
+    screenshot(&mut h, "light-theme");
+    h.get_by_label("Dark theme").click();
+    h.run_steps(2);
+    assert!(mean_brightness(&mut h) < 80.0, "the dark theme is dark");
+    h.get_by_label("Light theme").click();
+    h.run_steps(2);
+    h.state_mut().state.settings.seed = 42;
+    let mut app = App { workbench: h.into_state() };
+    let mut storage = MemoryStorage::default();
+    eframe::App::save(&mut app, &mut storage);
+    let back: Settings = eframe::get_value(&storage, eframe::APP_KEY).expect("settings were saved");
+    assert_eq!(back, app.workbench.state.settings);
+    assert!(!back.dark && back.seed == 42);
 }

@@ -3,7 +3,7 @@
 
 use serde::{de::DeserializeOwned, Serialize};
 use std::fmt;
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -44,6 +44,22 @@ pub enum FileError {
         field: String,
         /// What is wrong and what was expected.
         problem: String,
+    },
+    /// The file is larger than the limit for its kind; it was refused from its size, unread.
+    #[error(
+        "{file}: {size_bytes} bytes, above the limit of {limit_bytes} bytes for {what}; refusing to read it ({advice})"
+    )]
+    TooLarge {
+        /// The file.
+        file: PathBuf,
+        /// Its size (bytes).
+        size_bytes: u64,
+        /// The limit (bytes).
+        limit_bytes: u64,
+        /// What kind of file was expected, e.g. "a session file".
+        what: &'static str,
+        /// What to do about it.
+        advice: &'static str,
     },
     /// The value could not be serialised (a bug, reported rather than panicking).
     #[error("{file}: cannot serialise: {message}")]
@@ -101,6 +117,33 @@ pub fn read_text(path: &Path) -> Result<String, FileError> {
         action: "cannot read",
         source,
     })
+}
+
+/// Refuse a file larger than `limit_bytes` from its size alone, before reading any of it.
+pub fn check_size(path: &Path, limit_bytes: u64, what: &'static str, advice: &'static str) -> Result<u64, FileError> {
+    let size_bytes = std::fs::metadata(path)
+        .map_err(|source| FileError::Io { file: path.to_path_buf(), action: "cannot open", source })?
+        .len();
+    if size_bytes > limit_bytes {
+        return Err(FileError::TooLarge { file: path.to_path_buf(), size_bytes, limit_bytes, what, advice });
+    }
+    Ok(size_bytes)
+}
+
+/// Read a text file of at most `limit_bytes` (checked from its size first, so a huge file is
+/// never read into memory); the error names the file.
+pub fn read_text_limited(
+    path: &Path,
+    limit_bytes: u64,
+    what: &'static str,
+    advice: &'static str,
+) -> Result<String, FileError> {
+    check_size(path, limit_bytes, what, advice)?;
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(limit_bytes).read_to_string(&mut text))
+        .map_err(|source| FileError::Io { file: path.to_path_buf(), action: "cannot read", source })?;
+    Ok(text)
 }
 
 /// Read and parse a RON file.

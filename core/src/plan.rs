@@ -663,7 +663,7 @@ impl PlanError {
     }
 
     /// The problem with the segment's label in front, as shown after a field path.
-    fn labelled_problem(&self) -> String {
+    pub fn labelled_problem(&self) -> String {
         match self.label() {
             Some(l) => format!("(segment \"{l}\") {}", self.problem()),
             None => self.problem(),

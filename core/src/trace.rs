@@ -24,6 +24,10 @@
 //! - Line endings may be `\n` or `\r\n`. Line numbers in errors are 1-based and count every line
 //!   of the file (a quoted field spanning lines is reported at its last line).
 //! - Numbers are written in Rust's shortest round-trip form, so write-then-read is bit-exact.
+//! - A file above [`ReadOptions::max_bytes`] (default [`DEFAULT_MAX_BYTES`], 2 GiB) is refused
+//!   from its size without being read; more than [`ReadOptions::max_rows`] rows are refused too.
+//! - [`read_table`] reads any numeric CSV with these rules; `crate::import` uses it for files from
+//!   other acquisition systems.
 
 use crate::files::{write_atomic, FileError};
 use serde::{Deserialize, Serialize};
@@ -42,6 +46,10 @@ pub const REQUIRED_COLUMNS: [&str; 9] =
 /// Default largest number of data rows [`Trace::read_csv`] accepts (50 million, about 4 GB
 /// of columns in memory); larger files are refused with a message instead of exhausting memory.
 pub const DEFAULT_MAX_ROWS: usize = 50_000_000;
+
+/// Default largest trace file [`Trace::read_csv`] opens: 2 GiB (about 25 million rows of the
+/// nine required columns). A larger file is refused from its size, without reading it.
+pub const DEFAULT_MAX_BYTES: u64 = 2 << 30;
 
 /// Longest metadata line accepted (bytes); longer ones are refused rather than read whole.
 const MAX_META_LINE_BYTES: u64 = 64 * 1024;
@@ -153,11 +161,14 @@ pub struct Trace {
 pub struct ReadOptions {
     /// Largest number of data rows accepted; a file with more is refused. Default [`DEFAULT_MAX_ROWS`].
     pub max_rows: usize,
+    /// Largest file accepted (bytes), checked from the file's size before reading. Default
+    /// [`DEFAULT_MAX_BYTES`].
+    pub max_bytes: u64,
 }
 
 impl Default for ReadOptions {
     fn default() -> Self {
-        Self { max_rows: DEFAULT_MAX_ROWS }
+        Self { max_rows: DEFAULT_MAX_ROWS, max_bytes: DEFAULT_MAX_BYTES }
     }
 }
 
@@ -282,18 +293,21 @@ pub enum TraceError {
         value: f64,
     },
     /// Time does not strictly increase.
-    #[error("{file}:{line}: column `t_s`: time {t_s} s is not after {previous_t_s} s on line {previous_line} (expected strictly increasing time)", file = .file.display())]
+    #[error("{file}:{line}: column `{column}`: time {t}{unit} is not after {previous_t}{unit} on line {previous_line} (expected strictly increasing time)",
+        file = .file.display(), unit = if .column == "t_s" { " s" } else { "" })]
     NonMonotonicTime {
         /// The file.
         file: PathBuf,
         /// Line of the offending row.
         line: usize,
-        /// Its time (s).
-        t_s: f64,
+        /// The time column (`t_s` in our format; the source column of an import).
+        column: String,
+        /// Its time (in the column's unit).
+        t: f64,
         /// Line of the previous row.
         previous_line: usize,
-        /// The previous time (s).
-        previous_t_s: f64,
+        /// The previous time (in the column's unit).
+        previous_t: f64,
     },
     /// A header but no data rows.
     #[error("{file}: empty trace: the header is followed by no data rows (expected at least one row)", file = .file.display())]
@@ -320,6 +334,40 @@ pub enum TraceError {
         line: usize,
         /// The reader's message.
         message: String,
+    },
+    /// Import: a column the mapping reads is not in the file's header.
+    #[error("{file}:{line}: no column `{column}` in the header (the column mapping reads it for `{target}`); found `{found}`", file = .file.display())]
+    MappedColumnMissing {
+        /// The file.
+        file: PathBuf,
+        /// Line of the header.
+        line: usize,
+        /// The source column the mapping names.
+        column: String,
+        /// Our column it feeds.
+        target: String,
+        /// The header as found (joined with commas).
+        found: String,
+    },
+    /// Import: a value is no longer finite after the mapping's unit conversion and scale.
+    #[error("{file}: column `{column}`, data row {row}: {value} after the mapping's unit conversion and scale (expected a finite number: check the mapping's unit and scale)", file = .file.display())]
+    ScaledNonFinite {
+        /// The file.
+        file: PathBuf,
+        /// Our column.
+        column: String,
+        /// 1-based data row.
+        row: usize,
+        /// The value after scaling.
+        value: f64,
+    },
+    /// Import: the converted trace is not valid (e.g. time no longer increases after rounding).
+    #[error("{file}: after the column mapping: {problem}", file = .file.display())]
+    Imported {
+        /// The file.
+        file: PathBuf,
+        /// What is wrong.
+        problem: String,
     },
     /// In memory: a column's length differs from the number of samples.
     #[error("trace column `{column}` has {found} values, expected {expected} (one per t_s sample)")]
@@ -504,8 +552,8 @@ fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usiz
     Ok((meta, lines))
 }
 
-/// Check the header row; returns the extra column names.
-fn check_header(rec: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<String>, TraceError> {
+/// Check the header row's names: UTF-8, non-empty, on one line, unique. Returns them trimmed.
+fn check_names(rec: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<String>, TraceError> {
     let mut names = Vec::with_capacity(rec.len());
     for (i, field) in rec.iter().enumerate() {
         let name = std::str::from_utf8(field).map_err(|_| TraceError::BadHeader {
@@ -541,12 +589,18 @@ fn check_header(rec: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<S
         }
         names.push(name);
     }
-    let missing: Vec<String> = REQUIRED_COLUMNS.iter().filter(|r| !names.contains(r)).map(|r| r.to_string()).collect();
+    Ok(names.into_iter().map(str::to_string).collect())
+}
+
+/// Check that a header starts with the [`REQUIRED_COLUMNS`] in order.
+fn check_required(names: &[String], file: &Path, line: usize) -> Result<(), TraceError> {
+    let missing: Vec<String> =
+        REQUIRED_COLUMNS.iter().filter(|r| !names.iter().any(|n| n == *r)).map(|r| r.to_string()).collect();
     if !missing.is_empty() {
         let unknown = names
             .iter()
             .take(REQUIRED_COLUMNS.len())
-            .filter(|n| !REQUIRED_COLUMNS.contains(n))
+            .filter(|n| !REQUIRED_COLUMNS.contains(&n.as_str()))
             .map(|n| n.to_string())
             .collect();
         let mut found = names.join(",");
@@ -567,7 +621,133 @@ fn check_header(rec: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<S
             });
         }
     }
-    Ok(names[REQUIRED_COLUMNS.len()..].iter().map(|n| n.to_string()).collect())
+    Ok(())
+}
+
+/// A numeric CSV table as read from a file: the `#` metadata lines, the column names and one
+/// vector per column. Every value is finite, every row has one field per column, the time
+/// column strictly increases and there is at least one row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Table {
+    /// Metadata from the `# key: value` lines (defaults where absent).
+    pub meta: TraceMeta,
+    /// 1-based line of the header row.
+    pub header_line: usize,
+    /// Column names, trimmed, unique, in file order.
+    pub names: Vec<String>,
+    /// One vector per column, in file order.
+    pub columns: Vec<Vec<f64>>,
+}
+
+/// Open a file for [`read_table`], refusing it from its size when above [`ReadOptions::max_bytes`].
+pub fn open_limited(path: &Path, options: &ReadOptions) -> Result<std::fs::File, TraceError> {
+    crate::files::check_size(
+        path,
+        options.max_bytes,
+        "a trace file",
+        "split the recording into one file per motion, or raise ReadOptions::max_bytes",
+    )?;
+    Ok(std::fs::File::open(path).map_err(|source| FileError::Io {
+        file: path.to_path_buf(),
+        action: "cannot open",
+        source,
+    })?)
+}
+
+/// Read a numeric CSV table with the trace format's rules (metadata lines, comments, blank
+/// lines, `\r\n`, a byte-order mark, line numbers in errors). `header` checks the column
+/// names (given with the header's line) and returns the index of the time column, which must
+/// strictly increase. Never panics, whatever the bytes.
+pub fn read_table<R: Read>(
+    reader: R,
+    origin: &Path,
+    options: &ReadOptions,
+    header: impl FnOnce(&[String], usize) -> Result<usize, TraceError>,
+) -> Result<Table, TraceError> {
+    let file = || origin.to_path_buf();
+    let mut input = BufReader::with_capacity(64 * 1024, reader);
+    let (meta, meta_lines) = read_meta(&mut input, origin)?;
+    // A final '\n' makes every record end with one, so the reader's line count after a
+    // record is always one past the record's (last) line. `\r` before it is trimmed as space.
+    let mut csv_reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .terminator(csv::Terminator::Any(b'\n'))
+        .comment(Some(b'#'))
+        .buffer_capacity(64 * 1024)
+        .from_reader(input.chain(&b"\n"[..]));
+    let mut rec = csv::ByteRecord::new();
+    let mut next = |rec: &mut csv::ByteRecord| -> Result<Option<usize>, TraceError> {
+        loop {
+            let more = csv_reader.read_byte_record(rec).map_err(|e| {
+                let line = meta_lines + csv_reader.position().line() as usize;
+                match e.into_kind() {
+                    csv::ErrorKind::Io(source) => {
+                        TraceError::File(FileError::Io { file: file(), action: "cannot read", source })
+                    }
+                    other => TraceError::Csv { file: file(), line, message: format!("{other:?}") },
+                }
+            })?;
+            if !more {
+                return Ok(None);
+            }
+            // A blank line ending in "\r\n" arrives as one field holding "\r": skip it.
+            if rec.len() == 1 && rec[0].iter().all(|b| b.is_ascii_whitespace()) {
+                continue;
+            }
+            let line = meta_lines + (csv_reader.position().line() as usize).saturating_sub(1);
+            return Ok(Some(line));
+        }
+    };
+
+    let Some(header_line) = next(&mut rec)? else {
+        return Err(TraceError::NoHeader { file: file() });
+    };
+    let names = check_names(&rec, origin, header_line)?;
+    let time = header(&names, header_line)?;
+    let n_cols = names.len();
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); n_cols];
+    let mut rows = 0usize;
+    let mut previous: Option<(usize, f64)> = None;
+    while let Some(line) = next(&mut rec)? {
+        if rows >= options.max_rows {
+            return Err(TraceError::TooLarge { file: file(), line, max_rows: options.max_rows });
+        }
+        if rec.len() != n_cols {
+            return Err(TraceError::FieldCount { file: file(), line, expected: n_cols, found: rec.len() });
+        }
+        for (c, field) in rec.iter().enumerate() {
+            let v = parse_field(field).ok_or_else(|| TraceError::NotANumber {
+                file: file(),
+                line,
+                column: names[c].clone(),
+                text: field_text(field),
+            })?;
+            if !v.is_finite() {
+                return Err(TraceError::NonFinite { file: file(), line, column: names[c].clone(), value: v });
+            }
+            columns[c].push(v);
+        }
+        let t = columns[time][rows];
+        if let Some((previous_line, previous_t)) = previous {
+            if t <= previous_t {
+                return Err(TraceError::NonMonotonicTime {
+                    file: file(),
+                    line,
+                    column: names[time].clone(),
+                    t,
+                    previous_line,
+                    previous_t,
+                });
+            }
+        }
+        previous = Some((line, t));
+        rows += 1;
+    }
+    if rows == 0 {
+        return Err(TraceError::EmptyTrace { file: file() });
+    }
+    Ok(Table { meta, header_line, names, columns })
 }
 
 impl Trace {
@@ -735,13 +915,10 @@ impl Trace {
         Self::read_csv_with(path, &ReadOptions::default())
     }
 
-    /// Read and validate a trace file with options.
+    /// Read and validate a trace file with options. A file larger than
+    /// [`ReadOptions::max_bytes`] is refused from its size, before any of it is read.
     pub fn read_csv_with(path: &Path, options: &ReadOptions) -> Result<Self, TraceError> {
-        let f = std::fs::File::open(path).map_err(|source| FileError::Io {
-            file: path.to_path_buf(),
-            action: "cannot open",
-            source,
-        })?;
+        let f = open_limited(path, options)?;
         Self::from_csv_reader_with(f, path, options)
     }
 
@@ -753,99 +930,38 @@ impl Trace {
     /// Read and validate a trace from any reader, with options; `origin` names it in errors.
     /// Never panics, whatever the bytes.
     pub fn from_csv_reader_with<R: Read>(reader: R, origin: &Path, options: &ReadOptions) -> Result<Self, TraceError> {
-        let file = || origin.to_path_buf();
-        let mut input = BufReader::with_capacity(64 * 1024, reader);
-        let (meta, meta_lines) = read_meta(&mut input, origin)?;
-        // A final '\n' makes every record end with one, so the reader's line count after a
-        // record is always one past the record's (last) line. `\r` before it is trimmed as space.
-        let mut csv_reader = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .flexible(true)
-            .terminator(csv::Terminator::Any(b'\n'))
-            .comment(Some(b'#'))
-            .buffer_capacity(64 * 1024)
-            .from_reader(input.chain(&b"\n"[..]));
-        let mut rec = csv::ByteRecord::new();
-        let mut next = |rec: &mut csv::ByteRecord| -> Result<Option<usize>, TraceError> {
-            loop {
-                let more = csv_reader.read_byte_record(rec).map_err(|e| {
-                    let line = meta_lines + csv_reader.position().line() as usize;
-                    match e.into_kind() {
-                        csv::ErrorKind::Io(source) => {
-                            TraceError::File(FileError::Io { file: file(), action: "cannot read", source })
-                        }
-                        other => TraceError::Csv { file: file(), line, message: format!("{other:?}") },
-                    }
-                })?;
-                if !more {
-                    return Ok(None);
-                }
-                // A blank line ending in "\r\n" arrives as one field holding "\r": skip it.
-                if rec.len() == 1 && rec[0].iter().all(|b| b.is_ascii_whitespace()) {
-                    continue;
-                }
-                let line = meta_lines + (csv_reader.position().line() as usize).saturating_sub(1);
-                return Ok(Some(line));
-            }
-        };
+        let table = read_table(reader, origin, options, |names, line| {
+            check_required(names, origin, line)?;
+            Ok(0)
+        })?;
+        let mut columns = table.columns;
+        let extra_values = columns.split_off(REQUIRED_COLUMNS.len().min(columns.len()));
+        let extra = table.names[REQUIRED_COLUMNS.len()..]
+            .iter()
+            .zip(extra_values)
+            .map(|(name, values)| ExtraColumn { name: name.clone(), values })
+            .collect();
+        Ok(Trace::from_columns(table.meta, columns, extra))
+    }
 
-        let Some(header_line) = next(&mut rec)? else {
-            return Err(TraceError::NoHeader { file: file() });
-        };
-        let extra_names = check_header(&rec, origin, header_line)?;
-        let n_cols = REQUIRED_COLUMNS.len() + extra_names.len();
-        let mut trace = Trace::new(meta);
-        trace.extra = extra_names.into_iter().map(|name| ExtraColumn { name, values: Vec::new() }).collect();
-        let column_name = |trace: &Trace, c: usize| -> String {
-            if c < REQUIRED_COLUMNS.len() {
-                REQUIRED_COLUMNS[c].to_string()
-            } else {
-                trace.extra[c - REQUIRED_COLUMNS.len()].name.clone()
-            }
-        };
-        let mut row = [0.0f64; REQUIRED_COLUMNS.len()];
-        let mut previous: Option<(usize, f64)> = None;
-        while let Some(line) = next(&mut rec)? {
-            if trace.len() >= options.max_rows {
-                return Err(TraceError::TooLarge { file: file(), line, max_rows: options.max_rows });
-            }
-            if rec.len() != n_cols {
-                return Err(TraceError::FieldCount { file: file(), line, expected: n_cols, found: rec.len() });
-            }
-            for (c, field) in rec.iter().enumerate() {
-                let v = parse_field(field).ok_or_else(|| TraceError::NotANumber {
-                    file: file(),
-                    line,
-                    column: column_name(&trace, c),
-                    text: field_text(field),
-                })?;
-                if !v.is_finite() {
-                    return Err(TraceError::NonFinite { file: file(), line, column: column_name(&trace, c), value: v });
-                }
-                if c < row.len() {
-                    row[c] = v;
-                } else {
-                    trace.extra[c - row.len()].values.push(v);
-                }
-            }
-            if let Some((previous_line, previous_t_s)) = previous {
-                if row[0] <= previous_t_s {
-                    return Err(TraceError::NonMonotonicTime {
-                        file: file(),
-                        line,
-                        t_s: row[0],
-                        previous_line,
-                        previous_t_s,
-                    });
-                }
-            }
-            previous = Some((line, row[0]));
-            trace.push_sample(row[0], [row[1], row[2], row[3], row[4], row[5], row[6]], row[7], row[8]);
+    /// A trace from its required columns in [`REQUIRED_COLUMNS`] order (missing ones empty)
+    /// and its extra columns; see [`Trace::validate`].
+    pub fn from_columns(meta: TraceMeta, required: Vec<Vec<f64>>, extra: Vec<ExtraColumn>) -> Self {
+        let mut columns = required.into_iter();
+        let mut next = || columns.next().unwrap_or_default();
+        Self {
+            meta,
+            t_s: next(),
+            q1_um: next(),
+            q2_um: next(),
+            q3_um: next(),
+            q4_deg: next(),
+            q5_deg: next(),
+            q6_deg: next(),
+            wavelength_nm: next(),
+            irradiance: next(),
+            extra,
         }
-        if trace.is_empty() {
-            return Err(TraceError::EmptyTrace { file: file() });
-        }
-        Ok(trace)
     }
 
     /// The `#` metadata lines, each ending in `\n`.
@@ -1074,10 +1190,10 @@ mod tests {
         for i in 0..5 {
             text.push_str(&format!("{i},0,0,0,0,0,0,1560,0.5\n"));
         }
-        let opts = ReadOptions { max_rows: 4 };
+        let opts = ReadOptions { max_rows: 4, ..ReadOptions::default() };
         let err = Trace::from_csv_reader_with(text.as_bytes(), Path::new("big.csv"), &opts).unwrap_err().to_string();
         assert!(err.starts_with("big.csv:6: more than 4 data rows; refusing to read further"), "{err}");
-        let opts = ReadOptions { max_rows: 5 };
+        let opts = ReadOptions { max_rows: 5, ..ReadOptions::default() };
         assert_eq!(Trace::from_csv_reader_with(text.as_bytes(), Path::new("big.csv"), &opts).unwrap().len(), 5);
         assert_eq!(ReadOptions::default().max_rows, 50_000_000);
     }

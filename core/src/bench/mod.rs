@@ -100,6 +100,16 @@ pub enum RunError {
     /// The plan is invalid or leaves the joint limits; nothing was moved.
     #[error(transparent)]
     Plan(#[from] PlanError),
+    /// The per-step callback asked to stop after a completed segment (e.g. an autosave failed).
+    #[error("stopped after segment {segment} ({label}): {reason}")]
+    Stopped {
+        /// Index of the last completed segment.
+        segment: usize,
+        /// Its label.
+        label: String,
+        /// Why.
+        reason: String,
+    },
     /// A segment failed or was cancelled.
     #[error("segment {segment} ({label}): {error}")]
     Segment {
@@ -123,10 +133,35 @@ pub struct PlanRun {
     pub outcome: Result<(), RunError>,
 }
 
+/// A segment that has just completed, as reported to the per-step callback of [`run_plan_with`].
+#[derive(Debug, Clone, Copy)]
+pub struct StepDone<'a> {
+    /// Index of the segment in the plan.
+    pub segment: usize,
+    /// Its label.
+    pub label: &'a str,
+    /// Its trace, when the segment records.
+    pub trace: Option<&'a Trace>,
+}
+
+/// Called after every completed segment (to autosave, for example); an `Err` stops the plan
+/// before the next segment with [`RunError::Stopped`].
+pub type OnStep<'a> = dyn FnMut(StepDone<'_>) -> Result<(), String> + 'a;
+
 /// Run a plan: expand and check it against the limits first (nothing moves if any move is out
 /// of range), then run segment by segment. Data already recorded is never lost: it is in the
 /// returned [`PlanRun`] whatever the outcome.
 pub fn run_plan(bench: &mut dyn Bench, plan: &Plan, control: &mut RunControl<'_>) -> PlanRun {
+    run_plan_with(bench, plan, control, &mut |_| Ok(()))
+}
+
+/// [`run_plan`], calling `on_step` after every completed segment.
+pub fn run_plan_with(
+    bench: &mut dyn Bench,
+    plan: &Plan,
+    control: &mut RunControl<'_>,
+    on_step: &mut OnStep<'_>,
+) -> PlanRun {
     let start = bench.clock_s();
     let segments = match plan.expand(bench.robot(), bench.position_display(), bench.motion_limits()) {
         Ok(s) => s,
@@ -147,8 +182,17 @@ pub fn run_plan(bench: &mut dyn Bench, plan: &Plan, control: &mut RunControl<'_>
             notes: format!("plan {}, segment {} of {}", plan.name, i + 1, count),
         };
         match bench.run_segment(seg, meta, control) {
-            Ok(Some(t)) => traces.push(t),
-            Ok(None) => {}
+            Ok(trace) => {
+                let stop = on_step(StepDone { segment: i, label: &seg.label, trace: trace.as_ref() });
+                traces.extend(trace);
+                if let Err(reason) = stop {
+                    return PlanRun {
+                        traces,
+                        duration_s: bench.clock_s() - start,
+                        outcome: Err(RunError::Stopped { segment: i, label: seg.label.clone(), reason }),
+                    };
+                }
+            }
             Err(error) => {
                 if let Some(p) = error.partial() {
                     if !p.is_empty() {
@@ -178,6 +222,19 @@ pub fn resume_plan(
     from_segment: usize,
     control: &mut RunControl<'_>,
 ) -> PlanRun {
+    resume_plan_with(bench, plan, plan_start_display, from_segment, control, &mut |_| Ok(()))
+}
+
+/// [`resume_plan`], calling `on_step` after every completed segment of the original plan, with
+/// the segment's index in the original plan (the return move is not reported).
+pub fn resume_plan_with(
+    bench: &mut dyn Bench,
+    plan: &Plan,
+    plan_start_display: [f64; 6],
+    from_segment: usize,
+    control: &mut RunControl<'_>,
+    on_step: &mut OnStep<'_>,
+) -> PlanRun {
     let segments = match plan.expand(bench.robot(), plan_start_display, bench.motion_limits()) {
         Ok(s) => s,
         Err(e) => return PlanRun { traces: vec![], duration_s: 0.0, outcome: Err(e.into()) },
@@ -196,5 +253,8 @@ pub fn resume_plan(
         description: plan.description.clone(),
         segments: rest,
     };
-    run_plan(bench, &remainder, control)
+    run_plan_with(bench, &remainder, control, &mut |step: StepDone<'_>| match step.segment {
+        0 => Ok(()),
+        k => on_step(StepDone { segment: from_segment + k - 1, ..step }),
+    })
 }

@@ -17,11 +17,11 @@ use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::plan::Plan;
 use crate::trace::Trace;
 use crate::validate::{run_validation, ValidationMotion};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
 
 /// Which identifier.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Mode {
     /// The paper's steps A, B, C on strategies 1 and 2.
@@ -31,7 +31,7 @@ pub enum Mode {
 }
 
 /// One row of the Table II-style result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParameterRow {
     /// Parameter name (paper's).
     pub name: String,
@@ -48,7 +48,7 @@ pub struct ParameterRow {
 }
 
 /// One validation result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ValidationRow {
     /// The motion.
     pub motion: String,
@@ -60,10 +60,28 @@ pub struct ValidationRow {
     pub paper_nm: f64,
     /// Why a figure is missing.
     pub note: Option<String>,
+    /// L variation along the motion planned with the nominal extrinsics (nm), at most
+    /// [`CURVE_POINTS`] evenly spaced samples, for plots.
+    #[serde(default)]
+    pub before_curve_nm: Vec<f64>,
+    /// The same planned with the identified extrinsics (nm).
+    #[serde(default)]
+    pub after_curve_nm: Vec<f64>,
 }
 
-/// The whole calibration report.
-#[derive(Debug, Clone, Serialize)]
+/// Most points kept of a validation curve in a report or session.
+pub const CURVE_POINTS: usize = 400;
+
+/// At most `n` evenly spaced samples of `v` (the first and the last included).
+fn thin(v: &[f64], n: usize) -> Vec<f64> {
+    if v.len() <= n || n < 2 {
+        return v.to_vec();
+    }
+    (0..n).map(|k| v[k * (v.len() - 1) / (n - 1)]).collect()
+}
+
+/// The whole calibration report (saved in sessions and `report.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CalibrationReport {
     /// Identifier used.
     pub mode: Mode,
@@ -83,6 +101,10 @@ pub struct CalibrationReport {
     pub residuals: Vec<(String, String, f64, f64)>,
     /// Validation figures.
     pub validation: Vec<ValidationRow>,
+    /// True when the validation figures are predictions on a virtual bench whose truth is the
+    /// identified extrinsics (traces recorded elsewhere, no bench to run on), not measurements.
+    #[serde(default)]
+    pub validation_predicted: bool,
     /// Bench time of the measurements (s).
     pub measurement_duration_s: f64,
     /// Number of observations used.
@@ -90,7 +112,6 @@ pub struct CalibrationReport {
     /// Sentences for the user.
     pub warnings: Vec<String>,
     /// The identified extrinsics.
-    #[serde(skip)]
     pub extrinsics: Extrinsics,
     /// The recorded traces.
     #[serde(skip)]
@@ -297,6 +318,20 @@ pub fn parameter_rows(e: &Extrinsics, report: &IdentifiabilityReport) -> Vec<Par
 /// Measure, identify, report and validate on a bench.
 pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Result<CalibrationReport, String> {
     let (traces, duration) = measure(bench, &plans(mode))?;
+    let mut report = report_from_traces(traces, duration, bench.name(), nominal, mode)?;
+    report.validation = validation_rows(bench, nominal, &report.extrinsics);
+    Ok(report)
+}
+
+/// Identify from recorded traces and build the report (without validation, which needs a
+/// bench: see [`validation_rows`]). `bench_name` says where the traces come from.
+pub fn report_from_traces(
+    traces: Vec<Trace>,
+    duration_s: f64,
+    bench_name: String,
+    nominal: &PhaseModel,
+    mode: Mode,
+) -> Result<CalibrationReport, String> {
     let id = identify(&traces, nominal, mode)?;
     let (est, obs) = (id.estimate, id.observations);
     let report = analyse_estimate(&est);
@@ -308,29 +343,12 @@ pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Res
         warnings
             .push(format!("the solver did not converge ({}): the values below are not a calibration", est.termination));
     }
-    let after_model = model_with(nominal, est.extrinsics);
-    let mut validation = Vec::new();
-    for m in ValidationMotion::ALL {
-        let before = run_validation(bench, &after_model, &nominal.extrinsics, m, [0.0; 6]);
-        let after = run_validation(bench, &after_model, &est.extrinsics, m, [0.0; 6]);
-        let note = match (&before, &after) {
-            (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
-            _ => None,
-        };
-        validation.push(ValidationRow {
-            motion: m.name().to_string(),
-            before_nm: before.ok().map(|f| f.peak_to_peak_nm),
-            after_nm: after.ok().map(|f| f.peak_to_peak_nm),
-            paper_nm: m.paper_after_nm(),
-            note,
-        });
-    }
     let rms = (est.normalised_residuals.iter().map(|r| r * r).sum::<f64>()
         / est.normalised_residuals.len().max(1) as f64)
         .sqrt();
     Ok(CalibrationReport {
         mode,
-        bench: bench.name(),
+        bench: bench_name,
         parameters: parameter_rows(&est.extrinsics, &report),
         identifiability: report,
         converged: est.converged,
@@ -341,11 +359,54 @@ pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Res
             .zip(&est.residuals)
             .map(|(o, r)| (o.label.clone(), o.unit().to_string(), *r, o.sigma))
             .collect(),
-        validation,
-        measurement_duration_s: duration,
+        validation: Vec::new(),
+        validation_predicted: false,
+        measurement_duration_s: duration_s,
         observations: obs.len(),
         warnings,
         extrinsics: est.extrinsics,
         traces,
     })
+}
+
+/// The validation motions planned with the nominal extrinsics (before) and with `identified`
+/// (after), run on the bench and measured with the identified model.
+pub fn validation_rows(bench: &mut dyn Bench, nominal: &PhaseModel, identified: &Extrinsics) -> Vec<ValidationRow> {
+    let after_model = model_with(nominal, *identified);
+    ValidationMotion::ALL
+        .iter()
+        .map(|&m| {
+            let before = run_validation(bench, &after_model, &nominal.extrinsics, m, [0.0; 6]);
+            let after = run_validation(bench, &after_model, identified, m, [0.0; 6]);
+            let note = match (&before, &after) {
+                (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
+                _ => None,
+            };
+            ValidationRow {
+                motion: m.name().to_string(),
+                before_nm: before.as_ref().ok().map(|f| f.peak_to_peak_nm),
+                after_nm: after.as_ref().ok().map(|f| f.peak_to_peak_nm),
+                paper_nm: m.paper_after_nm(),
+                note,
+                before_curve_nm: before.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
+                after_curve_nm: after.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
+            }
+        })
+        .collect()
+}
+
+/// Validation predicted without a bench (traces recorded elsewhere): the validation motions run
+/// on a virtual bench built from `preset` whose truth is `identified` and which hides no
+/// effects. "Before" then says what the nominal extrinsics would do on a bench that really has
+/// the identified ones; "after" is the tracking floor of the identified model.
+pub fn predicted_validation_rows(
+    preset: &crate::bench::BenchPreset,
+    nominal: &PhaseModel,
+    identified: &Extrinsics,
+) -> Result<Vec<ValidationRow>, String> {
+    let mut p = preset.clone();
+    p.truth = *identified;
+    p.effects.clear();
+    let mut bench = crate::bench::VirtualBench::new(&p, None).map_err(|e| e.to_string())?;
+    Ok(validation_rows(&mut bench, nominal, identified))
 }

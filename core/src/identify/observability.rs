@@ -174,7 +174,7 @@ pub enum AnalysisError {
 }
 
 /// What the data say about one parameter.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParameterUncertainty {
     /// Name.
     pub name: String,
@@ -206,7 +206,7 @@ impl ParameterUncertainty {
 }
 
 /// Whether a combination is invisible or only weakly visible.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum CombinationKind {
     /// In the numerical null space: the data do not see it at all.
     NotSeen,
@@ -215,7 +215,7 @@ pub enum CombinationKind {
 }
 
 /// A parameter combination the data cannot determine.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Combination {
     /// `(name, coefficient)` in internal units, largest |coefficient| normalised to +1, small ones dropped,
     /// sorted by decreasing |coefficient|.
@@ -231,7 +231,7 @@ pub struct Combination {
 }
 
 /// Everything [`analyse`] finds.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct IdentifiabilityReport {
     /// Number of observations (rows).
     pub n_observations: usize,

@@ -1,0 +1,433 @@
+//! The application state every view reads: settings (persisted), the worker handle, the bench's
+//! position, the live signal, the wizard's steps and their traces, the identification and
+//! validation results. Owns applying the worker's events; views only read it and send commands.
+
+use crate::decimate::Decimator;
+use crate::dialogs::Dialogs;
+use crate::worker::{Command, Event, Pace, ValidationPair, Worker};
+use photorobot_core::alignment::SignalQuality;
+use photorobot_core::identify::calibration::{CalibrationReport, Mode};
+use photorobot_core::measure::Measurement;
+use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::model::kinematics::Chain;
+use photorobot_core::plan::Plan;
+use photorobot_core::trace::Trace;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+
+/// Settings kept between runs (eframe storage). Data is not kept here: sessions are files.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Settings {
+    /// Dark theme (else light).
+    pub dark: bool,
+    /// Bench preset (embedded name or file).
+    pub preset: String,
+    /// Random seed of the virtual bench.
+    pub seed: u64,
+    /// Identify with the joint estimator (else the paper's steps).
+    pub joint_mode: bool,
+    /// Bench clock speed against the wall clock while running plans; 0 = as fast as possible.
+    pub speed: f64,
+    /// Width of the scrolling live window (s).
+    pub live_window_s: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self { dark: true, preset: "table2-ideal".into(), seed: 7, joint_mode: true, speed: 0.0, live_window_s: 5.0 }
+    }
+}
+
+impl Settings {
+    /// The pacing these settings ask for.
+    pub fn pace(&self) -> Pace {
+        if self.speed > 0.0 {
+            Pace::Speed(self.speed)
+        } else {
+            Pace::Unpaced
+        }
+    }
+}
+
+/// Live fringe counting: each confirmed extremum of the irradiance is a λ/(4n) step of dL,
+/// signed by the direction in which the model says the gap moves.
+#[derive(Debug, Clone, Default)]
+pub struct LiveCounter {
+    looking_for_max: bool,
+    extreme: f64,
+    /// Signed number of λ/(4n) steps since the reset.
+    pub steps: i64,
+    /// Direction of the last counted step: +1 gap growing, −1 shrinking, 0 none yet.
+    pub direction: i8,
+    started: bool,
+    first: Option<f64>,
+}
+
+impl LiveCounter {
+    /// Feed samples; `hysteresis` is the drop from an extreme that confirms it, `sign` the
+    /// direction of the gap change over these samples.
+    pub fn feed(&mut self, samples: &[f64], hysteresis: f64, sign: f64) {
+        for &v in samples {
+            if !self.started {
+                // The first sample is no extremum: wait until the signal has moved by the
+                // hysteresis to know which extremum comes next.
+                let first = *self.first.get_or_insert(v);
+                if (v - first).abs() > hysteresis {
+                    self.started = true;
+                    self.looking_for_max = v > first;
+                    self.extreme = v;
+                }
+                continue;
+            }
+            if self.looking_for_max {
+                if v > self.extreme {
+                    self.extreme = v;
+                } else if v < self.extreme - hysteresis {
+                    self.count(sign);
+                    self.looking_for_max = false;
+                    self.extreme = v;
+                }
+            } else if v < self.extreme {
+                self.extreme = v;
+            } else if v > self.extreme + hysteresis {
+                self.count(sign);
+                self.looking_for_max = true;
+                self.extreme = v;
+            }
+        }
+    }
+
+    fn count(&mut self, sign: f64) {
+        let s = if sign > 0.0 {
+            1
+        } else if sign < 0.0 {
+            -1
+        } else {
+            0
+        };
+        self.steps += s as i64;
+        if s != 0 {
+            self.direction = s;
+        }
+    }
+}
+
+/// The live signal: the scrolling trace, the counter and the latest readouts.
+#[derive(Debug, Default)]
+pub struct LiveSignal {
+    /// Irradiance against bench time.
+    pub trace: Decimator,
+    /// Fringe counter.
+    pub counter: LiveCounter,
+    /// Frozen view (the trace still fills behind it).
+    pub paused: bool,
+    /// The model's gap at the latest sample (µm).
+    pub gap_um: Option<f64>,
+    /// Laser wavelength (nm).
+    pub wavelength_nm: f64,
+    /// Signal quality over the last second.
+    pub quality: Option<SignalQuality>,
+}
+
+/// Most samples kept in the live buffer.
+pub const LIVE_CAPACITY: usize = 20_000_000;
+
+impl LiveSignal {
+    /// dL since the counter's reset (nm).
+    pub fn dl_nm(&self, n_air: f64) -> f64 {
+        self.counter.steps as f64 * self.wavelength_nm / (4.0 * n_air)
+    }
+
+    /// The last `window_s` seconds of samples.
+    pub fn recent(&self, window_s: f64) -> &[f64] {
+        let t = self.trace.times();
+        let Some(&end) = t.last() else { return &[] };
+        let i = t.partition_point(|&x| x < end - window_s);
+        &self.trace.values()[i..]
+    }
+
+    fn push(&mut self, t_s: &[f64], irradiance: &[f64], model_step_nm: f64) {
+        self.trace.extend(t_s, irradiance);
+        if self.trace.len() > LIVE_CAPACITY {
+            self.trace.keep_last(LIVE_CAPACITY / 2);
+        }
+        self.quality = SignalQuality::of(self.recent(1.0));
+        let hysteresis = self.quality.map_or(f64::INFINITY, |q| 0.3 * (q.max - q.min).max(6.0 * q.noise_sigma));
+        self.counter.feed(irradiance, hysteresis, model_step_nm);
+    }
+}
+
+/// Where a wizard step is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StepState {
+    /// Not run yet.
+    Pending,
+    /// Running.
+    Running,
+    /// Ran to the end.
+    Done,
+    /// Stopped early (cancelled or failed): the traces recorded so far are kept.
+    Stopped(String),
+}
+
+/// One measurement step of the wizard.
+#[derive(Debug, Clone)]
+pub struct MeasurementStep {
+    /// Title.
+    pub title: &'static str,
+    /// What the robot does and why.
+    pub explanation: &'static str,
+    /// The plan.
+    pub plan: Plan,
+    /// Only the joint identifier uses it.
+    pub joint_only: bool,
+    /// Where it is.
+    pub state: StepState,
+    /// Its recorded traces.
+    pub traces: Vec<Trace>,
+    /// Bench time it took (s).
+    pub duration_s: f64,
+}
+
+/// The wizard's measurement steps.
+pub fn measurement_steps() -> Vec<MeasurementStep> {
+    let step = |title, explanation, plan, joint_only| MeasurementStep {
+        title,
+        explanation,
+        plan,
+        joint_only,
+        state: StepState::Pending,
+        traces: vec![],
+        duration_s: 0.0,
+    };
+    vec![
+        step(
+            "Strategy 1: translations",
+            "The XYZ stage translates the lamella along X_w and Z_w at several fixed offsets while the \
+             goniometers hold still. Each translation changes the gap only through the angle between the \
+             lamella normal and the fiber axis, so the fringes counted along X_w and Z_w give the two tilt \
+             parameters of the lamella (β_et, θ_et) to a few 0.0001°.",
+            Plan::strategy1(),
+            false,
+        ),
+        step(
+            "Strategy 2: rotations",
+            "The goniometers rotate the lamella about q4 (at several q5) and about q5 (at several q4). How \
+             the gap varies with the rotation says where the fiber is and how it points (β_wf, θ_wf, x_wf, \
+             z_wf), and, with strategy 1, how far the lamella plane sits from the rotation centre.",
+            Plan::strategy2(),
+            false,
+        ),
+        step(
+            "Extra measurements: tilt scans and absolute gaps",
+            "Wavelength sweeps at fixed poses measure the absolute gap (fiber to lamella, to 0.01 µm), and \
+             short rotation scans at offsets break the equivalences the paper's motions leave: without \
+             them Z_et and y_wf cannot be told apart (the paper's steps leave them undetermined).",
+            Plan::joint_extras(),
+            true,
+        ),
+    ]
+}
+
+/// Everything the views share.
+pub struct AppState {
+    /// Persisted settings.
+    pub settings: Settings,
+    /// The bench worker.
+    pub worker: Worker,
+    /// The robot model the software uses.
+    pub chain: Chain,
+    /// The extrinsics the views draw with: nominal, then the identified ones.
+    pub extrinsics: Extrinsics,
+    /// The bench's joints (µm, °).
+    pub q_display: [f64; 6],
+    /// Joint targets of the jog controls (µm, °).
+    pub jog_target: [f64; 6],
+    /// What the worker is doing.
+    pub busy: Option<String>,
+    /// Latest message for the status bar.
+    pub status: String,
+    /// The live signal.
+    pub live: LiveSignal,
+    /// The wizard's measurement steps.
+    pub steps: Vec<MeasurementStep>,
+    /// Which step is running and its progress (label, fraction).
+    pub running: Option<(usize, String, f64)>,
+    /// The identification result.
+    pub report: Option<Box<CalibrationReport>>,
+    /// Why identification failed.
+    pub identify_error: Option<String>,
+    /// Validation results.
+    pub validation: Option<Vec<ValidationPair>>,
+    /// Selected frame-tree node.
+    pub selected_frame: Option<usize>,
+    /// The robot view's camera.
+    pub camera: crate::views::robot::Camera,
+    /// Traces imported from files.
+    pub imported: Vec<Trace>,
+    /// Trace analyses by index in [`AppState::all_traces`].
+    pub analyses: HashMap<usize, Result<Box<Measurement>, String>>,
+    /// File dialogs (a real portal in the app, scripted in tests).
+    pub dialogs: Box<dyn Dialogs>,
+}
+
+impl AppState {
+    /// A state on the worker's bench.
+    pub fn new(settings: Settings, worker: Worker, dialogs: Box<dyn Dialogs>) -> Self {
+        let chain = worker.nominal.chain.clone();
+        let extrinsics = worker.nominal.extrinsics;
+        Self {
+            settings,
+            worker,
+            chain,
+            extrinsics,
+            q_display: [0.0; 6],
+            jog_target: [0.0; 6],
+            busy: None,
+            status: String::new(),
+            live: LiveSignal { wavelength_nm: 1550.0, ..Default::default() },
+            steps: measurement_steps(),
+            running: None,
+            report: None,
+            identify_error: None,
+            validation: None,
+            selected_frame: None,
+            camera: Default::default(),
+            imported: vec![],
+            analyses: HashMap::new(),
+            dialogs,
+        }
+    }
+
+    /// Every trace: the wizard's in step order, then the imported ones.
+    pub fn all_traces(&self) -> Vec<&Trace> {
+        self.steps.iter().flat_map(|s| s.traces.iter()).chain(self.imported.iter()).collect()
+    }
+
+    /// Trace `i` of [`AppState::all_traces`].
+    pub fn trace(&self, i: usize) -> Option<&Trace> {
+        self.steps.iter().flat_map(|s| s.traces.iter()).chain(self.imported.iter()).nth(i)
+    }
+
+    /// Start a wizard step (clears its earlier traces: a redo).
+    pub fn run_step(&mut self, i: usize) {
+        if self.running.is_some() || self.busy.is_some() {
+            return;
+        }
+        self.worker.live.store(false, std::sync::atomic::Ordering::Relaxed);
+        let step = &mut self.steps[i];
+        step.traces.clear();
+        step.state = StepState::Running;
+        self.analyses.clear();
+        self.live.counter = LiveCounter::default();
+        self.running = Some((i, step.plan.name.clone(), 0.0));
+        self.worker.send(Command::SetPace(self.settings.pace()));
+        self.worker.send(Command::Run { job: i, plan: step.plan.clone() });
+    }
+
+    /// Cancel what runs (the traces recorded so far are kept).
+    pub fn cancel(&mut self) {
+        self.worker.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// The steps the chosen identifier needs, and whether they are all done.
+    pub fn ready_to_identify(&self) -> bool {
+        self.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).all(|s| s.state == StepState::Done)
+    }
+
+    /// Identify from the recorded steps.
+    pub fn identify(&mut self) {
+        let mode = if self.settings.joint_mode { Mode::Joint } else { Mode::Paper };
+        let used: Vec<&MeasurementStep> =
+            self.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).collect();
+        let traces = used.iter().flat_map(|s| s.traces.iter().cloned()).collect();
+        let duration_s = used.iter().map(|s| s.duration_s).sum();
+        self.identify_error = None;
+        self.worker.send(Command::Identify { traces, duration_s, mode });
+    }
+
+    /// Apply every pending event of the worker.
+    pub fn poll_worker(&mut self) {
+        for e in self.worker.drain() {
+            self.apply(e);
+        }
+    }
+
+    /// Apply one event.
+    pub fn apply(&mut self, e: Event) {
+        match e {
+            Event::Samples { t_s, irradiance, q_display, wavelength_nm, gap_um, model_step_nm } => {
+                self.live.push(&t_s, &irradiance, model_step_nm);
+                self.live.gap_um = gap_um;
+                self.live.wavelength_nm = wavelength_nm;
+                self.q_display = q_display;
+            }
+            Event::Progress { label, fraction } => {
+                if let Some(r) = self.running.as_mut() {
+                    r.1 = label;
+                    r.2 = fraction;
+                }
+            }
+            Event::Position(q) => self.q_display = q,
+            Event::PlanDone { job, traces, duration_s, outcome } => {
+                if let Some(step) = self.steps.get_mut(job) {
+                    step.traces = traces;
+                    step.duration_s = duration_s;
+                    step.state = match outcome {
+                        Ok(()) => StepState::Done,
+                        Err(e) => StepState::Stopped(e),
+                    };
+                    self.status = format!("{}: {} traces recorded", step.title, step.traces.len());
+                }
+                self.running = None;
+            }
+            Event::Identified(r) => match r {
+                Ok(report) => {
+                    self.extrinsics = report.extrinsics;
+                    self.status = format!("identified from {} observations", report.observations);
+                    self.report = Some(report);
+                    self.validation = None;
+                }
+                Err(e) => self.identify_error = Some(e),
+            },
+            Event::Validated(pairs) => {
+                self.status = format!("validation done: {} motions, before and after", pairs.len());
+                self.validation = Some(pairs);
+            }
+            Event::Analysed { index, result } => {
+                self.analyses.insert(index, result);
+            }
+            Event::Busy(b) => {
+                if let Some(msg) = &b {
+                    self.status.clone_from(msg);
+                }
+                self.busy = b;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_live_counter_counts_each_extremum_once_with_the_model_direction() {
+        // 5 full fringes (10 extrema after the first) of a noisy cosine, gap growing.
+        let signal: Vec<f64> = (0..5000)
+            .map(|i| {
+                let x = i as f64 / 1000.0 * std::f64::consts::TAU;
+                1.0 + 0.4 * x.cos() + 0.01 * ((i * 7919 % 101) as f64 / 101.0 - 0.5)
+            })
+            .collect();
+        let mut c = LiveCounter::default();
+        c.feed(&signal, 0.1, 1.0);
+        // The start is a maximum already passed: extrema at 0.5, 1, …, 4.5 fringes = 9.
+        assert_eq!(c.steps, 9);
+        assert_eq!(c.direction, 1);
+        c.feed(&signal, 0.1, -1.0);
+        assert_eq!(c.steps, 9 - 10, "back down: ten more extrema, counted negative");
+        assert_eq!(c.direction, -1);
+    }
+}

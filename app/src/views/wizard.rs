@@ -1,0 +1,145 @@
+//! Calibration wizard: pre-alignment check, strategy 1, strategy 2 and the extra measurements,
+//! each explained (what the robot will do and why), with its planned motions, a run button,
+//! progress, cancel, the recorded traces and redo; then identification.
+
+use crate::state::{AppState, StepState};
+use egui::RichText;
+use egui_plot::{Line, Plot, PlotPoints};
+use photorobot_core::alignment::SignalQuality;
+
+/// Draw the wizard.
+pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
+    egui::ScrollArea::vertical().id_salt("wizard").show(ui, |ui| {
+        ui.heading("Calibration wizard");
+        ui.horizontal(|ui| {
+            ui.label("Identifier:");
+            ui.radio_value(&mut s.settings.joint_mode, true, "joint (every parameter, with σ)");
+            ui.radio_value(&mut s.settings.joint_mode, false, "paper (steps A, B, C)");
+        });
+        ui.separator();
+        ui.label(RichText::new("0. Pre-alignment").size(18.0).strong());
+        let q: Option<SignalQuality> = s.live.quality;
+        match q {
+            Some(q) => ui.label(q.advice()),
+            None => ui.label("no live signal measured yet: check the signal in the Align view first"),
+        };
+        if ui.button("Open the alignment gauge").clicked() {
+            *go_to_align = true;
+        }
+        for i in 0..s.steps.len() {
+            ui.separator();
+            step(ui, s, i);
+        }
+        ui.separator();
+        ui.label(RichText::new(format!("{}. Identify", s.steps.len() + 1)).size(18.0).strong());
+        let ready = s.ready_to_identify();
+        let idle = s.busy.is_none() && s.running.is_none();
+        if !ready {
+            ui.label("run every step above first (the extra measurements only for the joint identifier)");
+        }
+        if ui.add_enabled(ready && idle, egui::Button::new(RichText::new("Identify").size(18.0))).clicked() {
+            s.identify();
+        }
+        if s.busy.as_deref() == Some("identifying") {
+            ui.horizontal(|ui| {
+                ui.spinner();
+                ui.label("identifying: extracting dL and gaps from every trace, then the least-squares fit");
+            });
+        }
+        if let Some(e) = &s.identify_error {
+            ui.colored_label(ui.visuals().error_fg_color, format!("identification failed: {e}"));
+        }
+        if let Some(r) = &s.report {
+            ui.label(format!(
+                "identified from {} observations, residual {:.2} σ RMS: see Results",
+                r.observations, r.residual_rms_sigma
+            ));
+        }
+    });
+}
+
+fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
+    let idle = s.busy.is_none() && s.running.is_none();
+    let st = &s.steps[i];
+    let used = s.settings.joint_mode || !st.joint_only;
+    ui.label(RichText::new(format!("{}. {}", i + 1, st.title)).size(18.0).strong());
+    if !used {
+        ui.label("(not used by the paper identifier)");
+    }
+    ui.label(st.explanation);
+    let moves = st.plan.recorded_moves();
+    let sweeps = st.plan.segments.iter().filter(|g| matches!(g, photorobot_core::plan::Segment::Sweep { .. })).count();
+    let duration = st
+        .plan
+        .duration_s(s.chain.description(), [0.0; 6], &photorobot_core::plan::MotionLimits::default())
+        .map_or("?".into(), |d| format!("{:.1} min", d / 60.0));
+    egui::CollapsingHeader::new(format!(
+        "planned motions: {} segments, {moves} recorded moves, {sweeps} sweeps, about {duration} of bench time",
+        st.plan.segments.len()
+    ))
+    .id_salt(("plan", i))
+    .show(ui, |ui| {
+        for (k, g) in st.plan.segments.iter().enumerate().take(200) {
+            let what = match g {
+                photorobot_core::plan::Segment::Move { to, record, .. } => format!(
+                    "move to {:?}{}",
+                    to.values().map(|v| v.map_or("·".to_string(), |v| format!("{v:.1}"))),
+                    if *record { ", recorded" } else { "" }
+                ),
+                photorobot_core::plan::Segment::Sweep { from_nm, to_nm, .. } => {
+                    format!("wavelength sweep {from_nm:.1} to {to_nm:.1} nm")
+                }
+                photorobot_core::plan::Segment::Dwell { duration_s, .. } => format!("dwell {duration_s:.2} s"),
+            };
+            ui.monospace(format!("{:>3} {:<40} {what}", k + 1, g.label()));
+        }
+    });
+    let running_this = s.running.as_ref().is_some_and(|r| r.0 == i);
+    let pending = st.state == StepState::Pending;
+    ui.horizontal(|ui| {
+        let label = if pending { format!("Run step {} (F5)", i + 1) } else { format!("Redo step {}", i + 1) };
+        if ui.add_enabled(idle && used, egui::Button::new(label)).clicked() {
+            s.run_step(i);
+        }
+        if running_this && ui.button("Cancel (Esc)").clicked() {
+            s.cancel();
+        }
+        match &s.steps[i].state {
+            StepState::Pending => ui.label("not run"),
+            StepState::Running => ui.label("running…"),
+            StepState::Done => ui.label(format!("done: {} traces", s.steps[i].traces.len())),
+            StepState::Stopped(e) => ui.colored_label(
+                ui.visuals().warn_fg_color,
+                format!("stopped: {e}; {} traces kept", s.steps[i].traces.len()),
+            ),
+        };
+    });
+    if let Some((_, label, f)) = s.running.as_ref().filter(|r| r.0 == i) {
+        ui.add(egui::ProgressBar::new(*f as f32).show_percentage().text(format!("{label} — {:.0} %", f * 100.0)));
+    }
+    let st = &s.steps[i];
+    if !st.traces.is_empty() {
+        egui::CollapsingHeader::new(format!("recorded traces ({})", st.traces.len())).id_salt(("traces", i)).show(
+            ui,
+            |ui| {
+                for t in st.traces.iter().take(100) {
+                    ui.monospace(format!(
+                        "{:<44} {:>8} samples {:>8.2} s",
+                        t.meta.label,
+                        t.len(),
+                        t.t_s.last().unwrap_or(&0.0) - t.t_s[0]
+                    ));
+                }
+                if let Some(t) = st.traces.last() {
+                    let step = (t.len() / 2000).max(1);
+                    let pts: Vec<[f64; 2]> =
+                        (0..t.len()).step_by(step).map(|k| [t.t_s[k] - t.t_s[0], t.irradiance[k]]).collect();
+                    ui.label(format!("last trace: {}", t.meta.label));
+                    Plot::new(("last trace", i)).height(140.0).x_axis_label("s").y_axis_label("mW").show(ui, |p| {
+                        p.line(Line::new("irradiance", PlotPoints::from(pts)));
+                    });
+                }
+            },
+        );
+    }
+}

@@ -1,0 +1,432 @@
+//! The bench worker: a thread that owns the bench and does every slow thing (running plans,
+//! jogging, the live dither, identification, validation, trace analysis), so the UI never blocks.
+//! Owns the command and event types; the UI sends [`Command`]s and drains [`Event`]s each frame.
+//!
+//! Samples stream out while a segment records; pacing holds the bench clock to the wall clock
+//! (times a speed factor) so a virtual bench looks like a real one, or runs as fast as it can.
+
+use photorobot_core::bench::{run_plan, Bench, BenchPreset, RunControl, VirtualBench};
+use photorobot_core::identify::calibration::{report_from_traces, CalibrationReport, Mode};
+use photorobot_core::measure::{self, Measurement, PhaseModel};
+use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::plan::{JointTarget, Plan, Segment};
+use photorobot_core::trace::Trace;
+use photorobot_core::validate::{run_validation, ValidationFigure, ValidationMotion};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// How fast the bench clock runs against the wall clock.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum Pace {
+    /// Bench time = wall time × this factor.
+    Speed(f64),
+    /// No waiting (a virtual bench simulates as fast as it can).
+    Unpaced,
+}
+
+/// What the UI asks for.
+#[derive(Debug)]
+pub enum Command {
+    /// Run a plan; its traces come back in [`Event::PlanDone`] with the same `job`.
+    Run {
+        /// Caller's tag.
+        job: usize,
+        /// The plan.
+        plan: Plan,
+    },
+    /// Move (unrecorded) to joint values (µm, °).
+    Jog([f64; 6]),
+    /// Identify from traces (joint or paper mode).
+    Identify {
+        /// The recorded traces.
+        traces: Vec<Trace>,
+        /// Bench time they took (s).
+        duration_s: f64,
+        /// The identifier.
+        mode: Mode,
+    },
+    /// Run the four validation motions planned with the nominal and with the identified extrinsics.
+    Validate {
+        /// The identified extrinsics.
+        identified: Extrinsics,
+    },
+    /// Analyse a recorded trace (phase tracking, extremum counting or sweep fit) with the model.
+    Analyse {
+        /// Caller's tag (the trace's index).
+        index: usize,
+        /// The trace.
+        trace: Box<Trace>,
+        /// Extrinsics of the model used for the motion hint.
+        extrinsics: Extrinsics,
+    },
+    /// Change the pacing.
+    SetPace(Pace),
+    /// Stop the thread.
+    Shutdown,
+}
+
+/// One validation motion, planned before and after calibration.
+#[derive(Debug, Clone)]
+pub struct ValidationPair {
+    /// The motion.
+    pub motion: ValidationMotion,
+    /// Planned with the nominal extrinsics.
+    pub before: Result<ValidationFigure, String>,
+    /// Planned with the identified extrinsics.
+    pub after: Result<ValidationFigure, String>,
+}
+
+/// What the worker reports.
+#[derive(Debug)]
+pub enum Event {
+    /// New samples of the segment being recorded.
+    Samples {
+        /// Bench time (s).
+        t_s: Vec<f64>,
+        /// Irradiance (the trace's unit, mW).
+        irradiance: Vec<f64>,
+        /// Joints at the last sample (µm, °).
+        q_display: [f64; 6],
+        /// Laser wavelength at the last sample (nm).
+        wavelength_nm: f64,
+        /// The model's gap |L| at the last sample (µm), `None` when the beam misses the lamella.
+        gap_um: Option<f64>,
+        /// The model's phase-equivalent gap change since the previous batch (nm): its sign is
+        /// the direction of the fringes.
+        model_step_nm: f64,
+    },
+    /// Progress of the running segment.
+    Progress {
+        /// Segment label.
+        label: String,
+        /// Fraction of the plan done (0..1).
+        fraction: f64,
+    },
+    /// Joint positions after a move (µm, °).
+    Position([f64; 6]),
+    /// A plan finished, failed or was cancelled; every recorded trace is here.
+    PlanDone {
+        /// The caller's tag.
+        job: usize,
+        /// Recorded traces (a partial one of an interrupted segment included).
+        traces: Vec<Trace>,
+        /// Bench time used (s).
+        duration_s: f64,
+        /// `Err` with the reason when it did not run to the end.
+        outcome: Result<(), String>,
+    },
+    /// Identification finished.
+    Identified(Result<Box<CalibrationReport>, String>),
+    /// Validation finished.
+    Validated(Vec<ValidationPair>),
+    /// A trace analysis finished.
+    Analysed {
+        /// The caller's tag.
+        index: usize,
+        /// The analysis.
+        result: Result<Box<Measurement>, String>,
+    },
+    /// The worker started (`Some(what)`) or finished (`None`) a job.
+    Busy(Option<String>),
+}
+
+/// The UI's handle on the worker thread.
+pub struct Worker {
+    commands: Sender<Command>,
+    events: Receiver<Event>,
+    /// Set to cancel the running plan.
+    pub cancel: Arc<AtomicBool>,
+    /// While set and idle, the worker dithers the lamella along the beam and streams the signal.
+    pub live: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+    /// The bench's name.
+    pub bench_name: String,
+    /// The software's model before calibration.
+    pub nominal: PhaseModel,
+}
+
+/// Step of the live view's dither staircase along the beam (µm).
+pub const DITHER_STEP_UM: f64 = 0.1;
+/// Steps per half-cycle: 2 µm, about 2.6 fringes at 1.55 µm, in about 0.8 s.
+pub const DITHER_STEPS: usize = 20;
+
+impl Worker {
+    /// Start a worker on the virtual bench of `preset` with random seed `seed`. `notify` is
+    /// called after every event (the GUI passes `request_repaint`).
+    pub fn virtual_bench(
+        preset_name: &str,
+        seed: Option<u64>,
+        pace: Pace,
+        notify: Box<dyn Fn() + Send>,
+    ) -> Result<Self, String> {
+        let preset = BenchPreset::resolve(preset_name).map_err(|e| e.to_string())?;
+        let bench = VirtualBench::new(&preset, seed).map_err(|e| e.to_string())?;
+        let nominal = PhaseModel::new(
+            preset.robot_description().map_err(|e| e.to_string())?,
+            Extrinsics::nominal_design(),
+            preset.optics,
+            &preset.ambient,
+            preset.laser.wavelength_nm,
+        )?;
+        Ok(Self::start(Box::new(bench), nominal, pace, notify))
+    }
+
+    /// Start a worker on any bench.
+    pub fn start(bench: Box<dyn Bench>, nominal: PhaseModel, pace: Pace, notify: Box<dyn Fn() + Send>) -> Self {
+        let (commands, rx) = channel();
+        let (tx, events) = channel();
+        let cancel = Arc::new(AtomicBool::new(false));
+        let live = Arc::new(AtomicBool::new(false));
+        let bench_name = bench.name();
+        let mut state = Thread {
+            bench,
+            nominal: nominal.clone(),
+            pace,
+            tx,
+            notify,
+            cancel: cancel.clone(),
+            live: live.clone(),
+            dither_up: true,
+        };
+        let handle = std::thread::Builder::new()
+            .name("bench worker".into())
+            .spawn(move || state.serve(rx))
+            .expect("the OS starts a thread");
+        Self { commands, events, cancel, live, handle: Some(handle), bench_name, nominal }
+    }
+
+    /// Send a command (ignored once the thread is gone).
+    pub fn send(&self, c: Command) {
+        if matches!(c, Command::Run { .. }) {
+            self.cancel.store(false, Ordering::Relaxed);
+        }
+        let _ = self.commands.send(c);
+    }
+
+    /// Every event received since the last call.
+    pub fn drain(&self) -> Vec<Event> {
+        self.events.try_iter().collect()
+    }
+
+    /// Wait up to `timeout` for one event.
+    pub fn recv_timeout(&self, timeout: Duration) -> Option<Event> {
+        self.events.recv_timeout(timeout).ok()
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.cancel.store(true, Ordering::Relaxed);
+        self.live.store(false, Ordering::Relaxed);
+        let _ = self.commands.send(Command::Shutdown);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+struct Thread {
+    bench: Box<dyn Bench>,
+    nominal: PhaseModel,
+    pace: Pace,
+    tx: Sender<Event>,
+    notify: Box<dyn Fn() + Send>,
+    cancel: Arc<AtomicBool>,
+    live: Arc<AtomicBool>,
+    dither_up: bool,
+}
+
+impl Thread {
+    fn send(&self, e: Event) {
+        let _ = self.tx.send(e);
+        (self.notify)();
+    }
+
+    fn serve(&mut self, rx: Receiver<Command>) {
+        self.send(Event::Position(self.bench.position_display()));
+        loop {
+            let command = match rx.recv_timeout(Duration::from_millis(20)) {
+                Ok(c) => c,
+                Err(RecvTimeoutError::Timeout) => {
+                    if self.live.load(Ordering::Relaxed) {
+                        self.dither();
+                    }
+                    continue;
+                }
+                Err(RecvTimeoutError::Disconnected) => return,
+            };
+            match command {
+                Command::Shutdown => return,
+                Command::SetPace(p) => self.pace = p,
+                Command::Run { job, plan } => {
+                    self.send(Event::Busy(Some(format!("running {}", plan.name))));
+                    let pace = self.pace;
+                    let (traces, duration_s, outcome) = self.run(&plan, pace, true);
+                    self.send(Event::PlanDone { job, traces, duration_s, outcome });
+                    self.send(Event::Busy(None));
+                }
+                Command::Jog(to) => {
+                    let plan = Plan {
+                        name: "jog".into(),
+                        description: String::new(),
+                        segments: vec![Segment::Move { to: JointTarget::all(to), record: false, label: "jog".into() }],
+                    };
+                    if let (_, _, Err(e)) = self.run(&plan, Pace::Unpaced, false) {
+                        self.send(Event::Busy(Some(format!("jog refused: {e}"))));
+                        self.send(Event::Busy(None));
+                    }
+                }
+                Command::Identify { traces, duration_s, mode } => {
+                    self.send(Event::Busy(Some("identifying".into())));
+                    let r = report_from_traces(traces, duration_s, self.bench.name(), &self.nominal, mode);
+                    self.send(Event::Identified(r.map(Box::new)));
+                    self.send(Event::Busy(None));
+                }
+                Command::Validate { identified } => {
+                    self.send(Event::Busy(Some("validating".into())));
+                    let analysis = PhaseModel { extrinsics: identified, ..self.nominal.clone() };
+                    let nominal = self.nominal.extrinsics;
+                    let mut pairs = Vec::new();
+                    for m in ValidationMotion::ALL {
+                        let before = run_validation(self.bench.as_mut(), &analysis, &nominal, m, [0.0; 6])
+                            .map_err(|e| e.to_string());
+                        let after = run_validation(self.bench.as_mut(), &analysis, &identified, m, [0.0; 6])
+                            .map_err(|e| e.to_string());
+                        pairs.push(ValidationPair { motion: m, before, after });
+                    }
+                    self.send(Event::Position(self.bench.position_display()));
+                    self.send(Event::Validated(pairs));
+                    self.send(Event::Busy(None));
+                }
+                Command::Analyse { index, trace, extrinsics } => {
+                    let model = PhaseModel { extrinsics, ..self.nominal.clone() };
+                    let result = measure::analyse(&trace, &model).map(Box::new).map_err(|e| e.to_string());
+                    self.send(Event::Analysed { index, result });
+                }
+            }
+        }
+    }
+
+    /// One live dither half-cycle along the beam (q2), at real time: a staircase of small recorded
+    /// steps (the stages' speed limits would make one move of a few fringes last milliseconds).
+    fn dither(&mut self) {
+        let q = self.bench.position_display();
+        let limits = self.bench.robot().links[1].limits;
+        let mut step = if self.dither_up { DITHER_STEP_UM } else { -DITHER_STEP_UM };
+        let span = step * DITHER_STEPS as f64;
+        if q[1] + span > limits.max || q[1] + span < limits.min {
+            step = -step;
+        }
+        self.dither_up = !self.dither_up;
+        let segments = (1..=DITHER_STEPS)
+            .map(|k| {
+                let mut to = q;
+                to[1] = q[1] + step * k as f64;
+                Segment::Move { to: JointTarget::all(to), record: true, label: "live dither".into() }
+            })
+            .collect();
+        let plan = Plan { name: "live dither".into(), description: String::new(), segments };
+        let (_, _, outcome) = self.run(&plan, Pace::Speed(1.0), false);
+        if outcome.is_err() {
+            self.live.store(false, Ordering::Relaxed);
+        }
+    }
+
+    /// Run a plan, streaming samples (paced) and progress; returns traces, bench time, outcome.
+    fn run(&mut self, plan: &Plan, pace: Pace, report_progress: bool) -> (Vec<Trace>, f64, Result<(), String>) {
+        let wall0 = Instant::now();
+        let bench_t0 = self.bench.clock_s();
+        let total_s = plan
+            .duration_s(self.bench.robot(), self.bench.position_display(), self.bench.motion_limits())
+            .unwrap_or(1.0)
+            .max(1e-9);
+        let tx = self.tx.clone();
+        let notify = &self.notify;
+        let model = &self.nominal;
+        let fp =
+            photorobot_core::model::optics::FabryPerot::new(&model.optics, self.bench.wavelength_nm(), model.n_air)
+                .ok();
+        let mut last_gap_nm: Option<f64> = None;
+        let mut on_samples = |tr: &Trace, from: usize| {
+            if from >= tr.len() {
+                return;
+            }
+            let last = tr.len() - 1;
+            let q = tr.joints_display(last);
+            let gap_um = model
+                .extrinsics
+                .cavity(&model.chain.end_effector(&model.chain.description().q_from_display(&q)))
+                .ok()
+                .map(|c| c.length_um.abs());
+            let phase_gap = fp.as_ref().map(|fp| model.phase_gap_nm(fp, &q)).filter(|g| g.is_finite());
+            let step = match (phase_gap, last_gap_nm) {
+                (Some(g), Some(prev)) => g - prev,
+                (Some(g), None) => g - fp.as_ref().map_or(g, |fp| model.phase_gap_nm(fp, &tr.joints_display(from))),
+                _ => 0.0,
+            };
+            last_gap_nm = phase_gap.or(last_gap_nm);
+            let _ = tx.send(Event::Samples {
+                t_s: tr.t_s[from..].to_vec(),
+                irradiance: tr.irradiance[from..].to_vec(),
+                q_display: q,
+                wavelength_nm: tr.wavelength_nm[last],
+                gap_um,
+                model_step_nm: step,
+            });
+            notify();
+            if let Pace::Speed(f) = pace {
+                let due = Duration::from_secs_f64(((tr.t_s[last] - bench_t0) / f.max(1e-6)).max(0.0));
+                if let Some(wait) = due.checked_sub(wall0.elapsed()) {
+                    std::thread::sleep(wait.min(Duration::from_millis(500)));
+                }
+            }
+            if report_progress {
+                let _ = tx.send(Event::Progress {
+                    label: tr.meta.label.clone(),
+                    fraction: ((tr.t_s[last] - bench_t0) / total_s).clamp(0.0, 1.0),
+                });
+            }
+        };
+        let mut on_progress = |_: f64| {};
+        let mut control =
+            RunControl { cancel: &self.cancel, on_samples: &mut on_samples, on_progress: &mut on_progress };
+        let run = run_plan(self.bench.as_mut(), plan, &mut control);
+        if report_progress {
+            let done = (self.bench.clock_s() - bench_t0) / total_s;
+            let _ = self.tx.send(Event::Progress { label: plan.name.clone(), fraction: done.clamp(0.0, 1.0) });
+        }
+        self.send(Event::Position(self.bench.position_display()));
+        (run.traces, run.duration_s, run.outcome.map_err(|e| e.to_string()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_live_dither_streams_samples_at_real_time_up_and_down_the_beam() {
+        let w = Worker::virtual_bench("table2-ideal", Some(3), Pace::Unpaced, Box::new(|| {})).unwrap();
+        w.live.store(true, Ordering::Relaxed);
+        let start = Instant::now();
+        let (mut samples, mut bench_span, mut q2) = (0usize, (f64::INFINITY, f64::NEG_INFINITY), vec![]);
+        while start.elapsed() < Duration::from_secs(3) {
+            if let Some(Event::Samples { t_s, q_display, .. }) = w.recv_timeout(Duration::from_millis(100)) {
+                samples += t_s.len();
+                bench_span = (bench_span.0.min(t_s[0]), bench_span.1.max(*t_s.last().unwrap()));
+                q2.push(q_display[1]);
+            }
+        }
+        w.live.store(false, Ordering::Relaxed);
+        let span = bench_span.1 - bench_span.0;
+        // Paced at real time: about as much bench time as wall time (less the start-up).
+        assert!(span > 1.5 && span < 3.2, "bench time {span} s in 3 s");
+        assert!(samples > 10_000, "{samples} samples");
+        let (lo, hi) = q2.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| (a.0.min(v), a.1.max(v)));
+        assert!(hi - lo > 1.5 && hi - lo < 2.1 + 1e-9, "q2 range {lo}..{hi}");
+        assert!(lo >= -1e-9, "starts at 0 and goes up first: {lo}");
+    }
+}

@@ -1,0 +1,496 @@
+//! The calibration report a technician files: one self-contained HTML file (inline CSS and SVG, no external
+//! resource) rendered from a session. Owns the report's layout and its plots (hand-written SVG).
+//!
+//! Contents: bench, software and session versions; the Table II-style parameter table (value,
+//! σ, determined or why not; an undetermined parameter never shows a bare number); the
+//! identifiability warnings; the residual of every observation in units of its σ; the
+//! validation motions before and after calibration (figures and curves); the diagnosis if one
+//! was run; the notes and the list of traces.
+
+use crate::identify::calibration::{CalibrationReport, ValidationRow};
+use crate::session::{Session, FORMAT_VERSION};
+use std::fmt::Write as _;
+
+/// Escape text for HTML (also inside attributes).
+pub fn escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+const STYLE: &str = "body{font-family:'DejaVu Sans',Arial,sans-serif;max-width:60em;margin:1.5em auto;padding:0 1em;color:#222;line-height:1.4}\
+h1{font-size:1.6em;margin-bottom:0.2em}h2{font-size:1.2em;border-bottom:1px solid #ccc;margin-top:1.6em}\
+table{border-collapse:collapse;margin:0.6em 0}th,td{border:1px solid #ccc;padding:0.25em 0.6em;text-align:left;vertical-align:top}\
+th{background:#f0f0f0}td.num{text-align:right;font-family:'DejaVu Sans Mono',monospace}\
+.no{color:#a00;font-weight:bold}.yes{color:#070}.muted{color:#777}.warn{background:#fff4e0;border-left:4px solid #e90;padding:0.3em 0.6em;margin:0.3em 0}\
+.plots{display:flex;flex-wrap:wrap;gap:1em}figure{margin:0.5em 0}figcaption{font-size:0.9em;color:#444;max-width:44em}";
+
+/// The whole report as an HTML document.
+pub fn render_html(session: &Session) -> String {
+    let mut h = String::new();
+    let title = match &session.calibration {
+        Some(c) => format!("Calibration report: {}", c.bench),
+        None => format!("Session report: {}", session.bench.name),
+    };
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title><style>{STYLE}</style></head><body>\n<h1>{}</h1>\n",
+        escape(&title),
+        escape(&title)
+    );
+    versions(&mut h, session);
+    match &session.calibration {
+        Some(c) => {
+            summary(&mut h, c);
+            parameter_table(&mut h, c);
+            identifiability(&mut h, c);
+            residual_plot(&mut h, c);
+            validation(&mut h, c);
+        }
+        None => {
+            h.push_str("<p class=\"warn\">No calibration in this session yet: only the measurements are listed.</p>\n")
+        }
+    }
+    diagnosis(&mut h, session);
+    notes_and_traces(&mut h, session);
+    h.push_str("</body></html>\n");
+    h
+}
+
+fn versions(h: &mut String, s: &Session) {
+    h.push_str("<table>\n");
+    let mut row = |k: &str, v: String| {
+        let _ = writeln!(h, "<tr><th>{}</th><td>{}</td></tr>", escape(k), escape(&v));
+    };
+    row("bench", s.bench.name.clone());
+    if let Some(p) = &s.bench.preset {
+        row("bench preset (model)", p.clone());
+    }
+    if let Some(seed) = s.bench.seed {
+        row("virtual bench seed", seed.to_string());
+    }
+    row("robot", format!("{} ({} joints)", s.robot.name, s.robot.dof()));
+    row("measured with", s.software.clone());
+    row("report by", format!("{} (session format {FORMAT_VERSION})", crate::session::software()));
+    h.push_str("</table>\n");
+}
+
+fn summary(h: &mut String, c: &CalibrationReport) {
+    let _ = writeln!(
+        h,
+        "<h2>Summary</h2>\n<p>Identifier: <b>{}</b> mode. {} observations from {:.1} min of measurement. Solver: {}. \
+         Residual RMS {:.2} σ (1 = at the noise floor of the measurements).</p>",
+        match c.mode {
+            crate::identify::calibration::Mode::Paper => "paper (steps A, B, C)",
+            crate::identify::calibration::Mode::Joint => "joint estimate",
+        },
+        c.observations,
+        c.measurement_duration_s / 60.0,
+        if c.converged {
+            "<span class=\"yes\">converged</span>".to_string()
+        } else {
+            format!("<span class=\"no\">NOT converged</span> ({})", escape(&c.termination))
+        },
+        c.residual_rms_sigma
+    );
+}
+
+/// A number with `digits` significant digits after the decimal point chosen from σ.
+fn with_sigma(value: f64, sigma: Option<f64>) -> (String, String) {
+    match sigma {
+        Some(s) if s > 0.0 && s.is_finite() => {
+            let decimals = (1 - s.log10().floor() as i64).clamp(0, 12) as usize;
+            (format!("{value:.decimals$}"), format!("{s:.decimals$}"))
+        }
+        _ => (format!("{value:.6}"), "–".into()),
+    }
+}
+
+fn parameter_table(h: &mut String, c: &CalibrationReport) {
+    h.push_str(
+        "<h2>Identified parameters</h2>\n<p>The extrinsic parameters of the paper's Table II: where the fiber and \
+         the lamella are. σ is the standard uncertainty (68 %). A parameter the measurements do not determine is \
+         shown as such, never as a number.</p>\n<table>\n<tr><th>parameter</th><th>what it is</th><th>value</th><th>σ</th><th>unit</th><th>determined</th></tr>\n",
+    );
+    for p in &c.parameters {
+        if p.determined {
+            let (v, s) = with_sigma(p.value, p.sigma);
+            let _ = writeln!(
+                h,
+                "<tr><td>{}</td><td>{}</td><td class=\"num\">{v}</td><td class=\"num\">{s}</td><td>{}</td><td class=\"yes\">yes</td></tr>",
+                escape(&p.name),
+                meaning(&p.name),
+                escape(&p.unit)
+            );
+        } else {
+            let _ = writeln!(
+                h,
+                "<tr><td>{}</td><td>{}</td><td class=\"muted\">not determined</td><td class=\"num\">–</td><td>{}</td><td><span class=\"no\">no</span>: {}</td></tr>",
+                escape(&p.name),
+                meaning(&p.name),
+                escape(&p.unit),
+                escape(p.reason.as_deref().unwrap_or("not determined by these data"))
+            );
+        }
+    }
+    h.push_str("</table>\n");
+}
+
+/// What a parameter of the paper's Table II is, in words (docs/conventions.md).
+fn meaning(name: &str) -> &'static str {
+    match name {
+        "beta_et" => "lamella tilt about the end-effector X axis",
+        "theta_et" => "lamella tilt about the end-effector Y axis",
+        "beta_wf" => "fiber axis tilt about the world X axis",
+        "theta_wf" => "fiber axis tilt about the fiber Z axis",
+        "Z_et" => "lamella offset along the end-effector Z axis",
+        "x_wf" => "fiber end, world X (across the beam)",
+        "y_wf" => "fiber end, world Y (along the beam)",
+        "z_wf" => "fiber end, world Z (across the beam)",
+        _ => "",
+    }
+}
+
+fn identifiability(h: &mut String, c: &CalibrationReport) {
+    let id = &c.identifiability;
+    h.push_str("<h2>Identifiability and warnings</h2>\n<ul>\n");
+    let _ = writeln!(h, "<li>rank {} of {} parameters (with detector gains)</li>", id.rank, id.parameters.len());
+    if let Some(k) = id.condition_number {
+        let _ = writeln!(
+            h,
+            "<li>condition number {}{}</li>",
+            sci(k),
+            if k > 100.0 { " (above 100: some combinations are poorly determined)" } else { "" }
+        );
+    }
+    if let Some(k) = id.condition_number_determined {
+        let _ = writeln!(h, "<li>condition number of the determined parameters {}</li>", sci(k));
+    }
+    for (a, b, rho) in &id.strong_correlations {
+        let _ = writeln!(h, "<li>strongly correlated: {} and {} (ρ = {rho:+.3})</li>", escape(a), escape(b));
+    }
+    for u in &id.unobservable {
+        let _ = writeln!(h, "<li>{}</li>", escape(&u.description));
+    }
+    h.push_str("</ul>\n");
+    for w in &c.warnings {
+        let _ = writeln!(h, "<div class=\"warn\">{}</div>", escape(w));
+    }
+}
+
+fn sci(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.3e}")
+    } else {
+        "∞ (exactly singular)".into()
+    }
+}
+
+/// A "nice" tick step for a range: 1, 2 or 5 × 10ⁿ giving about `count` ticks.
+fn tick_step(range: f64, count: f64) -> f64 {
+    let raw = (range / count).max(f64::MIN_POSITIVE);
+    let mag = 10f64.powf(raw.log10().floor());
+    let r = raw / mag;
+    mag * if r < 1.5 {
+        1.0
+    } else if r < 3.5 {
+        2.0
+    } else if r < 7.5 {
+        5.0
+    } else {
+        10.0
+    }
+}
+
+fn tick_label(v: f64, step: f64) -> String {
+    let decimals = (-step.log10().floor()).clamp(0.0, 9.0) as usize;
+    format!("{v:.decimals$}")
+}
+
+/// One data series of a plot.
+struct Series<'a> {
+    name: &'a str,
+    color: &'a str,
+    points: Vec<(f64, f64)>,
+    /// Draw as markers instead of a line.
+    markers: bool,
+}
+
+/// An SVG plot with axes, ticks, labels and a legend; y range from the data (and `y_include`).
+fn svg_plot(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series<'_>],
+    y_include: &[f64],
+    guides: &[f64],
+) -> String {
+    let (w, hgt) = (640.0, 300.0);
+    let (left, right, top, bottom) = (70.0, 16.0, 34.0, 46.0);
+    let all = series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for &(x, y) in all {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    for &y in y_include {
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    if !x0.is_finite() {
+        (x0, x1, y0, y1) = (0.0, 1.0, -1.0, 1.0);
+    }
+    if x1 - x0 <= 0.0 {
+        x1 = x0 + 1.0;
+    }
+    if y1 - y0 <= 0.0 {
+        let pad = y0.abs().max(1.0) * 0.1;
+        (y0, y1) = (y0 - pad, y1 + pad);
+    }
+    let ystep = tick_step(y1 - y0, 5.0);
+    let (y0, y1) = ((y0 / ystep).floor() * ystep, (y1 / ystep).ceil() * ystep);
+    let xstep = tick_step(x1 - x0, 6.0);
+    let px = |x: f64| left + (x - x0) / (x1 - x0) * (w - left - right);
+    let py = |y: f64| top + (y1 - y) / (y1 - y0) * (hgt - top - bottom);
+    let mut s = String::new();
+    let _ = write!(
+        s,
+        "<svg width=\"{w}\" height=\"{hgt}\" viewBox=\"0 0 {w} {hgt}\" font-family=\"DejaVu Sans, Arial, sans-serif\" font-size=\"11\">\
+         <rect width=\"{w}\" height=\"{hgt}\" fill=\"white\"/>\
+         <text x=\"{}\" y=\"18\" font-size=\"13\" font-weight=\"bold\">{}</text>",
+        left,
+        escape(title)
+    );
+    // Grid and ticks.
+    let mut y = y0;
+    while y <= y1 + ystep * 1e-6 {
+        let v = py(y);
+        let _ = write!(
+            s,
+            "<line x1=\"{left}\" y1=\"{v:.1}\" x2=\"{:.1}\" y2=\"{v:.1}\" stroke=\"#e4e4e4\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>",
+            w - right,
+            left - 5.0,
+            v + 4.0,
+            tick_label(y, ystep)
+        );
+        y += ystep;
+    }
+    let mut x = (x0 / xstep).ceil() * xstep;
+    while x <= x1 + xstep * 1e-6 {
+        let v = px(x);
+        let _ = write!(
+            s,
+            "<line x1=\"{v:.1}\" y1=\"{top}\" x2=\"{v:.1}\" y2=\"{:.1}\" stroke=\"#f0f0f0\"/><text x=\"{v:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+            hgt - bottom,
+            hgt - bottom + 15.0,
+            tick_label(x, xstep)
+        );
+        x += xstep;
+    }
+    for &g in guides {
+        if g >= y0 && g <= y1 {
+            let v = py(g);
+            let _ = write!(
+                s,
+                "<line x1=\"{left}\" y1=\"{v:.1}\" x2=\"{:.1}\" y2=\"{v:.1}\" stroke=\"#999\" stroke-dasharray=\"4 3\"/>",
+                w - right
+            );
+        }
+    }
+    let _ = write!(
+        s,
+        "<rect x=\"{left}\" y=\"{top}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"none\" stroke=\"#444\"/>\
+         <text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>\
+         <text transform=\"translate(14 {:.1}) rotate(-90)\" text-anchor=\"middle\">{}</text>",
+        w - left - right,
+        hgt - top - bottom,
+        (left + w - right) / 2.0,
+        hgt - 8.0,
+        escape(x_label),
+        (top + hgt - bottom) / 2.0,
+        escape(y_label)
+    );
+    for (k, sr) in series.iter().enumerate() {
+        let pts = sr.points.iter().filter(|p| p.0.is_finite() && p.1.is_finite());
+        if sr.markers {
+            for &(x, y) in pts {
+                let _ = write!(s, "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"2.2\" fill=\"{}\"/>", px(x), py(y), sr.color);
+            }
+        } else {
+            let coords: Vec<String> = pts.map(|&(x, y)| format!("{:.1},{:.1}", px(x), py(y))).collect();
+            let _ = write!(
+                s,
+                "<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\" points=\"{}\"/>",
+                sr.color,
+                coords.join(" ")
+            );
+        }
+        // Legend, top right.
+        let ly = top + 14.0 + 14.0 * k as f64;
+        let lx = w - right - 190.0;
+        let _ = write!(
+            s,
+            "<rect x=\"{lx:.1}\" y=\"{:.1}\" width=\"10\" height=\"10\" fill=\"{}\"/><text x=\"{:.1}\" y=\"{ly:.1}\">{}</text>",
+            ly - 9.0,
+            sr.color,
+            lx + 14.0,
+            escape(sr.name)
+        );
+    }
+    s.push_str("</svg>");
+    s
+}
+
+fn residual_plot(h: &mut String, c: &CalibrationReport) {
+    h.push_str("<h2>Residuals</h2>\n");
+    let colors = [
+        ("nm", "#1f77b4", "gap changes (nm)"),
+        ("µm", "#d62728", "absolute gaps (µm)"),
+        ("mW", "#2ca02c", "fringe amplitudes (mW)"),
+    ];
+    let mut series: Vec<Series<'_>> = Vec::new();
+    for (unit, color, name) in colors {
+        let points: Vec<(f64, f64)> = c
+            .residuals
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.1 == unit && r.3 > 0.0)
+            .map(|(k, r)| (k as f64 + 1.0, r.2 / r.3))
+            .collect();
+        if !points.is_empty() {
+            series.push(Series { name, color, points, markers: true });
+        }
+    }
+    let other: Vec<(f64, f64)> = c
+        .residuals
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| !colors.iter().any(|c| c.0 == r.1) && r.3 > 0.0)
+        .map(|(k, r)| (k as f64 + 1.0, r.2 / r.3))
+        .collect();
+    if !other.is_empty() {
+        series.push(Series { name: "other", color: "#7f7f7f", points: other, markers: true });
+    }
+    let _ = writeln!(
+        h,
+        "<figure>{}<figcaption>Measured minus predicted for every observation, divided by its standard uncertainty σ. \
+         With a good model most points lie between the dashed lines at ±3 σ; a pattern or many points outside \
+         means something the model does not describe (see the diagnosis).</figcaption></figure>",
+        svg_plot(
+            "Residual per observation",
+            "observation number",
+            "residual / σ",
+            &series,
+            &[-3.5, 3.5],
+            &[-3.0, 0.0, 3.0]
+        )
+    );
+}
+
+fn validation(h: &mut String, c: &CalibrationReport) {
+    h.push_str("<h2>Validation</h2>\n");
+    if c.validation_predicted {
+        h.push_str(
+            "<p class=\"warn\">PREDICTED, not measured: the traces were recorded elsewhere, so the validation motions were run \
+             on a virtual bench whose truth is the identified extrinsics. Run them on the real bench to confirm.</p>\n",
+        );
+    }
+    h.push_str(
+        "<p>Each validation motion should leave the Fabry-Perot cavity length unchanged. The figure of merit is the \
+         peak-to-peak variation of the cavity length during the motion, planned with the nominal (design) extrinsics \
+         (<i>before</i>) and with the identified ones (<i>after</i>).</p>\n<table>\n<tr><th>motion</th><th>before (nm)</th><th>after (nm)</th><th>paper after (nm)</th><th>note</th></tr>\n",
+    );
+    let f = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.1}"));
+    for v in &c.validation {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{:.0}</td><td>{}</td></tr>",
+            escape(&v.motion),
+            f(v.before_nm),
+            f(v.after_nm),
+            v.paper_nm,
+            escape(v.note.as_deref().unwrap_or(""))
+        );
+    }
+    h.push_str("</table>\n<div class=\"plots\">\n");
+    for v in &c.validation {
+        if v.before_curve_nm.is_empty() && v.after_curve_nm.is_empty() {
+            continue;
+        }
+        let _ = writeln!(h, "<figure>{}</figure>", validation_plot(v));
+    }
+    h.push_str("</div>\n<p class=\"muted\">Before and after share the plot; the after curve is also listed in the table above \
+                when it is too small to see at the before curve's scale.</p>\n");
+}
+
+fn validation_plot(v: &ValidationRow) -> String {
+    let along = |c: &[f64]| -> Vec<(f64, f64)> {
+        let n = c.len().max(2) - 1;
+        c.iter().enumerate().map(|(i, &y)| (100.0 * i as f64 / n as f64, y)).collect()
+    };
+    let before = format!("before: {} nm p-p", v.before_nm.map_or("–".into(), |x| format!("{x:.1}")));
+    let after = format!("after: {} nm p-p", v.after_nm.map_or("–".into(), |x| format!("{x:.1}")));
+    let series = [
+        Series { name: &before, color: "#d62728", points: along(&v.before_curve_nm), markers: false },
+        Series { name: &after, color: "#1f77b4", points: along(&v.after_curve_nm), markers: false },
+    ];
+    svg_plot(&v.motion, "progress along the motion (%)", "cavity length change (nm)", &series, &[0.0], &[])
+}
+
+fn diagnosis(h: &mut String, s: &Session) {
+    h.push_str("<h2>Diagnosis</h2>\n");
+    let Some(d) = &s.diagnosis else {
+        h.push_str("<p class=\"muted\">No diagnosis was run in this session.</p>\n");
+        return;
+    };
+    let _ = writeln!(h, "<p><b>Verdict:</b> {}</p>", escape(&d.verdict));
+    h.push_str("<table>\n<tr><th>effect</th><th>estimate</th><th>σ</th><th>unit</th><th>score</th><th>absorbed by the extrinsics</th><th>note</th></tr>\n");
+    for e in &d.effects {
+        let (v, sg) = with_sigma(e.estimate, e.sigma);
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td class=\"num\">{v}</td><td class=\"num\">{sg}</td><td>{}</td><td class=\"num\">{:.2} {}</td><td class=\"num\">{}</td><td>{}</td></tr>",
+            escape(&e.name),
+            escape(&e.unit),
+            e.score,
+            escape(&e.score_kind),
+            e.absorbed_fraction.map_or("–".into(), |f| format!("{:.0} %", 100.0 * f)),
+            escape(&e.note)
+        );
+    }
+    h.push_str("</table>\n");
+}
+
+fn notes_and_traces(h: &mut String, s: &Session) {
+    if !s.notes.is_empty() {
+        let _ = writeln!(h, "<h2>Notes</h2>\n<p>{}</p>", escape(&s.notes).replace('\n', "<br>"));
+    }
+    let _ = writeln!(
+        h,
+        "<h2>Measurements</h2>\n<details><summary>{} recorded traces (in the session's traces/ folder)</summary>\n<table>\n<tr><th>file</th><th>label</th><th>kind</th><th>samples</th></tr>",
+        s.traces.len()
+    );
+    for t in &s.traces {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}{}</td><td>{}</td><td class=\"num\">{}</td></tr>",
+            escape(&t.file),
+            escape(&t.label),
+            if t.complete { "" } else { " <span class=\"no\">(partial, not used)</span>" },
+            t.kind,
+            t.samples
+        );
+    }
+    h.push_str("</table></details>\n");
+}

@@ -1,0 +1,225 @@
+//! Every class of bad input (truncated file, wrong version, wrong types, NaN or infinite values,
+//! non-monotonic time, mismatched column counts, empty trace, a huge file) for every file the
+//! program reads (traces, sessions, column mappings, imported traces): a clear error that names
+//! the file and the line or field and says what was expected, never a panic.
+
+use photorobot_core::bench::BenchPreset;
+use photorobot_core::files::to_ron_string;
+use photorobot_core::import::{import_file, ColumnMapping};
+use photorobot_core::plan::Plan;
+use photorobot_core::session::{BenchInfo, DiagnosisRecord, EffectFinding, Session};
+use photorobot_core::trace::{ReadOptions, Trace};
+use std::path::{Path, PathBuf};
+
+const HEADER: &str = "t_s,q1_um,q2_um,q3_um,q4_deg,q5_deg,q6_deg,wavelength_nm,irradiance";
+const FOREIGN: &str = "time_ms,X_nm,Z_nm,lambda_nm,pd_V";
+
+/// Which reader a case goes through.
+#[derive(Debug, Clone, Copy)]
+enum Kind {
+    Trace,
+    Session,
+    Mapping,
+    Import,
+}
+
+/// What the file holds.
+enum Content {
+    Text(String),
+    /// A sparse file of this many bytes (nothing written: a reader that read it would take minutes).
+    Huge(u64),
+}
+
+fn mapping_text() -> String {
+    r#"ColumnMapping(
+    format_version: 1,
+    columns: {
+        "t_s": (source: Column("time_ms"), unit: "ms"),
+        "q1_um": (source: Column("Z_nm"), unit: "nm"),
+        "q2_um": (source: Constant(0.0), unit: "um"),
+        "q3_um": (source: Column("X_nm"), unit: "nm"),
+        "q4_deg": (source: Constant(0.0), unit: "deg"),
+        "q5_deg": (source: Constant(0.0), unit: "deg"),
+        "q6_deg": (source: Constant(0.0), unit: "deg"),
+        "wavelength_nm": (source: Column("lambda_nm"), unit: "nm"),
+        "irradiance": (source: Column("pd_V"), unit: "V", scale: 10.0),
+    },
+)
+"#
+    .to_string()
+}
+
+fn session_text() -> String {
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    let info = BenchInfo {
+        name: "virtual bench table2-ideal".into(),
+        preset: Some("table2-ideal".into()),
+        description: None,
+        seed: Some(1),
+    };
+    let mut s = Session::new(info, preset.robot_description().unwrap());
+    s.plans = vec![Plan::strategy2()];
+    s.diagnosis = Some(DiagnosisRecord {
+        effects: vec![EffectFinding {
+            name: "q2 (Y) scale".into(),
+            estimate: 800.0,
+            unit: "ppm".into(),
+            sigma: Some(30.0),
+            score: 12.0,
+            score_kind: "ΔBIC".into(),
+            absorbed_fraction: None,
+            note: String::new(),
+        }],
+        verdict: "q2 scale".into(),
+    });
+    to_ron_string(&s, Path::new("session.ron")).unwrap()
+}
+
+fn read(kind: Kind, path: &Path) -> Result<(), String> {
+    let mapping = ColumnMapping::from_ron_str(&mapping_text(), Path::new("mapping.ron")).unwrap();
+    match kind {
+        Kind::Trace => Trace::read_csv(path).map(drop).map_err(|e| e.to_string()),
+        Kind::Session => Session::load(path).map(drop).map_err(|e| e.to_string()),
+        Kind::Mapping => ColumnMapping::load(path).map(drop).map_err(|e| e.to_string()),
+        Kind::Import => import_file(path, &mapping, &ReadOptions::default()).map(drop).map_err(|e| e.to_string()),
+    }
+}
+
+#[test]
+fn every_bad_input_class_gives_a_clear_error_naming_file_and_place() {
+    let ok_trace = format!("# photorobot trace v1\n{HEADER}\n0,0,0,0,0,0,0,1560,0.5\n0.1,0,0,0,0,0,0,1560,0.5\n");
+    let ok_foreign = format!("{FOREIGN}\n0,1000,0,1560,0.5\n10,1100,0,1560,0.4\n");
+    let session = session_text();
+    let mapping = mapping_text();
+    // Line of a field in the valid session text (1-based), for the type errors.
+    let line_of = |needle: &str| session.lines().position(|l| l.contains(needle)).unwrap() + 1;
+    let cases: Vec<(&str, Kind, Content, Vec<String>)> = vec![
+        // 1. Truncated files.
+        ("truncated trace: metadata only", Kind::Trace, Content::Text("# photorobot trace v1\n# label: x\n".into()),
+            vec!["truncated file: no header row".into(), "expected a header line `t_s,q1_um".into()]),
+        ("truncated trace: cut in a row", Kind::Trace, Content::Text(ok_trace[..ok_trace.len() - 12].to_string()),
+            vec![":4: expected 9 fields (one per header column), found 6 (truncated row?)".into()]),
+        ("truncated session", Kind::Session, Content::Text(session[..session.len() / 2].to_string()),
+            vec!["expected a Session(format_version: 1".into()]),
+        ("truncated mapping", Kind::Mapping, Content::Text(mapping[..mapping.len() / 2].to_string()),
+            vec!["expected a ColumnMapping(format_version: 1".into()]),
+        ("truncated import", Kind::Import, Content::Text(ok_foreign[..ok_foreign.len() - 6].to_string()),
+            vec![":3: expected 5 fields (one per header column), found 4 (truncated row?)".into()]),
+        // 2. Wrong versions.
+        ("newer trace format", Kind::Trace, Content::Text(ok_trace.replace("trace v1", "trace v2")),
+            vec![":1: unsupported format `# photorobot trace v2` (expected `# photorobot trace v1`)".into()]),
+        ("newer session format", Kind::Session, Content::Text(session.replace("format_version: 1", "format_version: 2")),
+            vec!["field `format_version`: found 2, but this program".into(), "reads session formats up to 1".into(), "open it with that version or newer".into()]),
+        ("older session format", Kind::Session, Content::Text(session.replace("format_version: 1", "format_version: 0")),
+            vec!["field `format_version`: found 0, which is older".into(), "photorobot calibrate --traces".into()]),
+        ("session without a version", Kind::Session, Content::Text(session.replace("format_version: 1,", "")),
+            vec!["field `format_version`: missing; expected `format_version: 1`".into()]),
+        ("newer mapping format", Kind::Mapping, Content::Text(mapping.replace("format_version: 1", "format_version: 3")),
+            vec!["field `format_version`: expected 1".into(), "found 3".into()]),
+        // 3. Wrong types.
+        ("text in a trace number", Kind::Trace, Content::Text(ok_trace.replace("0.1,0,0,0", "0.1,0,0,abc")),
+            vec![":4: column `q3_um`: expected a number, found `abc`".into()]),
+        ("text as the session version", Kind::Session, Content::Text(session.replace("format_version: 1", "format_version: \"one\"")),
+            vec![format!("session.ron:{}:", line_of("format_version")), "expected a Session(".into()]),
+        ("text as a plan rate", Kind::Session, Content::Text(session.replacen("rate_nm_per_s: ", "rate_nm_per_s: \"fast\" + ", 1)),
+            vec![format!("session.ron:{}:", line_of("rate_nm_per_s")), "expected a Session(".into()]),
+        ("text as a mapping scale", Kind::Mapping, Content::Text(mapping.replace("unit: \"ms\")", "unit: \"ms\", scale: \"x\")")),
+            vec!["mapping.ron:4:62: Expected float".into(), "expected a ColumnMapping(".into()]),
+        ("unknown unit in a mapping", Kind::Mapping, Content::Text(mapping.replace("unit: \"nm\"),\n        \"q2_um\"", "unit: \"furlong\"),\n        \"q2_um\"")),
+            vec!["field `columns.\"q1_um\".unit`: unknown unit `furlong` for q1_um (expected one of: m, mm, um (µm), nm, pm)".into()]),
+        ("unknown column in a mapping", Kind::Mapping, Content::Text(mapping.replace("\"irradiance\": (", "\"power\": (")),
+            vec!["field `columns.\"power\"`: not one of our columns (expected one of t_s, q1_um".into()]),
+        ("time constant in a mapping", Kind::Mapping, Content::Text(mapping.replace("Column(\"time_ms\")", "Constant(0.0)")),
+            vec!["field `columns.\"t_s\".source`: expected Column(\"<time column>\"): time must be recorded".into()]),
+        // 4. NaN and infinite values.
+        ("NaN in a trace", Kind::Trace, Content::Text(ok_trace.replace("0.1,0,0,0,0,0", "0.1,0,0,0,0,NaN")),
+            vec![":4: column `q5_deg`: expected a finite number, found NaN".into()]),
+        ("infinity in a trace", Kind::Trace, Content::Text(ok_trace.replace("1560,0.5\n0.1", "inf,0.5\n0.1")),
+            vec![":3: column `wavelength_nm`: expected a finite number, found inf".into()]),
+        ("NaN in a session", Kind::Session, Content::Text(session.replace("estimate: 800.0", "estimate: NaN")),
+            vec!["field `diagnosis.effects[0].estimate`: expected a finite number".into()]),
+        ("NaN as a mapping scale", Kind::Mapping, Content::Text(mapping.replace("unit: \"ms\")", "unit: \"ms\", scale: NaN)")),
+            vec!["field `columns.\"t_s\".scale`: expected a finite, non-zero factor, found NaN".into()]),
+        ("infinity in an import", Kind::Import, Content::Text(ok_foreign.replace("10,1100", "10,-inf")),
+            vec![":3: column `X_nm`: expected a finite number, found -inf".into()]),
+        ("overflow after the mapping", Kind::Import, Content::Text(ok_foreign.replace("1560,0.4", "1560,1e308")),
+            vec!["column `irradiance`, data row 2: inf after the mapping's unit conversion and scale".into()]),
+        // 5. Non-monotonic time.
+        ("time goes back in a trace", Kind::Trace, Content::Text(format!("{ok_trace}0.05,0,0,0,0,0,0,1560,0.5\n")),
+            vec![":5: column `t_s`: time 0.05 s is not after 0.1 s on line 4 (expected strictly increasing time)".into()]),
+        ("time goes back in an import", Kind::Import, Content::Text(format!("{ok_foreign}5,0,0,1560,0.5\n")),
+            vec![":4: column `time_ms`: time 5 is not after 10 on line 3 (expected strictly increasing time)".into()]),
+        // 6. Mismatched column counts.
+        ("extra field in a trace row", Kind::Trace, Content::Text(format!("{ok_trace}0.2,0,0,0,0,0,0,1560,0.5,9\n")),
+            vec![":5: expected 9 fields (one per header column), found 10".into()]),
+        ("missing required column", Kind::Trace, Content::Text(ok_trace.replace("q2_um,", "")),
+            vec![":2: missing required column(s) `q2_um`".into()]),
+        ("mapped column absent", Kind::Import, Content::Text(ok_foreign.replace("X_nm", "Y_nm")),
+            vec![":1: no column `X_nm` in the header (the column mapping reads it for `q3_um`)".into()]),
+        ("short import row", Kind::Import, Content::Text(format!("{ok_foreign}20,1\n")),
+            vec![":4: expected 5 fields (one per header column), found 2".into()]),
+        // 7. Empty traces and files.
+        ("header without rows", Kind::Trace, Content::Text(format!("{HEADER}\n")),
+            vec!["empty trace: the header is followed by no data rows (expected at least one row)".into()]),
+        ("empty trace file", Kind::Trace, Content::Text(String::new()), vec!["truncated file: no header row".into()]),
+        ("import without rows", Kind::Import, Content::Text(format!("{FOREIGN}\n")), vec!["empty trace".into()]),
+        ("empty session file", Kind::Session, Content::Text(String::new()), vec!["session.ron:1:".into(), "expected a Session(".into()]),
+        // 8. Huge files, refused from their size.
+        ("huge trace", Kind::Trace, Content::Huge(3 << 30),
+            vec!["3221225472 bytes, above the limit of 2147483648 bytes for a trace file; refusing to read it".into()]),
+        ("huge import", Kind::Import, Content::Huge(3 << 30), vec!["above the limit of 2147483648 bytes for a trace file".into()]),
+        ("huge session", Kind::Session, Content::Huge(40 << 20),
+            vec!["41943040 bytes, above the limit of 33554432 bytes for a session file; refusing to read it".into()]),
+        ("huge mapping", Kind::Mapping, Content::Huge(2 << 20), vec!["above the limit of 1048576 bytes for a column mapping".into()]),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let mut failures = Vec::new();
+    for (k, (name, kind, content, wants)) in cases.into_iter().enumerate() {
+        let file = match kind {
+            Kind::Session => "session.ron".to_string(),
+            Kind::Mapping => "mapping.ron".to_string(),
+            _ => format!("case{k}.csv"),
+        };
+        let case_dir = dir.path().join(format!("case{k}"));
+        std::fs::create_dir(&case_dir).unwrap();
+        let path: PathBuf = case_dir.join(&file);
+        match content {
+            Content::Text(t) => std::fs::write(&path, t).unwrap(),
+            Content::Huge(n) => std::fs::File::create(&path).unwrap().set_len(n).unwrap(),
+        }
+        let start = std::time::Instant::now();
+        let result = std::panic::catch_unwind(|| read(kind, &path));
+        let err = match result {
+            Err(_) => panic!("{name}: the reader panicked"),
+            Ok(Ok(())) => panic!("{name}: accepted"),
+            Ok(Err(e)) => e,
+        };
+        assert!(
+            err.starts_with(&path.display().to_string()),
+            "{name}: the message does not start with the file: {err}"
+        );
+        for want in &wants {
+            if !err.contains(want.as_str()) {
+                failures.push(format!("{name}: got `{err}`, want `{want}`"));
+            }
+        }
+        assert!(
+            start.elapsed().as_secs_f64() < 2.0,
+            "{name}: took {:?} (a huge file must be refused unread)",
+            start.elapsed()
+        );
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    // The valid files behind the cases are accepted.
+    let valid = dir.path().join("valid");
+    std::fs::create_dir(&valid).unwrap();
+    for (kind, file, text) in [
+        (Kind::Trace, "t.csv", &ok_trace),
+        (Kind::Session, "session.ron", &session),
+        (Kind::Mapping, "mapping.ron", &mapping),
+        (Kind::Import, "i.csv", &ok_foreign),
+    ] {
+        std::fs::write(valid.join(file), text).unwrap();
+        read(kind, &valid.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
+    }
+}

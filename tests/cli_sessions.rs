@@ -1,0 +1,208 @@
+//! End to end (issue 7): traces written by the virtual bench identify through `photorobot
+//! calibrate --traces` into a session; the session loads and re-identifies to identical results;
+//! the same traces renamed and re-mapped into another acquisition system's columns and units
+//! identify to the same results; `photorobot report` turns the session into one self-contained
+//! HTML file. A short plan keeps the three identifications cheap.
+
+use photorobot_app::cli::{run, Outcome};
+use photorobot_core::identify::calibration::{report_from_traces, Mode};
+use photorobot_core::measure::PhaseModel;
+use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use photorobot_core::session::Session;
+use photorobot_core::trace::Trace;
+use serde_json::Value;
+use std::path::Path;
+
+fn cli(args: &[&str]) -> String {
+    let mut out = Vec::new();
+    let argv: Vec<String> = std::iter::once("photorobot").chain(args.iter().copied()).map(String::from).collect();
+    let outcome = run(argv, &mut out).unwrap_or_else(|e| panic!("photorobot {}: {e}", args.join(" ")));
+    assert_eq!(outcome, Outcome::Done);
+    String::from_utf8(out).unwrap()
+}
+
+fn calibrate(extra: &[&str], out: &Path) -> Value {
+    let out = out.display().to_string();
+    let mut args =
+        vec!["calibrate", "--bench", "table2-ideal", "--seed", "7", "--mode", "paper", "--json", "--out", &out];
+    args.extend_from_slice(extra);
+    serde_json::from_str(&cli(&args)).unwrap()
+}
+
+fn values(doc: &Value) -> Vec<f64> {
+    doc["parameters"].as_array().unwrap().iter().map(|p| p["value"].as_f64().unwrap()).collect()
+}
+
+/// Write the traces as another acquisition system would: other names, order and units, no
+/// metadata (labels only in the file names), and a mapping back.
+fn write_foreign(traces: &[Trace], dir: &Path) -> std::path::PathBuf {
+    std::fs::create_dir_all(dir.join("run")).unwrap();
+    for (i, t) in traces.iter().enumerate() {
+        let mut s = String::from("pd_mW,time_ms,Z_nm,Y_nm,X_nm,a_mrad,b_mrad,c_deg,lambda_um,temp_C\n");
+        for k in 0..t.len() {
+            let q = t.joints_display(k);
+            s.push_str(&format!(
+                "{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},21.5\n",
+                t.irradiance[k],
+                t.t_s[k] * 1e3,
+                q[0] * 1e3,
+                q[1] * 1e3,
+                q[2] * 1e3,
+                q[3].to_radians() * 1e3,
+                q[4].to_radians() * 1e3,
+                q[5],
+                t.wavelength_nm[k] * 1e-3,
+            ));
+        }
+        let name = format!("rec {i:03} {}.csv", t.meta.label.replace(['/', ':', '>', '\\'], "_"));
+        std::fs::write(dir.join("run").join(name), s).unwrap();
+    }
+    let mapping = r#"ColumnMapping(
+        format_version: 1,
+        columns: {
+            "t_s": (source: Column("time_ms"), unit: "ms"),
+            "q1_um": (source: Column("Z_nm"), unit: "nm"),
+            "q2_um": (source: Column("Y_nm"), unit: "nm"),
+            "q3_um": (source: Column("X_nm"), unit: "nm"),
+            "q4_deg": (source: Column("a_mrad"), unit: "mrad"),
+            "q5_deg": (source: Column("b_mrad"), unit: "mrad"),
+            "q6_deg": (source: Column("c_deg"), unit: "deg"),
+            "wavelength_nm": (source: Column("lambda_um"), unit: "um"),
+            "irradiance": (source: Column("pd_mW"), unit: "mW"),
+        },
+    )"#;
+    let path = dir.join("mapping.ron");
+    std::fs::write(&path, mapping).unwrap();
+    path
+}
+
+#[test]
+fn session_round_trip_import_and_report() {
+    let root = tempfile::tempdir().unwrap();
+    let t0 = std::time::Instant::now();
+    // Traces written by the virtual bench (a short plan: the identification is the cost here).
+    let sim = root.path().join("sim");
+    let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/small-plan.ron");
+    cli(&["simulate", "--bench", "table2-ideal", "--seed", "7", "--plan", plan, "--out", &sim.display().to_string()]);
+    let sim_traces = photorobot_core::import::read_folder(&sim, None).unwrap();
+    assert_eq!(sim_traces.len(), 9);
+
+    // 3a. `calibrate --traces`: the virtual bench's traces through the identifier, a session written.
+    let s1 = root.path().join("from-traces");
+    let sim_dir = sim.display().to_string();
+    let measured = calibrate(&["--traces", &sim_dir], &s1);
+    eprintln!("--traces (identify + predicted validation): {:.1} s", t0.elapsed().as_secs_f64());
+    assert_eq!(measured["validation_predicted"], true);
+    assert_eq!(measured["observations"].as_u64().unwrap() as usize, measured["residuals"].as_array().unwrap().len());
+
+    // A folder holding a session is never overwritten.
+    let mut sink = Vec::new();
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", &sim_dir, "--out"];
+    let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
+    argv.push(s1.display().to_string());
+    let err = run(argv, &mut sink).unwrap_err().to_string();
+    assert!(err.contains("already holds a session (session.ron); choose another folder"), "{err}");
+
+    // A folder holding an unfinished measurement is offered for --resume, not overwritten.
+    let unfinished = root.path().join("unfinished");
+    let mut partial = Session::load(&s1).unwrap();
+    partial.calibration = None;
+    partial.autosave(&unfinished).unwrap();
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--mode", "paper", "--out"];
+    let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
+    argv.push(unfinished.display().to_string());
+    let err = run(argv, &mut sink).unwrap_err().to_string();
+    assert!(
+        err.contains("holds an unfinished measurement (session.autosave.ron); add --resume to continue it"),
+        "{err}"
+    );
+
+    // 1. The session file: bench, robot, every trace referenced and identical, the calibration.
+    let session = Session::load(&s1).unwrap();
+    assert_eq!(session.format_version, 1);
+    assert_eq!(session.bench.preset.as_deref(), Some("table2-ideal"));
+    assert_eq!(session.traces.len(), sim_traces.len());
+    assert!(session.traces.iter().all(|r| r.step.is_none() && r.complete));
+    let calibration = session.calibration.clone().expect("a calibration in the session");
+    // As printed (serde_json reads floats to within an ulp or two, not bit for bit).
+    assert_eq!(values(&measured).len(), calibration.parameters.len());
+    for (p, printed) in calibration.parameters.iter().zip(values(&measured)) {
+        assert!((p.value - printed).abs() <= 1e-14 * p.value.abs().max(1e-12), "{}: {} vs {printed}", p.name, p.value);
+    }
+    assert!(s1.join("extrinsics.ron").exists() && s1.join("report.json").exists());
+
+    // 6. Round trip: load, re-identify: identical results (bit for bit), the same traces.
+    let t1 = std::time::Instant::now();
+    let traces = session.load_traces(&s1).unwrap();
+    assert_eq!(traces, sim_traces);
+    let preset = session.bench.description.clone().unwrap();
+    let nominal = PhaseModel::new(
+        session.robot.clone(),
+        Extrinsics::nominal_design(),
+        preset.optics,
+        &preset.ambient,
+        preset.laser.wavelength_nm,
+    )
+    .unwrap();
+    let again = report_from_traces(traces.clone(), 0.0, "again".into(), &nominal, Mode::Paper).unwrap();
+    eprintln!("re-identify: {:.1} s", t1.elapsed().as_secs_f64());
+    assert_eq!(again.extrinsics, calibration.extrinsics);
+    assert_eq!(again.parameters, calibration.parameters);
+    assert_eq!(again.identifiability, calibration.identifiability);
+    assert_eq!(again.residuals, calibration.residuals);
+    // Saving what was loaded writes the same file.
+    let copy = root.path().join("copy");
+    session.save(&copy).unwrap();
+    assert_eq!(std::fs::read(copy.join("session.ron")).unwrap(), std::fs::read(s1.join("session.ron")).unwrap());
+
+    // 3b. Re-mapped and renamed, as another acquisition system writes them: the same results to
+    // rounding (ms → s and nm → µm are not exact in binary), far inside σ.
+    let t3 = std::time::Instant::now();
+    let mapping = write_foreign(&traces, &root.path().join("foreign"));
+    let s3 = root.path().join("from-foreign");
+    let foreign_dir = root.path().join("foreign/run").display().to_string();
+    let mapping = mapping.display().to_string();
+    let remapped = calibrate(&["--traces", &foreign_dir, "--mapping", &mapping], &s3);
+    eprintln!("--traces --mapping: {:.1} s", t3.elapsed().as_secs_f64());
+    for (k, p) in measured["parameters"].as_array().unwrap().iter().enumerate() {
+        let (a, b) = (p["value"].as_f64().unwrap(), remapped["parameters"][k]["value"].as_f64().unwrap());
+        let sigma = p["sigma"].as_f64().unwrap_or(1.0);
+        assert!((a - b).abs() <= 1e-3 * sigma + 1e-9 * a.abs(), "{}: {a} vs {b} (σ {sigma})", PARAMETER_NAMES[k].0);
+        assert_eq!(p["determined"], remapped["parameters"][k]["determined"]);
+    }
+    let s3_session = Session::load(&s3).unwrap();
+    let labels: Vec<&str> = s3_session.traces.iter().map(|r| r.label.as_str()).collect();
+    assert!(labels[0].starts_with("rec 000 "), "labels from file names: {labels:?}");
+    let kinds: Vec<_> = s3_session.traces.iter().map(|r| r.kind).collect();
+    let original: Vec<_> = session.traces.iter().map(|r| r.kind).collect();
+    assert_eq!(kinds, original, "sweeps recognised from the data");
+
+    // 7. The report: one self-contained HTML file.
+    let html_path = root.path().join("report.html");
+    cli(&["report", &s1.display().to_string(), "--out", &html_path.display().to_string()]);
+    let html = std::fs::read_to_string(&html_path).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
+    assert!(!html.contains("http://") && !html.contains("https://"), "no external reference");
+    assert!(!html.contains("<script") && !html.contains("<link") && !html.contains("src="), "nothing loaded");
+    for p in &calibration.parameters {
+        assert!(html.contains(&format!("<tr><td>{}</td>", p.name)), "a row for {}", p.name);
+        if !p.determined {
+            let row = html.lines().find(|l| l.starts_with(&format!("<tr><td>{}</td>", p.name))).unwrap();
+            assert!(row.contains("<td class=\"muted\">not determined</td>"), "{row}");
+            assert!(!row.contains(&format!("{:.4}", p.value)), "no bare number for an undetermined parameter: {row}");
+        }
+    }
+    let svgs = html.matches("<svg ").count();
+    let curves = calibration.validation.iter().filter(|v| !v.before_curve_nm.is_empty()).count();
+    assert!(curves > 0, "validation curves recorded");
+    assert_eq!(svgs, 1 + curves, "residual + validation plots");
+    assert!(html.matches("<circle ").count() >= calibration.residuals.len() / 2, "residual markers");
+    assert!(html.contains("<polyline "), "validation curves");
+    assert!(html.contains("PREDICTED, not measured"));
+    assert!(html.contains(env!("CARGO_PKG_VERSION")), "software version");
+    assert!(html.contains("No diagnosis was run"));
+    for w in &calibration.warnings {
+        assert!(html.contains(&photorobot_core::report::escape(w)), "warning shown: {w}");
+    }
+    eprintln!("total: {:.1} s", t0.elapsed().as_secs_f64());
+}
