@@ -73,7 +73,10 @@ fn simulate_refuses_bad_inputs_clearly() {
     let out = dir.path().join("t");
     let e =
         cli(&["simulate", "--bench", "no-such", "--plan", "strategy2", "--out", out.to_str().unwrap()]).unwrap_err();
-    assert!(e.to_string().contains("not an embedded preset (expected one of: table2-ideal, femto-lab)"), "{e}");
+    assert!(
+        e.to_string().contains("not an embedded preset (expected one of: table2-ideal, femto-lab, hidden-pivot)"),
+        "{e}"
+    );
     let bad_plan = dir.path().join("bad.ron");
     std::fs::write(&bad_plan, PLAN.replace("q2_um: 10.0", "q2_um: 400.0")).unwrap();
     let e = cli(&[

@@ -40,6 +40,8 @@ pub enum Command {
     Fringes(FringesArgs),
     /// Measure, identify and validate end to end on a bench; write the session.
     Calibrate(crate::cli_calibrate::CalibrateArgs),
+    /// Find where model and data disagree on a calibration session, name the missing effect, add it.
+    Diagnose(crate::cli_diagnose::DiagnoseArgs),
     /// Write a session's calibration report as one self-contained HTML file.
     Report(ReportArgs),
     /// Start the workbench GUI (the default when no command is given).
@@ -195,6 +197,7 @@ where
         Some(Command::Simulate(a)) => simulate(&a, out).map(|()| Outcome::Done),
         Some(Command::Fringes(a)) => fringes(&a, out).map(|()| Outcome::Done),
         Some(Command::Calibrate(a)) => crate::cli_calibrate::calibrate(&a, out).map(|()| Outcome::Done),
+        Some(Command::Diagnose(a)) => crate::cli_diagnose::diagnose(&a, out).map(|()| Outcome::Done),
         Some(Command::Report(a)) => report(&a, out).map(|()| Outcome::Done),
         Some(Command::Emulate(a)) => crate::cli_emulate::emulate(&a, out).map(|()| Outcome::Done),
     }

@@ -3,6 +3,7 @@
 
 pub mod alignment;
 pub mod bench;
+pub mod diagnose;
 pub mod files;
 pub mod fringes;
 pub mod hardware;

@@ -12,9 +12,10 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The presets shipped with the project, embedded so the app runs anywhere.
-pub const EMBEDDED: [(&str, &str); 2] = [
+pub const EMBEDDED: [(&str, &str); 3] = [
     ("table2-ideal", include_str!("../../../assets/benches/table2-ideal.ron")),
     ("femto-lab", include_str!("../../../assets/benches/femto-lab.ron")),
+    ("hidden-pivot", include_str!("../../../assets/benches/hidden-pivot.ron")),
 ];
 
 /// Which robot the bench has.

@@ -41,6 +41,7 @@ pub fn observations_from_trace(
                 kind: ObservationKind::AbsoluteGap { at_display: trace.joints_display(0), gap_um: s.gap.gap_um },
                 sigma: s.gap.sigma_um.hypot(options.gap_sigma_floor_um),
                 wavelength_nm: trace.wavelength_nm[trace.len() / 2],
+                time_s: [trace.t_s[0], trace.t_s[trace.len() - 1]],
             });
         }
         Measurement::Motion(m) => {
@@ -58,6 +59,7 @@ pub fn observations_from_trace(
                     },
                     sigma: sigma.hypot(options.sigma_floor_nm),
                     wavelength_nm,
+                    time_s: [trace.t_s[0], trace.t_s[i]],
                 });
             }
             if label.starts_with("tilt scan") {
@@ -101,6 +103,7 @@ fn amplitudes(trace: &Trace, dl_nm: &[f64], half_fringe_nm: f64, group: usize, w
                 // The extremum values each carry the noise σ (plus the bias of sampling a peak).
                 sigma: sigma.max(1e-12) * std::f64::consts::FRAC_1_SQRT_2 * 2.0,
                 wavelength_nm,
+                time_s: [trace.t_s[mid]; 2],
             }
         })
         .collect()

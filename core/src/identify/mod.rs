@@ -12,6 +12,7 @@ pub mod observability;
 pub mod paper;
 
 use crate::measure::PhaseModel;
+use crate::model::effects::Effect;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::optics::FabryPerot;
 use serde::{Deserialize, Serialize};
@@ -72,6 +73,10 @@ pub struct Observation {
     pub sigma: f64,
     /// Vacuum wavelength (nm).
     pub wavelength_nm: f64,
+    /// Bench time (s) of the start and end of the observation (a gap change's two poses; a
+    /// pose measurement's start and end): what time-dependent effects (drift) act on.
+    #[serde(default)]
+    pub time_s: [f64; 2],
 }
 
 impl Observation {
@@ -146,26 +151,46 @@ pub fn half_peak_to_peak_mw(fp: &FabryPerot, gap_um: f64, tilt_rad: f64) -> f64 
 /// Predict an observation from extrinsics `e` and the gain of its amplitude group (ignored for
 /// other kinds). NaN when the beam misses the lamella.
 pub fn predict(model: &PhaseModel, fp: &FabryPerot, e: &Extrinsics, obs: &Observation, gain: f64) -> f64 {
+    predict_with_path(model, fp, e, obs, gain, &[])
+}
+
+/// [`predict`] with path effects (drift, path scale: [`Effect::gap_change_nm`]) acting on the
+/// gap at the observation's times, in the order given, as the virtual bench applies them.
+/// Geometric effects act through `model.chain` (see [`crate::model::effects::apply_all`]).
+pub fn predict_with_path(
+    model: &PhaseModel,
+    fp: &FabryPerot,
+    e: &Extrinsics,
+    obs: &Observation,
+    gain: f64,
+    path: &[Effect],
+) -> f64 {
+    let optical_gap_um = |length_um: f64, t_s: f64| {
+        let mut gap_um = length_um.abs();
+        for p in path {
+            gap_um += p.gap_change_nm(t_s, gap_um) * 1e-3;
+        }
+        gap_um
+    };
+    let t_mid = 0.5 * (obs.time_s[0] + obs.time_s[1]);
     let cavity = |q: &[f64; 6]| {
         let q = model.chain.description().q_from_display(q);
         e.cavity(&model.chain.end_effector(&q)).ok()
     };
-    let phase_gap_nm = |q: &[f64; 6]| match cavity(q) {
+    let phase_gap_nm = |q: &[f64; 6], t_s: f64| match cavity(q) {
         Some(c) => {
-            fp.fringe_phase_rad(c.length_um.abs(), c.tilt_rad) * fp.wavelength_nm()
+            fp.fringe_phase_rad(optical_gap_um(c.length_um, t_s), c.tilt_rad) * fp.wavelength_nm()
                 / (4.0 * std::f64::consts::PI * fp.medium_index())
         }
         None => f64::NAN,
     };
     match &obs.kind {
         ObservationKind::GapChange { from_display, to_display, .. } => {
-            phase_gap_nm(to_display) - phase_gap_nm(from_display)
+            phase_gap_nm(to_display, obs.time_s[1]) - phase_gap_nm(from_display, obs.time_s[0])
         }
-        ObservationKind::AbsoluteGap { at_display, .. } => {
-            cavity(at_display).map_or(f64::NAN, |c| c.length_um.abs() * (1.0 - c.tilt_rad * c.tilt_rad / 2.0))
-        }
-        ObservationKind::FringeAmplitude { at_display, .. } => {
-            cavity(at_display).map_or(f64::NAN, |c| gain * half_peak_to_peak_mw(fp, c.length_um.abs(), c.tilt_rad))
-        }
+        ObservationKind::AbsoluteGap { at_display, .. } => cavity(at_display)
+            .map_or(f64::NAN, |c| optical_gap_um(c.length_um, t_mid) * (1.0 - c.tilt_rad * c.tilt_rad / 2.0)),
+        ObservationKind::FringeAmplitude { at_display, .. } => cavity(at_display)
+            .map_or(f64::NAN, |c| gain * half_peak_to_peak_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)),
     }
 }

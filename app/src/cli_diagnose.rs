@@ -1,0 +1,196 @@
+//! `photorobot diagnose <session> [--bench PRESET] [--seed N] [--json]`: the discrepancy workflow on a
+//! session written by `photorobot calibrate`. Owns only reading the session folder, choosing the bench and
+//! printing; the work is `photorobot_core::diagnose`.
+//!
+//! The session folder has `traces/*.csv` and `extrinsics.ron`. The bench is the one the traces
+//! name (`# bench: virtual bench <preset>`), or `--bench`; discriminating motions run on a fresh
+//! virtual bench of that preset (seed `--seed`, default the preset's + 1). With `--bench none`
+//! nothing runs and the report says which motions would tell the absorbed candidates apart.
+
+use crate::cli::CliError;
+use photorobot_core::bench::{BenchPreset, VirtualBench};
+use photorobot_core::diagnose::motions::{BenchRunner, MotionRunner};
+use photorobot_core::diagnose::{Diagnosis, DiagnosisResult, Step};
+use photorobot_core::files::FileError;
+use photorobot_core::measure::PhaseModel;
+use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::trace::Trace;
+use serde::Serialize;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `photorobot diagnose`.
+#[derive(Debug, clap::Args)]
+pub struct DiagnoseArgs {
+    /// Session folder written by `photorobot calibrate` (traces/*.csv, extrinsics.ron).
+    pub session: PathBuf,
+    /// Bench preset to run discriminating motions on (default: the one the traces name;
+    /// `none`: run nothing).
+    #[arg(long, value_name = "PRESET")]
+    pub bench: Option<String>,
+    /// Random seed of that virtual bench (default: the preset's + 1).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Print the result as JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Serialize)]
+struct JsonOut<'a> {
+    #[serde(flatten)]
+    result: &'a DiagnosisResult,
+    steps: &'a [Step],
+    skipped_traces: &'a [(String, String)],
+}
+
+fn invalid(file: &Path, field: &str, problem: String) -> CliError {
+    CliError::File(FileError::Invalid { file: file.to_path_buf(), field: field.into(), problem })
+}
+
+/// Read the session's traces, in file-name order.
+fn read_traces(session: &Path) -> Result<Vec<Trace>, CliError> {
+    let dir = session.join("traces");
+    let entries = std::fs::read_dir(&dir).map_err(|e| {
+        invalid(
+            &dir,
+            "traces",
+            format!("cannot read the folder ({e}): expected a session written by `photorobot calibrate --out`"),
+        )
+    })?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(invalid(&dir, "traces", "no .csv trace: expected traces/NNN.csv".into()));
+    }
+    files.iter().map(|p| Trace::read_csv(p).map_err(CliError::from)).collect()
+}
+
+/// Run the workflow and print it.
+pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let traces = read_traces(&a.session)?;
+    let extrinsics = Extrinsics::load(&a.session.join("extrinsics.ron"))?;
+    let named = traces[0].meta.bench.trim().trim_start_matches("virtual bench ").to_string();
+    let preset_name = a.bench.clone().unwrap_or(named.clone());
+    let preset = match preset_name.as_str() {
+        "none" => None,
+        n => Some(BenchPreset::resolve(n).map_err(|e| match a.bench {
+            Some(_) => CliError::from(e),
+            None => invalid(
+                &a.session.join("traces"),
+                "# bench",
+                format!("the traces name bench `{named}`, which is not a known preset ({e}); give --bench PRESET or --bench none"),
+            ),
+        })?),
+    };
+    // The software's model: the preset's robot description (nominal), optics and air; without a
+    // preset, the embedded reference bench's.
+    let reference = match &preset {
+        Some(p) => p.clone(),
+        None => BenchPreset::resolve("table2-ideal")?,
+    };
+    let base = PhaseModel::new(
+        reference.robot_description()?,
+        extrinsics,
+        reference.optics,
+        &reference.ambient,
+        reference.laser.wavelength_nm,
+    )
+    .map_err(|problem| CliError::Argument { argument: "--bench", problem })?;
+    let (mut d, skipped) =
+        Diagnosis::from_traces(&base, &traces, extrinsics).map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
+    let mut bench = match &preset {
+        Some(p) => Some(VirtualBench::new(p, Some(a.seed.unwrap_or(p.seed + 1)))?),
+        None => None,
+    };
+    let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, d.end_time_s() + 60.0));
+    if !a.json {
+        writeln!(out, "diagnosis of {} ({} traces, bench {named})", a.session.display(), traces.len())?;
+        for (label, why) in &skipped {
+            writeln!(out, "trace `{label}` not used: {why}")?;
+        }
+        match &runner {
+            Some(r) => writeln!(out, "discriminating motions run on {}", r.name())?,
+            None => writeln!(out, "no bench: discriminating motions are proposed, not run")?,
+        }
+    }
+    loop {
+        let step = d
+            .step(runner.as_mut().map(|r| r as &mut dyn MotionRunner))
+            .map_err(|e| CliError::Argument { argument: "session", problem: format!("diagnosis failed: {e}") })?;
+        let Some(step) = step else { break };
+        if !a.json {
+            writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
+        }
+    }
+    let result =
+        d.result().cloned().ok_or_else(|| CliError::Argument { argument: "session", problem: "no result".into() })?;
+    if a.json {
+        let text =
+            serde_json::to_string_pretty(&JsonOut { result: &result, steps: &d.steps, skipped_traces: &skipped })
+                .map_err(std::io::Error::other)?;
+        writeln!(out, "{text}")?;
+    } else {
+        print_result(&result, out)?;
+    }
+    Ok(())
+}
+
+fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(out, "\nverdict: {:?}", r.verdict)?;
+    for e in &r.effects {
+        writeln!(
+            out,
+            "  {} = {:+.4} ± {} {} (F {:.1}){}",
+            e.name,
+            e.estimate,
+            e.sigma.map_or("undetermined".into(), |s| format!("{s:.4}")),
+            e.unit,
+            e.score,
+            if e.ambiguous_with.is_empty() {
+                String::new()
+            } else {
+                format!("; or equivalently {}", e.ambiguous_with.join(", "))
+            }
+        )?;
+    }
+    writeln!(
+        out,
+        "residual rms: {:.2} nm ({:.2}σ) before, {:.2} nm ({:.2}σ) after; held-out motions {:.2}σ → {:.2}σ",
+        r.residual_rms_before_nm,
+        r.residual_rms_before_sigma,
+        r.residual_rms_after_nm,
+        r.residual_rms_after_sigma,
+        r.held_out_rms_before_sigma,
+        r.held_out_rms_after_sigma
+    )?;
+    if !r.equivalent_to_extrinsics.is_empty() {
+        writeln!(
+            out,
+            "equivalent to an extrinsic change on every available motion: {}",
+            r.equivalent_to_extrinsics.join(", ")
+        )?;
+    }
+    if !r.need_motions.is_empty() {
+        writeln!(out, "the recorded data cannot tell these from an extrinsic change: {}", r.need_motions.join(", "))?;
+        writeln!(out, "motions that would: {}", r.discriminating_motions.join("; "))?;
+    }
+    for p in &r.partial {
+        writeln!(
+            out,
+            "partly explained by {} = {:+.4} {} (not named: the residual stays above the noise)",
+            p.name, p.estimate, p.unit
+        )?;
+    }
+    for g in &r.residual_where {
+        writeln!(
+            out,
+            "  residual by {} `{}`: rms {:.2}σ, mean {:+.2}σ (n = {})",
+            g.by, g.key, g.rms_sigma, g.mean_sigma, g.count
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,854 @@
+//! The discrepancy workflow (SPEC section 9): replay the calibrated model against the recorded
+//! observations, score every candidate effect of the library against the residual, design and
+//! run discriminating motions, name, add and confirm effects. Owns the steps and the result.
+//!
+//! A GUI or CLI steps through [`Diagnosis`]: create it from the nominal model, the
+//! observations and the calibrated extrinsics, call [`Diagnosis::step`] until it returns
+//! `Ok(None)`, and show each [`Step`] (every step has [`Step::title`] and [`Step::summary`]).
+//! [`Diagnosis::result`] is the serialisable [`DiagnosisResult`] (`effects`, `verdict`,
+//! `residual_rms_before_nm`, `residual_rms_after_nm`, …), meant to be stored with a session.
+//!
+//! The order: (1) baseline: fit the extrinsics (no effect), residuals and where they live;
+//! (2) score each candidate on its signature projected off the extrinsics; (3) for candidates
+//! the data cannot see at their typical size, pick motions from [`motions::pool`] whose
+//! projected signature is large and run them when a bench is given (otherwise report them);
+//! (4) add the best significant candidate, refit, confirm on held-out motions (every fifth
+//! motion is kept out of every fit), rescore, repeat; (5) the verdict: named when effects were
+//! added and the residual is at most [`NOISE_FLOOR_FACTOR`] times the noise, none when the
+//! baseline already is and no candidate passes, unexplained otherwise (with where the residual
+//! lives). Candidates whose signature the extrinsics absorb on every available motion are
+//! reported as equivalent to an extrinsic change, never named.
+
+pub mod candidates;
+pub mod fit;
+pub mod motions;
+pub mod replay;
+pub mod scoring;
+
+use crate::identify::{Observation, ObservationKind, N_EXTRINSICS};
+use crate::measure::PhaseModel;
+use crate::model::extrinsics::Extrinsics;
+use candidates::Candidate;
+use fit::{Fit, ModelState, Predictor};
+use motions::{DesignedMotion, MotionRunner};
+use nalgebra::{DMatrix, DVector};
+use replay::ResidualGroup;
+use scoring::CandidateScore;
+use serde::{Deserialize, Serialize};
+
+/// The residual counts as at the noise floor up to this multiple of it (whitened rms).
+pub const NOISE_FLOOR_FACTOR: f64 = 1.5;
+/// Expected score at typical size below which a candidate needs discriminating motions.
+pub const DETECTABLE_SCORE: f64 = 25.0;
+/// Absorbed share from which a candidate counts as equivalent to an extrinsic change.
+pub const EQUIVALENT_SHARE: f64 = 0.999;
+/// How the diagnosis turns traces into observations: σ floors at SPEC section 9's noise (dL
+/// 2 nm, absolute gaps 20 nm), what a bench reaches beyond the fringe analysis' own σ (stage
+/// noise, sweep-model limits); the identifier's floors are tighter.
+pub const EXTRACT_OPTIONS: crate::identify::measurements::ExtractOptions =
+    crate::identify::measurements::ExtractOptions {
+        points_per_motion: 4,
+        sigma_floor_nm: 2.0,
+        gap_sigma_floor_um: 0.02,
+    };
+/// Label prefix of the discriminating motions ([`motions::pool`]).
+pub const DISCRIMINATING_PREFIX: &str = "D ";
+/// At most this many effects are added.
+pub const MAX_EFFECTS: usize = 4;
+
+/// The overall finding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// Effects were named and the residual is at the noise floor with them.
+    Named,
+    /// No significant missing effect: the residual is at the noise floor.
+    None,
+    /// The residual is above the noise floor and no candidate of the library explains it.
+    Unexplained,
+}
+
+/// A named (added) effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NamedEffect {
+    /// Candidate name, e.g. "pivot offset q4 along Z_w".
+    pub name: String,
+    /// Fitted value (with the extrinsics refitted).
+    pub estimate: f64,
+    /// Unit of the estimate and σ.
+    pub unit: String,
+    /// Standard uncertainty (`None` when the data do not determine it).
+    pub sigma: Option<f64>,
+    /// F statistic when it was named.
+    pub score: f64,
+    /// ΔBIC when it was named.
+    pub delta_bic: f64,
+    /// Share of its signature the extrinsics absorb on the data it was named on.
+    pub absorbed_share: f64,
+    /// Candidates that could not be told apart from it (nearly collinear projected signatures).
+    pub ambiguous_with: Vec<String>,
+}
+
+/// The diagnosis result, serialisable (for sessions and `--json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisResult {
+    /// Named, none or unexplained.
+    pub verdict: Verdict,
+    /// The named effects with their estimates (empty unless the verdict is `named`).
+    pub effects: Vec<NamedEffect>,
+    /// RMS of the gap-change residuals with the baseline model (nm).
+    pub residual_rms_before_nm: f64,
+    /// RMS of the gap-change residuals with the final model (nm).
+    pub residual_rms_after_nm: f64,
+    /// RMS of all whitened residuals with the baseline model (1 = noise floor).
+    pub residual_rms_before_sigma: f64,
+    /// The same with the final model.
+    pub residual_rms_after_sigma: f64,
+    /// Whitened RMS on the held-out motions, baseline model.
+    pub held_out_rms_before_sigma: f64,
+    /// Whitened RMS on the held-out motions, final model.
+    pub held_out_rms_after_sigma: f64,
+    /// Effects added that did not bring the residual to the noise floor (verdict unexplained).
+    pub partial: Vec<NamedEffect>,
+    /// Candidates the extrinsics absorb on every available motion: equivalent to an extrinsic change.
+    pub equivalent_to_extrinsics: Vec<String>,
+    /// Candidates the recorded data cannot tell from an extrinsic change but designed motions
+    /// could (when no bench ran them).
+    pub need_motions: Vec<String>,
+    /// Discriminating motions designed (and run, when a bench was given).
+    pub discriminating_motions: Vec<String>,
+    /// Whether the discriminating motions were run.
+    pub discriminating_motions_ran: bool,
+    /// Where the final residual lives, worst groups first (unexplained structure).
+    pub residual_where: Vec<ResidualGroup>,
+    /// Extrinsics of the final model.
+    pub extrinsics: Extrinsics,
+}
+
+/// One step of the workflow, for display.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Step {
+    /// The extrinsics refitted without effects.
+    Baseline {
+        /// Observations fitted and held out.
+        fitted: usize,
+        /// Held-out observations.
+        held_out: usize,
+        /// Whitened rms.
+        rms_sigma: f64,
+        /// Gap-change rms (nm).
+        rms_nm: f64,
+        /// Worst residual groups.
+        worst: Vec<ResidualGroup>,
+        /// Candidates no observation and no pool motion can see (dropped).
+        invisible: Vec<String>,
+    },
+    /// Candidates scored, best first.
+    Scored {
+        /// The scores.
+        scores: Vec<CandidateScore>,
+    },
+    /// Discriminating motions designed (and run).
+    Designed {
+        /// Candidates the data could not see at typical size.
+        needy: Vec<String>,
+        /// Motions chosen.
+        motions: Vec<String>,
+        /// Whether they ran, and on what.
+        ran_on: Option<String>,
+        /// Observations added.
+        added_observations: usize,
+        /// Whitened rms of the baseline refitted with them.
+        rms_sigma: f64,
+    },
+    /// An effect added and the model refitted.
+    Added {
+        /// The effect.
+        effect: NamedEffect,
+        /// Whitened rms before and after.
+        rms_sigma: [f64; 2],
+        /// Held-out rms before and after.
+        held_out_rms_sigma: [f64; 2],
+        /// Whether the held-out motions confirm it (their rms did not grow).
+        confirmed: bool,
+    },
+    /// The verdict.
+    Finished {
+        /// The verdict.
+        verdict: Verdict,
+    },
+}
+
+impl Step {
+    /// A short title.
+    pub fn title(&self) -> &'static str {
+        match self {
+            Step::Baseline { .. } => "1. replay: baseline fit of the extrinsics",
+            Step::Scored { .. } => "2. candidates scored",
+            Step::Designed { .. } => "3. discriminating motions",
+            Step::Added { .. } => "4. effect added, refitted, checked on held-out motions",
+            Step::Finished { .. } => "5. verdict",
+        }
+    }
+
+    /// A few lines for a person.
+    pub fn summary(&self) -> String {
+        match self {
+            Step::Baseline { fitted, held_out, rms_sigma, rms_nm, worst, invisible } => {
+                let mut s = format!(
+                    "{fitted} observations fitted, {held_out} held out; residual rms {rms_sigma:.2}× the noise ({rms_nm:.2} nm on gap changes)"
+                );
+                for g in worst.iter().take(4) {
+                    s += &format!(
+                        "\n  worst {} `{}`: rms {:.2}σ, mean {:+.2}σ (n = {})",
+                        g.by, g.key, g.rms_sigma, g.mean_sigma, g.count
+                    );
+                }
+                if !invisible.is_empty() {
+                    s += &format!("\n  no motion can see: {}", invisible.join(", "));
+                }
+                s
+            }
+            Step::Scored { scores } => {
+                let mut s = String::new();
+                for c in scores.iter().take(6) {
+                    s += &format!(
+                        "{}{:<36} F {:>9.1}  ΔBIC {:>8.1}  est {:+.4} ± {:.4} {}  absorbed {:.1} %\n",
+                        if c.significant { "* " } else { "  " },
+                        c.name,
+                        c.score,
+                        c.delta_bic,
+                        c.estimate,
+                        c.sigma,
+                        c.unit,
+                        100.0 * c.absorbed_share
+                    );
+                }
+                s.trim_end().to_string()
+            }
+            Step::Designed { needy, motions, ran_on, added_observations, rms_sigma } => {
+                let mut s = format!(
+                    "candidates the data cannot see at typical size: {}",
+                    if needy.is_empty() { "none".into() } else { needy.join(", ") }
+                );
+                s += &format!("\nmotions chosen ({}): {}", motions.len(), motions.join("; "));
+                match ran_on {
+                    Some(b) => {
+                        s += &format!(
+                        "\nran on {b}: {added_observations} observations added; baseline refitted, rms {rms_sigma:.2}σ"
+                    )
+                    }
+                    None => s += "\nno bench to run them: they are proposed, not run",
+                }
+                s
+            }
+            Step::Added { effect, rms_sigma, held_out_rms_sigma, confirmed } => format!(
+                "{} = {:+.4} ± {} {} (F {:.1}, absorbed {:.1} %){}\nrms {:.2}σ → {:.2}σ; held-out {:.2}σ → {:.2}σ: {}",
+                effect.name,
+                effect.estimate,
+                effect.sigma.map_or("undetermined".into(), |s| format!("{s:.4}")),
+                effect.unit,
+                effect.score,
+                100.0 * effect.absorbed_share,
+                if effect.ambiguous_with.is_empty() {
+                    String::new()
+                } else {
+                    format!("; cannot be told apart from {}", effect.ambiguous_with.join(", "))
+                },
+                rms_sigma[0],
+                rms_sigma[1],
+                held_out_rms_sigma[0],
+                held_out_rms_sigma[1],
+                if *confirmed { "confirmed" } else { "NOT confirmed (removed)" }
+            ),
+            Step::Finished { verdict } => match verdict {
+                Verdict::Named => "named: the effects above bring the residual to the noise floor".into(),
+                Verdict::None => "no significant missing effect".into(),
+                Verdict::Unexplained => {
+                    "unexplained structure remains: no candidate of the library explains the residual".into()
+                }
+            },
+        }
+    }
+}
+
+/// Why a diagnosis cannot run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DiagnoseError {
+    /// Too few observations.
+    #[error("{0} usable observations: the diagnosis needs at least 20")]
+    TooFewObservations(usize),
+    /// The model cannot be evaluated.
+    #[error("model: {0}")]
+    Model(String),
+    /// The discriminating motions could not be run.
+    #[error("{0}")]
+    Bench(String),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    Baseline,
+    Score,
+    Design,
+    Name,
+    Finish,
+    Done,
+}
+
+/// The pool, each motion's contribution per target, and each target's absorbed share.
+type PoolContributions = (Vec<DesignedMotion>, Vec<Vec<f64>>, Vec<f64>);
+
+/// The workflow, stepped by [`Diagnosis::step`].
+pub struct Diagnosis {
+    predictor: Predictor,
+    observations: Vec<Observation>,
+    held_out: Vec<bool>,
+    candidates: Vec<Candidate>,
+    excluded: Vec<usize>,
+    start: Extrinsics,
+    fit: Option<Fit>,
+    baseline: Option<(f64, f64, f64)>,
+    scores: Vec<CandidateScore>,
+    projected: Vec<DVector<f64>>,
+    added: Vec<NamedEffect>,
+    designed: Vec<DesignedMotion>,
+    ran: bool,
+    need_motions: Vec<String>,
+    equivalent: Vec<String>,
+    separated: Vec<String>,
+    session_traces: Vec<crate::trace::Trace>,
+    stage: Stage,
+    /// The steps done so far.
+    pub steps: Vec<Step>,
+    result: Option<DiagnosisResult>,
+}
+
+fn obs_rms_nm(obs: &[Observation], r: &DVector<f64>) -> f64 {
+    let v: Vec<f64> = obs
+        .iter()
+        .zip(r.iter())
+        .filter(|(o, _)| matches!(o.kind, ObservationKind::GapChange { .. }))
+        .map(|(o, ri)| ri * o.sigma)
+        .collect();
+    if v.is_empty() {
+        0.0
+    } else {
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+    }
+}
+
+fn held_out_mask(obs: &[Observation]) -> Vec<bool> {
+    // Every fifth recorded gap-change motion (by label, in order of appearance) is held out;
+    // discriminating motions (labels "D …") never are.
+    let mut labels: Vec<&str> = Vec::new();
+    for o in obs {
+        if matches!(o.kind, ObservationKind::GapChange { .. })
+            && !o.label.starts_with(DISCRIMINATING_PREFIX)
+            && !labels.contains(&o.label.as_str())
+        {
+            labels.push(&o.label);
+        }
+    }
+    obs.iter()
+        .map(|o| {
+            matches!(o.kind, ObservationKind::GapChange { .. })
+                && labels.iter().position(|l| *l == o.label).is_some_and(|k| k % 5 == 4)
+        })
+        .collect()
+}
+
+impl Diagnosis {
+    /// A diagnosis of `observations` on the nominal model `base` (robot, optics, air), starting
+    /// from the calibrated `extrinsics`, with the library's candidates for the robot.
+    pub fn new(
+        base: &PhaseModel,
+        observations: Vec<Observation>,
+        extrinsics: Extrinsics,
+    ) -> Result<Self, DiagnoseError> {
+        let observations: Vec<Observation> = observations
+            .into_iter()
+            .filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0)
+            .collect();
+        if observations.len() < 20 {
+            return Err(DiagnoseError::TooFewObservations(observations.len()));
+        }
+        let predictor = Predictor::new(base, &observations).map_err(DiagnoseError::Model)?;
+        let held_out = held_out_mask(&observations);
+        Ok(Self {
+            predictor,
+            held_out,
+            observations,
+            candidates: candidates::library(base.chain.description()),
+            excluded: Vec::new(),
+            start: extrinsics,
+            fit: None,
+            baseline: None,
+            scores: Vec::new(),
+            projected: Vec::new(),
+            added: Vec::new(),
+            designed: Vec::new(),
+            ran: false,
+            need_motions: Vec::new(),
+            equivalent: Vec::new(),
+            separated: Vec::new(),
+            session_traces: Vec::new(),
+            stage: Stage::Baseline,
+            steps: Vec::new(),
+            result: None,
+        })
+    }
+
+    /// A diagnosis of recorded traces: observations extracted with the calibrated model (the
+    /// fringe analysis' motion hint), then [`Diagnosis::new`]. Traces that cannot be analysed
+    /// are returned with why.
+    pub fn from_traces(
+        base: &PhaseModel,
+        traces: &[crate::trace::Trace],
+        extrinsics: Extrinsics,
+    ) -> Result<(Self, Vec<(String, String)>), DiagnoseError> {
+        use crate::identify::measurements::observations_from_traces;
+        let model = PhaseModel { extrinsics, ..base.clone() };
+        let extracted = observations_from_traces(traces, &model, &EXTRACT_OPTIONS);
+        let mut d = Self::new(base, extracted.observations, extrinsics)?;
+        d.session_traces = traces.to_vec();
+        Ok((d, extracted.skipped))
+    }
+
+    /// The end of the recorded observations in bench time (s).
+    pub fn end_time_s(&self) -> f64 {
+        self.observations.iter().map(|o| o.time_s[1]).fold(0.0, f64::max)
+    }
+
+    /// The result, once the last step has run.
+    pub fn result(&self) -> Option<&DiagnosisResult> {
+        self.result.as_ref()
+    }
+
+    /// The current model state (after the last fit).
+    pub fn state(&self) -> Option<&ModelState> {
+        self.fit.as_ref().map(|f| &f.state)
+    }
+
+    /// Run every step.
+    pub fn run<'r>(
+        mut self,
+        mut runner: Option<&mut (dyn MotionRunner + 'r)>,
+    ) -> Result<(DiagnosisResult, Vec<Step>), DiagnoseError> {
+        while self.step(runner.as_deref_mut())?.is_some() {}
+        let result = self.result.clone().ok_or_else(|| DiagnoseError::Model("no result".into()))?;
+        Ok((result, self.steps))
+    }
+
+    fn fit_set(&self) -> Vec<Observation> {
+        self.observations.iter().zip(&self.held_out).filter(|(_, h)| !**h).map(|(o, _)| o.clone()).collect()
+    }
+
+    fn held_set(&self) -> Vec<Observation> {
+        self.observations.iter().zip(&self.held_out).filter(|(_, h)| **h).map(|(o, _)| o.clone()).collect()
+    }
+
+    fn refit(&self, start: &ModelState) -> Result<Fit, DiagnoseError> {
+        fit::fit(&self.predictor, &self.fit_set(), start, &[true; N_EXTRINSICS])
+            .map_err(|e| DiagnoseError::Model(e.to_string()))
+    }
+
+    fn held_rms(&self, state: &ModelState) -> Result<f64, DiagnoseError> {
+        let held = self.held_set();
+        let r = self.predictor.whitened_residuals(state, &held).map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        Ok(fit::rms(&r))
+    }
+
+    fn rescore(&mut self) -> Result<(), DiagnoseError> {
+        let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("scored before the baseline".into()))?;
+        let obs = self.fit_set();
+        let sig = scoring::signatures(&self.predictor, &f.state, &self.candidates, &obs)
+            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let (mut scores, projected) = scoring::score(&self.candidates, &sig, &f.jacobian, &f.residuals);
+        for (k, s) in scores.iter_mut().enumerate() {
+            if self.excluded.contains(&k) || f.state.effects.iter().any(|(c, _)| c.name == s.name) {
+                s.significant = false;
+            }
+        }
+        self.scores = scores;
+        self.projected = projected;
+        Ok(())
+    }
+
+    /// Advance one step; `Ok(None)` once finished. `runner` runs discriminating motions when given.
+    pub fn step<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<Option<&Step>, DiagnoseError> {
+        match self.stage {
+            Stage::Baseline => self.do_baseline()?,
+            Stage::Score => {
+                self.rescore()?;
+                let mut sorted = self.scores.clone();
+                sorted.sort_by(|a, b| b.score.total_cmp(&a.score));
+                self.steps.push(Step::Scored { scores: sorted });
+                self.stage = Stage::Design;
+            }
+            Stage::Design => self.do_design(runner)?,
+            Stage::Name => self.do_name(runner)?,
+            Stage::Finish => self.do_finish()?,
+            Stage::Done => return Ok(None),
+        }
+        Ok(self.steps.last())
+    }
+
+    fn do_baseline(&mut self) -> Result<(), DiagnoseError> {
+        let start = ModelState { extrinsics: self.start, effects: vec![], gains: vec![] };
+        let f = self.refit(&start)?;
+        // Candidates that neither the data nor any pool motion can see are dropped.
+        let obs = self.fit_set();
+        let pool = motions::templates(&motions::pool(), 0.0);
+        self.predictor.extend(&pool).map_err(DiagnoseError::Model)?;
+        let all: Vec<Observation> = obs.iter().chain(&pool).cloned().collect();
+        let sig = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
+            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let mut invisible = Vec::new();
+        let mut keep = Vec::new();
+        for (c, s) in self.candidates.iter().zip(&sig) {
+            if s.norm_squared() * c.typical * c.typical < 1e-6 {
+                invisible.push(c.name.clone());
+            } else {
+                keep.push(c.clone());
+            }
+        }
+        self.candidates = keep;
+        let rms_nm = obs_rms_nm(&obs, &f.residuals);
+        let held = self.held_rms(&f.state)?;
+        self.baseline = Some((f.rms(), rms_nm, held));
+        self.steps.push(Step::Baseline {
+            fitted: obs.len(),
+            held_out: self.held_out.iter().filter(|h| **h).count(),
+            rms_sigma: f.rms(),
+            rms_nm,
+            worst: replay::localise(&obs, &f.residuals).into_iter().take(8).collect(),
+            invisible,
+        });
+        self.fit = Some(f);
+        self.stage = Stage::Score;
+        Ok(())
+    }
+
+    /// For each target (a candidate, and the candidates it must be told apart from), its
+    /// projected signature's contribution per pool motion at typical size, the extrinsics (and
+    /// the other candidates of the target) fitted on the data and the whole pool; and each
+    /// target's absorbed share on data and pool.
+    fn pool_contributions(&self, targets: &[(usize, Vec<usize>)]) -> Result<PoolContributions, DiagnoseError> {
+        let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("design before the baseline".into()))?;
+        let obs = self.fit_set();
+        let t_end = self.observations.iter().map(|o| o.time_s[1]).fold(0.0, f64::max);
+        let pool = motions::pool();
+        let templates = motions::templates(&pool, t_end + 10.0);
+        let all: Vec<Observation> = obs.iter().chain(&templates).cloned().collect();
+        let j = fit::jacobian_of(&self.predictor, &f.state, &all).map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let sig = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
+            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let base_proj = scoring::Projector::new(&j);
+        let mut per_motion = vec![vec![0.0; targets.len()]; pool.len()];
+        let mut absorbed = Vec::new();
+        for (t, (c, others)) in targets.iter().enumerate() {
+            let s = &sig[*c];
+            let sp = if others.is_empty() {
+                base_proj.orthogonal(s)
+            } else {
+                let mut cols: Vec<DVector<f64>> = j.column_iter().map(|c| c.into_owned()).collect();
+                cols.extend(others.iter().map(|&o| sig[o].clone()));
+                scoring::Projector::new(&DMatrix::from_columns(&cols)).orthogonal(s)
+            };
+            absorbed.push(if s.norm_squared() > 0.0 { 1.0 - sp.norm_squared() / s.norm_squared() } else { 1.0 });
+            let typical = self.candidates[*c].typical;
+            for (k, o) in templates.iter().enumerate() {
+                let m = pool.iter().position(|p| p.label == o.label).unwrap_or(0);
+                per_motion[m][t] += sp[obs.len() + k].powi(2) * typical * typical;
+            }
+        }
+        Ok((pool, per_motion, absorbed))
+    }
+
+    /// Choose pool motions greedily: the ones adding the most detectability (capped at
+    /// [`DETECTABLE_SCORE`]) to targets that have `have` on the data.
+    fn choose(per_motion: &[Vec<f64>], have: &[f64]) -> Vec<usize> {
+        let mut have = have.to_vec();
+        let mut chosen: Vec<usize> = Vec::new();
+        loop {
+            let best = (0..per_motion.len()).filter(|m| !chosen.contains(m)).map(|m| {
+                let gain: f64 = (0..have.len())
+                    .map(|t| (have[t] + per_motion[m][t]).min(DETECTABLE_SCORE) - have[t].min(DETECTABLE_SCORE))
+                    .sum();
+                (m, gain)
+            });
+            match best.max_by(|a, b| a.1.total_cmp(&b.1)) {
+                Some((m, gain)) if gain > 1.0 && chosen.len() < 10 => {
+                    for (t, h) in have.iter_mut().enumerate() {
+                        *h += per_motion[m][t];
+                    }
+                    chosen.push(m);
+                }
+                _ => return chosen,
+            }
+        }
+    }
+
+    /// Run motions on the runner, add their observations (all fitted), refit the current state, rescore.
+    fn run_motions<'r>(
+        &mut self,
+        runner: &mut (dyn MotionRunner + 'r),
+        motions: &[DesignedMotion],
+    ) -> Result<usize, DiagnoseError> {
+        let analysis = PhaseModel {
+            extrinsics: self.fit.as_ref().map_or(self.start, |f| f.state.extrinsics),
+            ..self.predictor.base().clone()
+        };
+        let new = runner.run(motions, &analysis).map_err(DiagnoseError::Bench)?;
+        let added = new.len();
+        self.predictor.extend(&new).map_err(DiagnoseError::Model)?;
+        self.held_out.extend(std::iter::repeat_n(false, new.len()));
+        self.observations.extend(new);
+        self.ran = true;
+        self.designed.extend(motions.iter().cloned());
+        let start = self.fit.as_ref().map(|f| f.state.clone()).ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
+        let f = self.refit(&start)?;
+        self.fit = Some(f);
+        self.rescore()?;
+        Ok(added)
+    }
+
+    fn do_design<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
+        let needy: Vec<usize> = (0..self.candidates.len())
+            .filter(|&c| self.scores[c].detectability_at_typical < DETECTABLE_SCORE && !self.scores[c].significant)
+            .collect();
+        let targets: Vec<(usize, Vec<usize>)> = (0..self.candidates.len()).map(|c| (c, vec![])).collect();
+        let (pool, per_motion, absorbed) = self.pool_contributions(&targets)?;
+        self.equivalent = (0..self.candidates.len())
+            .filter(|&c| absorbed[c] >= EQUIVALENT_SHARE)
+            .map(|c| self.candidates[c].name.clone())
+            .collect();
+        let needy_motion: Vec<Vec<f64>> = per_motion.iter().map(|m| needy.iter().map(|&c| m[c]).collect()).collect();
+        let have: Vec<f64> = needy.iter().map(|&c| self.scores[c].detectability_at_typical).collect();
+        let motions: Vec<DesignedMotion> =
+            Self::choose(&needy_motion, &have).into_iter().map(|m| pool[m].clone()).collect();
+        let needy_names: Vec<String> = needy
+            .iter()
+            .filter(|&&c| !self.equivalent.contains(&self.candidates[c].name))
+            .map(|&c| self.candidates[c].name.clone())
+            .collect();
+        let labels: Vec<String> = motions.iter().map(|m| m.label.clone()).collect();
+        let mut added = 0;
+        let mut ran_on = None;
+        match (runner, motions.is_empty()) {
+            (Some(r), false) => {
+                added = self.run_motions(r, &motions)?;
+                ran_on = Some(r.name());
+                let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
+                let obs = self.fit_set();
+                let held = self.held_rms(&f.state)?;
+                self.baseline = Some((f.rms(), obs_rms_nm(&obs, &f.residuals), held));
+            }
+            (None, false) => {
+                self.need_motions = needy_names.clone();
+                self.designed = motions.clone();
+            }
+            _ => {}
+        }
+        self.steps.push(Step::Designed {
+            needy: needy_names,
+            motions: labels,
+            ran_on,
+            added_observations: added,
+            rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
+        });
+        self.stage = Stage::Name;
+        Ok(())
+    }
+
+    /// When the best candidate cannot be told apart from others, motions that separate them
+    /// (each pair's projected signature large), run once per candidate. True when motions ran.
+    fn separate<'r>(
+        &mut self,
+        best: usize,
+        ambiguous: &[usize],
+        runner: &mut (dyn MotionRunner + 'r),
+    ) -> Result<bool, DiagnoseError> {
+        let name = self.candidates[best].name.clone();
+        if ambiguous.is_empty() || self.separated.contains(&name) {
+            return Ok(false);
+        }
+        self.separated.push(name.clone());
+        let targets: Vec<(usize, Vec<usize>)> =
+            ambiguous.iter().flat_map(|&o| [(best, vec![o]), (o, vec![best])]).collect();
+        let (pool, per_motion, _) = self.pool_contributions(&targets)?;
+        let have = vec![0.0; targets.len()];
+        let motions: Vec<DesignedMotion> = Self::choose(&per_motion, &have)
+            .into_iter()
+            .map(|m| pool[m].clone())
+            .filter(|m| !self.designed.contains(m))
+            .collect();
+        if motions.is_empty() {
+            return Ok(false);
+        }
+        let labels = motions.iter().map(|m| m.label.clone()).collect();
+        let added = self.run_motions(runner, &motions)?;
+        self.steps.push(Step::Designed {
+            needy: std::iter::once(name).chain(ambiguous.iter().map(|&o| self.candidates[o].name.clone())).collect(),
+            motions: labels,
+            ran_on: Some(runner.name()),
+            added_observations: added,
+            rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
+        });
+        Ok(true)
+    }
+
+    /// Analyse the traces again with the current model (effects included in the motion hint of
+    /// the fringe analysis), then refit and rescore. Nothing to do without traces.
+    fn reanalyse<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
+        let Some(f) = self.fit.clone() else { return Ok(()) };
+        let robot =
+            crate::model::effects::apply_all(&f.state.library_effects(), self.predictor.base().chain.description())
+                .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let analysis = PhaseModel {
+            chain: crate::model::kinematics::Chain::new(robot),
+            extrinsics: f.state.extrinsics,
+            ..self.predictor.base().clone()
+        };
+        let again = runner.and_then(|r| r.reanalyse(&analysis));
+        if self.session_traces.is_empty() && again.is_none() {
+            return Ok(());
+        }
+        let (recorded, designed): (Vec<Observation>, Vec<Observation>) =
+            self.observations.drain(..).partition(|o| !o.label.starts_with(DISCRIMINATING_PREFIX));
+        let mut obs = if self.session_traces.is_empty() {
+            recorded
+        } else {
+            use crate::identify::measurements::observations_from_traces;
+            observations_from_traces(&self.session_traces, &analysis, &EXTRACT_OPTIONS).observations
+        };
+        obs.extend(again.unwrap_or(designed));
+        obs.retain(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0);
+        self.predictor.extend(&obs).map_err(DiagnoseError::Model)?;
+        self.held_out = held_out_mask(&obs);
+        self.observations = obs;
+        let nf = self.refit(&f.state)?;
+        self.fit = Some(nf);
+        self.rescore()
+    }
+
+    fn do_name<'r>(&mut self, mut runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
+        let best = (0..self.scores.len())
+            .filter(|&k| self.scores[k].significant)
+            .max_by(|&a, &b| self.scores[a].score.total_cmp(&self.scores[b].score));
+        let Some(best) = best.filter(|_| self.added.len() < MAX_EFFECTS) else {
+            self.stage = Stage::Finish;
+            return self.do_finish();
+        };
+        let f = self.fit.clone().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
+        let mut ambiguous_idx = scoring::ambiguity_set(best, &self.projected);
+        if let Some(r) = runner.as_deref_mut() {
+            if self.separate(best, &ambiguous_idx, r)? {
+                return Ok(());
+            }
+        }
+        // Among candidates the data cannot tell apart with nearly equal evidence, the one that
+        // needs the least of its typical size is named (the others stay in the ambiguity set).
+        let plausible = |k: usize| (self.scores[k].estimate / self.candidates[k].typical).abs();
+        let f_best = self.scores[best].score;
+        let best = std::iter::once(best)
+            .chain(
+                ambiguous_idx
+                    .iter()
+                    .copied()
+                    .filter(|&k| self.scores[k].significant && self.scores[k].score >= 0.9 * f_best),
+            )
+            .min_by(|&a, &b| plausible(a).total_cmp(&plausible(b)))
+            .unwrap_or(best);
+        ambiguous_idx = scoring::ambiguity_set(best, &self.projected);
+        let sc = self.scores[best].clone();
+        let ambiguous: Vec<String> = ambiguous_idx.into_iter().map(|k| self.candidates[k].name.clone()).collect();
+        let mut start = f.state.clone();
+        start.effects.push((self.candidates[best].clone(), sc.estimate));
+        let nf = self.refit(&start)?;
+        let held = [self.held_rms(&f.state)?, self.held_rms(&nf.state)?];
+        // Confirmed unless the held-out motions get worse by more than their noise allows.
+        let n_held = self.held_out.iter().filter(|h| **h).count().max(1) as f64;
+        let confirmed = held[1] * held[1] <= held[0] * held[0] + 3.0 * (2.0 / n_held).sqrt();
+        let k = nf.state.effects.len() - 1;
+        let effect = NamedEffect {
+            name: sc.name.clone(),
+            estimate: nf.state.effects[k].1,
+            unit: sc.unit.clone(),
+            sigma: nf.effect_sigma[k],
+            score: sc.score,
+            delta_bic: sc.delta_bic,
+            absorbed_share: sc.absorbed_share,
+            ambiguous_with: ambiguous,
+        };
+        self.steps.push(Step::Added {
+            effect: effect.clone(),
+            rms_sigma: [f.rms(), nf.rms()],
+            held_out_rms_sigma: held,
+            confirmed,
+        });
+        if confirmed {
+            self.added.push(effect);
+            self.fit = Some(nf);
+            self.rescore()?;
+            self.reanalyse(runner)?;
+        } else {
+            self.excluded.push(best);
+            self.rescore()?;
+        }
+        // Refresh the estimates and σ of every added effect from the latest fit.
+        if let Some(f) = &self.fit {
+            for (k, (c, v)) in f.state.effects.iter().enumerate() {
+                if let Some(e) = self.added.iter_mut().find(|e| e.name == c.name) {
+                    e.estimate = *v;
+                    e.sigma = f.effect_sigma[k];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn do_finish(&mut self) -> Result<(), DiagnoseError> {
+        let f = self.fit.clone().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
+        let (rms0, nm0, held0) = self.baseline.unwrap_or((f64::NAN, f64::NAN, f64::NAN));
+        let obs = self.fit_set();
+        let at_floor = f.rms() <= NOISE_FLOOR_FACTOR;
+        let verdict = match (self.added.is_empty(), at_floor) {
+            (false, true) => Verdict::Named,
+            (true, true) => Verdict::None,
+            (_, false) => Verdict::Unexplained,
+        };
+        let (effects, partial) = match verdict {
+            Verdict::Named => (self.added.clone(), vec![]),
+            _ => (vec![], self.added.clone()),
+        };
+        self.result = Some(DiagnosisResult {
+            verdict,
+            effects,
+            residual_rms_before_nm: nm0,
+            residual_rms_after_nm: obs_rms_nm(&obs, &f.residuals),
+            residual_rms_before_sigma: rms0,
+            residual_rms_after_sigma: f.rms(),
+            held_out_rms_before_sigma: held0,
+            held_out_rms_after_sigma: self.held_rms(&f.state)?,
+            partial,
+            equivalent_to_extrinsics: self.equivalent.clone(),
+            need_motions: self.need_motions.clone(),
+            discriminating_motions: self.designed.iter().map(|m| m.label.clone()).collect(),
+            discriminating_motions_ran: self.ran,
+            residual_where: if verdict == Verdict::Unexplained {
+                replay::localise(&obs, &f.residuals).into_iter().take(8).collect()
+            } else {
+                vec![]
+            },
+            extrinsics: f.state.extrinsics,
+        });
+        self.steps.push(Step::Finished { verdict });
+        self.stage = Stage::Done;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests;

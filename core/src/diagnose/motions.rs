@@ -1,0 +1,427 @@
+//! Motions the diagnosis runs or proposes, and the benches that run them: the pool of
+//! discriminating motions (rotations at lateral offsets and at several gaps, optical-axis
+//! rotations, reversals, a return to a pose later in time), their observation templates, a
+//! simulated bench (model predictions + Gaussian noise) and the adapter to a real or virtual
+//! [`Bench`]. Owns what a motion is for the diagnosis and how it becomes observations.
+
+use crate::bench::{run_plan, Bench, RunControl};
+use crate::diagnose::fit::Predictor;
+use crate::identify::measurements::{observations_from_traces, ExtractOptions};
+use crate::identify::{Observation, ObservationKind};
+use crate::measure::PhaseModel;
+use crate::model::effects::Effect;
+use crate::model::extrinsics::Extrinsics;
+use crate::plan::{JointTarget, Plan, Segment};
+use rand::{rngs::StdRng, SeedableRng};
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::AtomicBool;
+
+/// What a motion does (joints in µm and °).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum MotionKind {
+    /// A straight move in joint space, recorded; gap changes at four points along it.
+    Move {
+        /// Start (µm, °).
+        from_display: [f64; 6],
+        /// End (µm, °).
+        to_display: [f64; 6],
+    },
+    /// Stay at a pose: the gap change between the start and the end of the wait.
+    Dwell {
+        /// Pose (µm, °).
+        at_display: [f64; 6],
+        /// Duration (s).
+        duration_s: f64,
+    },
+    /// A wavelength sweep at a pose: the absolute gap.
+    Sweep {
+        /// Pose (µm, °).
+        at_display: [f64; 6],
+    },
+}
+
+/// One motion with its label.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DesignedMotion {
+    /// Label (trace label on a bench).
+    pub label: String,
+    /// The motion.
+    pub kind: MotionKind,
+}
+
+/// σ of a gap change the templates assume (nm): a bench's stage noise (SPEC section 9).
+pub const TEMPLATE_SIGMA_NM: f64 = 2.0;
+/// σ of an absolute gap the templates assume (µm) (SPEC section 9).
+pub const TEMPLATE_SIGMA_GAP_UM: f64 = 0.02;
+/// Laser wavelength of the templates (nm).
+pub const TEMPLATE_WAVELENGTH_NM: f64 = 1560.0;
+/// Duration of a template sweep (s): 40 nm at 10 nm/s.
+const SWEEP_S: f64 = 4.0;
+
+/// Estimated bench time of a motion (s): 100 µm/s, 2 °/s, plus a second for the setup move.
+pub fn duration_s(m: &DesignedMotion) -> f64 {
+    match &m.kind {
+        MotionKind::Move { from_display, to_display } => {
+            let t = (0..6)
+                .map(|j| (to_display[j] - from_display[j]).abs() / if j < 3 { 100.0 } else { 2.0 })
+                .fold(0.0, f64::max);
+            t + 1.0
+        }
+        MotionKind::Dwell { duration_s, .. } => duration_s + 1.0,
+        MotionKind::Sweep { .. } => SWEEP_S + 1.0,
+    }
+}
+
+/// Observation templates of motions run from bench time `start_s` (values zero, σ the template
+/// σ, times estimated by [`duration_s`]).
+pub fn templates(motions: &[DesignedMotion], start_s: f64) -> Vec<Observation> {
+    let mut t = start_s;
+    let mut out = Vec::new();
+    for m in motions {
+        let d = duration_s(m);
+        let t0 = t + 1.0;
+        let obs = |kind, sigma, time_s| Observation {
+            label: m.label.clone(),
+            kind,
+            sigma,
+            wavelength_nm: TEMPLATE_WAVELENGTH_NM,
+            time_s,
+        };
+        match &m.kind {
+            MotionKind::Move { from_display, to_display } => {
+                for k in 1..=4 {
+                    let f = k as f64 / 4.0;
+                    let to: [f64; 6] = std::array::from_fn(|j| from_display[j] + f * (to_display[j] - from_display[j]));
+                    out.push(obs(
+                        ObservationKind::GapChange { from_display: *from_display, to_display: to, dl_nm: 0.0 },
+                        TEMPLATE_SIGMA_NM,
+                        [t0, t0 + f * (d - 1.0)],
+                    ));
+                }
+            }
+            MotionKind::Dwell { at_display, duration_s } => out.push(obs(
+                ObservationKind::GapChange { from_display: *at_display, to_display: *at_display, dl_nm: 0.0 },
+                TEMPLATE_SIGMA_NM,
+                [t0, t0 + duration_s],
+            )),
+            MotionKind::Sweep { at_display } => out.push(obs(
+                ObservationKind::AbsoluteGap { at_display: *at_display, gap_um: 0.0 },
+                TEMPLATE_SIGMA_GAP_UM,
+                [t0, t0 + SWEEP_S],
+            )),
+        }
+        t += d;
+    }
+    out
+}
+
+fn pose(q1: f64, q2: f64, q3: f64, q4: f64, q5: f64, q6: f64) -> [f64; 6] {
+    [q1, q2, q3, q4, q5, q6]
+}
+
+fn mv(label: String, from_display: [f64; 6], to_display: [f64; 6]) -> DesignedMotion {
+    DesignedMotion { label, kind: MotionKind::Move { from_display, to_display } }
+}
+
+/// The pool of discriminating motions (femto-6dof joint order: q1 Z_w, q2 Y_w, q3 X_w, q4-q6
+/// revolute), inside the default limits: q4 and q5 rotations of ±4° at ±150 µm lateral offsets
+/// and at gaps 100 µm shorter and longer and with q6 at ±45°, q6 rotations of ±20° centred and at lateral offsets,
+/// reversals of the X and Z stages, a long Y move, and a return to q = 0 after 30 s.
+pub fn pool() -> Vec<DesignedMotion> {
+    let mut out = Vec::new();
+    for (j, name) in [(3, "q4"), (4, "q5")] {
+        for (q1, q3) in [(150.0, 0.0), (-150.0, 0.0), (0.0, 150.0), (0.0, -150.0)] {
+            let mut from = pose(q1, 0.0, q3, 0.0, 0.0, 0.0);
+            from[j] = -4.0;
+            let mut to = from;
+            to[j] = 4.0;
+            out.push(mv(format!("D {name} -4 -> +4° at q1 = {q1}, q3 = {q3} µm"), from, to));
+        }
+        for q2 in [-100.0, 100.0] {
+            let mut from = pose(0.0, q2, 0.0, 0.0, 0.0, 0.0);
+            from[j] = -4.0;
+            let mut to = from;
+            to[j] = 4.0;
+            out.push(mv(format!("D {name} -4 -> +4° at q2 = {q2} µm"), from, to));
+        }
+        // With the lamella turned about the beam: separates a pivot offset of this joint from a
+        // shift of the beam together with a pivot offset of joint 6.
+        for q6 in [-45.0, 45.0] {
+            let mut from = pose(0.0, 0.0, 0.0, 0.0, 0.0, q6);
+            from[j] = -4.0;
+            let mut to = from;
+            to[j] = 4.0;
+            out.push(mv(format!("D {name} -4 -> +4° at q6 = {q6}°"), from, to));
+        }
+    }
+    for (q1, q3) in [(0.0, 0.0), (150.0, 0.0), (-150.0, 0.0), (0.0, 150.0), (0.0, -150.0)] {
+        out.push(mv(
+            format!("D q6 -20 -> +20° at q1 = {q1}, q3 = {q3} µm"),
+            pose(q1, 0.0, q3, 0.0, 0.0, -20.0),
+            pose(q1, 0.0, q3, 0.0, 0.0, 20.0),
+        ));
+    }
+    for (j, name) in [(2, "q3"), (0, "q1")] {
+        let mut a = [0.0; 6];
+        a[j] = -150.0;
+        let mut b = [0.0; 6];
+        b[j] = 150.0;
+        out.push(mv(format!("D {name} -150 -> +150 µm (reversal, out)"), a, b));
+        out.push(mv(format!("D {name} +150 -> -150 µm (reversal, back)"), b, a));
+    }
+    out.push(mv(
+        "D q2 -100 -> +100 µm".into(),
+        pose(0.0, -100.0, 0.0, 0.0, 0.0, 0.0),
+        pose(0.0, 100.0, 0.0, 0.0, 0.0, 0.0),
+    ));
+    out.push(DesignedMotion {
+        label: "D return to q = 0 after 30 s".into(),
+        kind: MotionKind::Dwell { at_display: [0.0; 6], duration_s: 30.0 },
+    });
+    out
+}
+
+/// A bench the diagnosis can run motions on.
+pub trait MotionRunner {
+    /// Name for the user.
+    fn name(&self) -> String;
+    /// Run the motions and return their observations; `analysis` is the current model (the
+    /// fringe analysis needs its motion hint).
+    fn run(&mut self, motions: &[DesignedMotion], analysis: &PhaseModel) -> Result<Vec<Observation>, String>;
+    /// The observations of everything run so far, analysed again with a better model (the
+    /// fringe analysis follows the model's motion hint); `None` when the runner keeps no traces.
+    fn reanalyse(&self, _analysis: &PhaseModel) -> Option<Vec<Observation>> {
+        None
+    }
+}
+
+/// A hidden perturbation outside the effect library, added to the simulated value of an
+/// observation (in its unit): for blind tests of "unexplained".
+pub type Perturbation = Box<dyn Fn(&Observation) -> f64 + Send>;
+
+/// Observations simulated by the extended model itself: truth extrinsics and hidden effects,
+/// Gaussian noise of the template σ, a bench clock. Fast (no traces), for statistics over many seeds.
+pub struct SimulatedBench {
+    predictor: Predictor,
+    truth: Extrinsics,
+    effects: Vec<Effect>,
+    perturbation: Option<Perturbation>,
+    /// Relative σ of a fringe amplitude.
+    pub amplitude_rel_sigma: f64,
+    rng: StdRng,
+    clock_s: f64,
+}
+
+impl SimulatedBench {
+    /// A simulated bench on the nominal model `base` with the hidden `truth` and `effects`.
+    pub fn new(base: &PhaseModel, truth: Extrinsics, effects: Vec<Effect>, seed: u64) -> Result<Self, String> {
+        let probe = templates(
+            &[DesignedMotion { label: String::new(), kind: MotionKind::Sweep { at_display: [0.0; 6] } }],
+            0.0,
+        );
+        Ok(Self {
+            predictor: Predictor::new(base, &probe)?,
+            truth,
+            effects,
+            perturbation: None,
+            amplitude_rel_sigma: 1e-3,
+            rng: StdRng::seed_from_u64(seed),
+            clock_s: 0.0,
+        })
+    }
+
+    /// Add a hidden perturbation the library does not contain.
+    pub fn with_perturbation(mut self, p: Perturbation) -> Self {
+        self.perturbation = Some(p);
+        self
+    }
+
+    /// Simulate given observation templates (their times are shifted to the bench clock);
+    /// amplitudes get σ = `amplitude_rel_sigma` of their value.
+    pub fn simulate(&mut self, templates: &[Observation]) -> Result<Vec<Observation>, String> {
+        let t0 = templates.iter().map(|o| o.time_s[0]).fold(f64::INFINITY, f64::min);
+        let shift = if t0.is_finite() { self.clock_s - t0 } else { 0.0 };
+        let mut obs: Vec<Observation> = templates.to_vec();
+        for o in &mut obs {
+            o.time_s = [o.time_s[0] + shift, o.time_s[1] + shift];
+        }
+        self.predictor.extend(&obs)?;
+        let values = self.predictor.predict(&self.truth, &self.effects, &[1.0; 64], &obs).map_err(|e| e.to_string())?;
+        for (o, v) in obs.iter_mut().zip(values) {
+            let extra = self.perturbation.as_ref().map_or(0.0, |p| p(o));
+            let n: f64 = StandardNormal.sample(&mut self.rng);
+            if let ObservationKind::FringeAmplitude { .. } = o.kind {
+                o.sigma = self.amplitude_rel_sigma * v.abs();
+            }
+            let value = v + extra + n * o.sigma;
+            match &mut o.kind {
+                ObservationKind::GapChange { dl_nm, .. } => *dl_nm = value,
+                ObservationKind::AbsoluteGap { gap_um, .. } => *gap_um = value,
+                ObservationKind::FringeAmplitude { amplitude_mw, .. } => *amplitude_mw = value,
+            }
+        }
+        self.clock_s = obs.iter().map(|o| o.time_s[1]).fold(self.clock_s, f64::max) + 1.0;
+        Ok(obs)
+    }
+}
+
+impl MotionRunner for SimulatedBench {
+    fn name(&self) -> String {
+        "simulated observations".into()
+    }
+
+    fn run(&mut self, motions: &[DesignedMotion], _analysis: &PhaseModel) -> Result<Vec<Observation>, String> {
+        let t = templates(motions, self.clock_s);
+        self.simulate(&t)
+    }
+}
+
+/// The calibration motions of the paper (SPEC section 4, section 9's "paper" set) as templates
+/// for simulated benches: strategy 1 (X, Z translations at three lateral positions, Y moves),
+/// strategy 2 (q4, q5 sweeps of ±4° at five values of the other), q4/q5 rotations at two more
+/// gaps, five absolute gaps, and tilt scans of the fringe amplitude (one gain group).
+pub fn paper_calibration() -> Vec<Observation> {
+    let mut motions = Vec::new();
+    for lateral in [-150.0, 0.0, 150.0] {
+        motions.push(mv(
+            format!("S1 X at q1 = {lateral}"),
+            pose(lateral, 0.0, -150.0, 0.0, 0.0, 0.0),
+            pose(lateral, 10.0, 150.0, 0.0, 0.0, 0.0),
+        ));
+        motions.push(mv(
+            format!("S1 Z at q3 = {lateral}"),
+            pose(-150.0, -10.0, lateral, 0.0, 0.0, 0.0),
+            pose(150.0, 10.0, lateral, 0.0, 0.0, 0.0),
+        ));
+        motions.push(mv(
+            format!("S1 XZ at q2 = {lateral}"),
+            pose(-150.0, lateral / 15.0, -150.0, 0.0, 0.0, 0.0),
+            pose(150.0, lateral / 15.0, 150.0, 0.0, 0.0, 0.0),
+        ));
+    }
+    for v in [-4.0, -2.0, 0.0, 2.0, 4.0] {
+        motions.push(mv(
+            format!("S2 q4 at q5 = {v}"),
+            pose(0.0, 0.0, 0.0, -4.0, v, 0.0),
+            pose(0.0, 0.0, 0.0, 4.0, v, 0.0),
+        ));
+        motions.push(mv(
+            format!("S2 q5 at q4 = {v}"),
+            pose(0.0, 0.0, 0.0, v, -4.0, 0.0),
+            pose(0.0, 0.0, 0.0, v, 4.0, 0.0),
+        ));
+    }
+    for q2 in [-100.0, 100.0] {
+        motions.push(mv(
+            format!("R q4 at q2 = {q2}"),
+            pose(0.0, q2, 0.0, -4.0, 0.0, 0.0),
+            pose(0.0, q2, 0.0, 4.0, 0.0, 0.0),
+        ));
+        motions.push(mv(
+            format!("R q5 at q2 = {q2}"),
+            pose(0.0, q2, 0.0, 0.0, -4.0, 0.0),
+            pose(0.0, q2, 0.0, 0.0, 4.0, 0.0),
+        ));
+    }
+    for (k, at) in [
+        pose(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        pose(0.0, -100.0, 0.0, 0.0, 0.0, 0.0),
+        pose(0.0, 100.0, 0.0, 0.0, 0.0, 0.0),
+        pose(120.0, 0.0, -120.0, 0.0, 0.0, 0.0),
+        pose(-120.0, 0.0, 120.0, 0.0, 0.0, 0.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        motions.push(DesignedMotion { label: format!("G sweep {k}"), kind: MotionKind::Sweep { at_display: at } });
+    }
+    let mut out = templates(&motions, 0.0);
+    let end = out.iter().map(|o| o.time_s[1]).fold(0.0, f64::max);
+    for (k, a) in [-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0].into_iter().enumerate() {
+        for j in [3, 4] {
+            let mut at = [0.0; 6];
+            at[j] = a;
+            out.push(Observation {
+                label: format!("tilt scan q{}", j + 1),
+                kind: ObservationKind::FringeAmplitude { at_display: at, amplitude_mw: 0.0, group: 0 },
+                sigma: 1.0,
+                wavelength_nm: TEMPLATE_WAVELENGTH_NM,
+                time_s: [end + k as f64; 2],
+            });
+        }
+    }
+    out
+}
+
+/// Runs motions on a [`Bench`] (virtual or hardware) and extracts their observations.
+pub struct BenchRunner<'a> {
+    /// The bench.
+    pub bench: &'a mut dyn Bench,
+    /// How traces become observations.
+    pub options: ExtractOptions,
+    /// Added to the bench times of the observations (s): a bench started afresh after the
+    /// recorded session puts its motions after the session's.
+    pub time_offset_s: f64,
+    /// The traces run so far.
+    pub traces: Vec<crate::trace::Trace>,
+}
+
+impl<'a> BenchRunner<'a> {
+    /// A runner on `bench` whose observations come after bench time `time_offset_s`.
+    pub fn new(bench: &'a mut dyn Bench, time_offset_s: f64) -> Self {
+        Self { bench, options: crate::diagnose::EXTRACT_OPTIONS, time_offset_s, traces: Vec::new() }
+    }
+
+    fn extract(&self, traces: &[crate::trace::Trace], analysis: &PhaseModel) -> Vec<Observation> {
+        let mut obs = observations_from_traces(traces, analysis, &self.options).observations;
+        for o in &mut obs {
+            o.time_s = [o.time_s[0] + self.time_offset_s, o.time_s[1] + self.time_offset_s];
+        }
+        obs
+    }
+}
+
+/// The plan that runs motions: an unrecorded setup move to each start, then the recorded motion.
+pub fn plan_of(motions: &[DesignedMotion]) -> Plan {
+    let mut segments = Vec::new();
+    for m in motions {
+        let start = match &m.kind {
+            MotionKind::Move { from_display, .. } => from_display,
+            MotionKind::Dwell { at_display, .. } | MotionKind::Sweep { at_display } => at_display,
+        };
+        segments.push(Segment::Move { to: JointTarget::all(*start), record: false, label: "D setup".into() });
+        segments.push(match &m.kind {
+            MotionKind::Move { to_display, .. } => {
+                Segment::Move { to: JointTarget::all(*to_display), record: true, label: m.label.clone() }
+            }
+            MotionKind::Dwell { duration_s, .. } => {
+                Segment::Dwell { duration_s: *duration_s, record: true, label: m.label.clone() }
+            }
+            MotionKind::Sweep { .. } => {
+                Segment::Sweep { from_nm: 1540.0, to_nm: 1580.0, rate_nm_per_s: 10.0, label: m.label.clone() }
+            }
+        });
+    }
+    Plan { name: "discriminating motions".into(), description: "designed by the diagnosis".into(), segments }
+}
+
+impl MotionRunner for BenchRunner<'_> {
+    fn name(&self) -> String {
+        self.bench.name()
+    }
+
+    fn run(&mut self, motions: &[DesignedMotion], analysis: &PhaseModel) -> Result<Vec<Observation>, String> {
+        let cancel = AtomicBool::new(false);
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        let run = run_plan(self.bench, &plan_of(motions), &mut control);
+        run.outcome.map_err(|e| format!("discriminating motions on {}: {e}", self.bench.name()))?;
+        let obs = self.extract(&run.traces, analysis);
+        self.traces.extend(run.traces);
+        Ok(obs)
+    }
+
+    fn reanalyse(&self, analysis: &PhaseModel) -> Option<Vec<Observation>> {
+        Some(self.extract(&self.traces, analysis))
+    }
+}
