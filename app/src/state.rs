@@ -270,6 +270,10 @@ pub struct AppState {
     pub identify_error: Option<String>,
     /// Validation results.
     pub validation: Option<Vec<ValidationPair>>,
+    /// The diagnosis steps so far (title, summary).
+    pub diagnosis_steps: Vec<(String, String)>,
+    /// The diagnosis result, or why it failed.
+    pub diagnosis: Option<Result<Box<photorobot_core::diagnose::DiagnosisResult>, String>>,
     /// Selected frame-tree node.
     pub selected_frame: Option<usize>,
     /// The robot view's camera.
@@ -312,6 +316,8 @@ impl AppState {
             report: None,
             identify_error: None,
             validation: None,
+            diagnosis_steps: vec![],
+            diagnosis: None,
             selected_frame: None,
             camera: Default::default(),
             imported: vec![],
@@ -370,6 +376,14 @@ impl AppState {
         let duration_s = used.iter().map(|s| s.duration_s).sum();
         self.identify_error = None;
         self.worker.send(Command::Identify { traces, duration_s, mode });
+    }
+
+    /// Start the diagnosis on every recorded trace from the identified extrinsics.
+    pub fn diagnose(&mut self) {
+        let traces: Vec<Trace> = self.steps.iter().flat_map(|s| s.traces.iter().cloned()).collect();
+        self.diagnosis_steps.clear();
+        self.diagnosis = None;
+        self.worker.send(Command::Diagnose { traces, extrinsics: self.extrinsics });
     }
 
     /// Apply every pending event of the worker and of the saves.
@@ -448,6 +462,15 @@ impl AppState {
             Event::Validated(pairs) => {
                 self.status = format!("validation done: {} motions, before and after", pairs.len());
                 self.validation = Some(pairs);
+            }
+            Event::DiagnosisStep(title, summary) => self.diagnosis_steps.push((title, summary)),
+            Event::Diagnosed(r) => {
+                self.status = match &r {
+                    Ok(d) => format!("diagnosis: {:?}", d.verdict),
+                    Err(e) => format!("diagnosis failed: {e}"),
+                };
+                self.diagnosis = Some(r);
+                self.dirty = true;
             }
             Event::Analysed { index, result } => {
                 self.analyses.insert(index, result);

@@ -6,6 +6,8 @@
 //! (times a speed factor) so a virtual bench looks like a real one, or runs as fast as it can.
 
 use photorobot_core::bench::{run_plan, Bench, BenchPreset, RunControl, VirtualBench};
+use photorobot_core::diagnose::motions::BenchRunner;
+use photorobot_core::diagnose::{Diagnosis, DiagnosisResult};
 use photorobot_core::identify::calibration::{report_from_traces, CalibrationReport, Mode};
 use photorobot_core::measure::{self, Measurement, PhaseModel};
 use photorobot_core::model::extrinsics::Extrinsics;
@@ -60,6 +62,14 @@ pub enum Command {
         /// The trace.
         trace: Box<Trace>,
         /// Extrinsics of the model used for the motion hint.
+        extrinsics: Extrinsics,
+    },
+    /// Run the discrepancy workflow on the traces from the calibrated extrinsics, with
+    /// discriminating motions on this bench.
+    Diagnose {
+        /// The recorded traces.
+        traces: Vec<Trace>,
+        /// The calibrated extrinsics.
         extrinsics: Extrinsics,
     },
     /// Change the pacing.
@@ -129,6 +139,10 @@ pub enum Event {
         /// The analysis.
         result: Result<Box<Measurement>, String>,
     },
+    /// One step of the diagnosis: its title and summary.
+    DiagnosisStep(String, String),
+    /// The diagnosis finished (or failed).
+    Diagnosed(Result<Box<DiagnosisResult>, String>),
     /// The worker started (`Some(what)`) or finished (`None`) a job.
     Busy(Option<String>),
 }
@@ -301,6 +315,13 @@ impl Thread {
                     self.send(Event::Validated(pairs));
                     self.send(Event::Busy(None));
                 }
+                Command::Diagnose { traces, extrinsics } => {
+                    self.send(Event::Busy(Some("diagnosing".into())));
+                    let result = self.diagnose(&traces, extrinsics);
+                    self.send(Event::Position(self.bench.position_display()));
+                    self.send(Event::Diagnosed(result.map(Box::new)));
+                    self.send(Event::Busy(None));
+                }
                 Command::Analyse { index, trace, extrinsics } => {
                     let model = PhaseModel { extrinsics, ..self.nominal.clone() };
                     let result = measure::analyse(&trace, &model).map(Box::new).map_err(|e| e.to_string());
@@ -308,6 +329,25 @@ impl Thread {
                 }
             }
         }
+    }
+
+    /// The diagnosis, step by step (each step reported), discriminating motions on this bench.
+    fn diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics) -> Result<DiagnosisResult, String> {
+        let (mut d, skipped) = Diagnosis::from_traces(&self.nominal, traces, extrinsics).map_err(|e| e.to_string())?;
+        if !skipped.is_empty() {
+            let _ = self.tx.send(Event::DiagnosisStep(
+                "0. traces".into(),
+                format!("{} traces gave no observation (e.g. {}: {})", skipped.len(), skipped[0].0, skipped[0].1),
+            ));
+        }
+        let offset = d.end_time_s().max(self.bench.clock_s()) + 60.0;
+        let mut runner = BenchRunner::new(self.bench.as_mut(), offset);
+        let tx = self.tx.clone();
+        while let Some(step) = d.step(Some(&mut runner)).map_err(|e| e.to_string())? {
+            let _ = tx.send(Event::DiagnosisStep(step.title().to_string(), step.summary()));
+            (self.notify)();
+        }
+        d.result().cloned().ok_or_else(|| "the diagnosis ended without a result".into())
     }
 
     /// One live dither half-cycle along the beam (q2), at real time: a staircase of small recorded

@@ -276,6 +276,32 @@ fn sessions_autosave_save_open_recover_and_export_through_the_file_menu() {
     assert!(h.state().state.steps[1].traces.is_empty() && !h.state().state.dirty);
 }
 
+/// The discrepancy workflow from the GUI on strategy 2's traces: every step is shown, then the
+/// verdict with the residual before and after.
+#[test]
+fn diagnosis_view_runs_the_workflow_step_by_step() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(workbench(Settings::default(), ScriptedDialogs::default()));
+    h.state_mut().state.session_dir = Some(tmp.path().join("session"));
+    open(&mut h, Tab::Diagnosis);
+    h.get_by_label_contains("no recorded trace yet");
+    open(&mut h, Tab::Wizard);
+    h.get_by_label("Run step 2 (F5)").click();
+    wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.steps[1].state == StepState::Done);
+    open(&mut h, Tab::Diagnosis);
+    h.get_by_label("Run the diagnosis").click();
+    wait_until(&mut h, "the diagnosis", Duration::from_secs(600), |w| w.state.diagnosis.is_some());
+    let result = h.state().state.diagnosis.clone().unwrap().expect("the diagnosis runs");
+    assert!(h.state().state.diagnosis_steps.len() >= 3, "{:?}", h.state().state.diagnosis_steps);
+    h.get_by_label("1. replay: baseline fit of the extrinsics");
+    h.get_by_label_contains("Verdict: ");
+    h.get_by_label_contains(&format!(
+        "{:.2} nm before, {:.2} nm after",
+        result.residual_rms_before_nm, result.residual_rms_after_nm
+    ));
+    screenshot(&mut h, "diagnosis-workflow");
+}
+
 #[test]
 fn cancelling_a_step_keeps_what_was_recorded_and_imports_go_through_the_dialog() {
     let dir = tempfile::tempdir().unwrap();

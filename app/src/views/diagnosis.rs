@@ -1,6 +1,7 @@
-//! Diagnosis: the entry point of the discrepancy workflow. Until the workflow is wired in, it
-//! shows where the residual of the identification lives: the measurements with the largest
-//! normalised residuals, and the RMS per equation.
+//! Diagnosis: where the residual of the identification lives (RMS per equation, the largest
+//! residuals), and the discrepancy workflow (`photorobot_core::diagnose`) run step by step in the
+//! worker: baseline, candidates scored, discriminating motions run on the bench, effects named
+//! and added, the verdict with the residual before and after.
 
 use crate::state::AppState;
 use crate::views::results::equation_of;
@@ -13,14 +14,48 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
         "Where do the model and the data disagree? A residual above the noise floor means an effect the \
          model lacks (drift, a stage scale or pivot error, …).",
     );
-    let Some(r) = s.report.as_deref() else {
-        ui.label("identify first (wizard)");
+    match s.report.as_deref() {
+        Some(r) => {
+            ui.label(format!(
+                "residual {:.2} σ RMS over {} observations (1 = at the noise floor)",
+                r.residual_rms_sigma, r.observations
+            ));
+        }
+        None => {
+            ui.label("not identified yet: the diagnosis starts from the design extrinsics and refits them");
+        }
+    }
+    if s.steps.iter().all(|st| st.traces.is_empty()) {
+        ui.label("no recorded trace yet: run the wizard's steps first");
         return;
-    };
-    ui.label(format!(
-        "residual {:.2} σ RMS over {} observations (1 = at the noise floor)",
-        r.residual_rms_sigma, r.observations
-    ));
+    }
+    let idle = s.busy.is_none() && s.running.is_none();
+    let mut start = false;
+    ui.horizontal(|ui| {
+        start = ui
+            .add_enabled(idle, egui::Button::new(RichText::new("Run the diagnosis").size(18.0)))
+            .on_hover_text(
+                "score every effect of the library against the residual, run discriminating motions on the bench, \
+                 add what is found",
+            )
+            .clicked();
+        if s.busy.as_deref() == Some("diagnosing") {
+            ui.spinner();
+            ui.label("diagnosing…");
+        }
+    });
+    egui::ScrollArea::vertical().id_salt("diagnosis").show(ui, |ui| {
+        workflow(ui, s);
+        ui.separator();
+        residuals(ui, s);
+    });
+    if start {
+        s.diagnose();
+    }
+}
+
+fn residuals(ui: &mut egui::Ui, s: &AppState) {
+    let Some(r) = s.report.as_deref() else { return };
     let mut per_eq: Vec<(String, f64, usize)> = Vec::new();
     for (label, unit, res, sigma) in &r.residuals {
         let eq = equation_of(label, unit);
@@ -64,4 +99,68 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
             ui.end_row();
         }
     });
+}
+
+fn workflow(ui: &mut egui::Ui, s: &AppState) {
+    for (title, summary) in &s.diagnosis_steps {
+        ui.label(RichText::new(drawable(title)).strong());
+        ui.label(drawable(summary));
+    }
+    match &s.diagnosis {
+        None => {}
+        Some(Err(e)) => {
+            ui.colored_label(ui.visuals().error_fg_color, format!("diagnosis failed: {e}"));
+        }
+        Some(Ok(d)) => {
+            let verdict = match d.verdict {
+                photorobot_core::diagnose::Verdict::Named => "named: the model lacked the effects below",
+                photorobot_core::diagnose::Verdict::None => "no significant missing effect",
+                photorobot_core::diagnose::Verdict::Unexplained => "unexplained structure remains",
+            };
+            ui.label(RichText::new(format!("Verdict: {verdict}")).size(20.0).strong());
+            ui.label(format!(
+                "gap-change residual RMS {:.2} nm before, {:.2} nm after ({:.2} σ to {:.2} σ)",
+                d.residual_rms_before_nm,
+                d.residual_rms_after_nm,
+                d.residual_rms_before_sigma,
+                d.residual_rms_after_sigma
+            ));
+            let effects: Vec<_> = d.effects.iter().chain(&d.partial).collect();
+            if !effects.is_empty() {
+                egui::Grid::new("effects").striped(true).show(ui, |ui| {
+                    for h in ["effect", "estimate", "σ", "F", "absorbed by extrinsics", "cannot be told from"] {
+                        ui.strong(h);
+                    }
+                    ui.end_row();
+                    for e in effects {
+                        ui.label(drawable(&e.name));
+                        ui.monospace(format!("{:.4} {}", e.estimate, e.unit));
+                        ui.monospace(e.sigma.map_or("–".into(), |v| format!("{v:.4} {}", e.unit)));
+                        ui.monospace(format!("{:.1}", e.score));
+                        ui.monospace(format!("{:.1} %", e.absorbed_share * 100.0));
+                        ui.label(drawable(&e.ambiguous_with.join(", ")));
+                        ui.end_row();
+                    }
+                });
+            }
+            if !d.equivalent_to_extrinsics.is_empty() {
+                ui.label(drawable(&format!(
+                    "equivalent to an extrinsic change: {}",
+                    d.equivalent_to_extrinsics.join(", ")
+                )));
+            }
+            if !d.discriminating_motions.is_empty() {
+                ui.label(drawable(&format!(
+                    "discriminating motions {}: {}",
+                    if d.discriminating_motions_ran { "run" } else { "designed (not run)" },
+                    d.discriminating_motions.join("; ")
+                )));
+            }
+        }
+    }
+}
+
+/// Text from the core with the arrows the UI font lacks written out.
+pub fn drawable(text: &str) -> String {
+    text.replace('→', "->").replace('←', "<-").replace('↔', "<->")
 }
