@@ -107,6 +107,8 @@ impl Workbench {
             let dark = self.state.settings.dark;
             ctx.set_visuals(if dark { egui::Visuals::dark() } else { egui::Visuals::light() });
             self.applied_dark = Some(dark);
+            // This pass was laid out with the old style: draw the next one with the new.
+            ctx.request_repaint();
         }
         self.shortcuts(&ctx);
         egui::Panel::top("top bar").show(ui, |ui| {

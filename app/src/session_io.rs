@@ -21,6 +21,7 @@ pub struct Snapshot {
     steps: Vec<(Vec<Trace>, bool)>,
     imported: Vec<Trace>,
     calibration: Option<photorobot_core::identify::calibration::CalibrationReport>,
+    diagnosis: Option<photorobot_core::session::DiagnosisRecord>,
     notes: String,
 }
 
@@ -38,6 +39,10 @@ pub fn snapshot(s: &AppState) -> Snapshot {
         steps: s.steps.iter().map(|st| (st.traces.clone(), st.state == StepState::Done)).collect(),
         imported: s.imported.clone(),
         calibration: s.report.as_deref().cloned(),
+        diagnosis: match &s.diagnosis {
+            Some(Ok(d)) => Some(photorobot_core::session::DiagnosisRecord::from_result(d)),
+            _ => None,
+        },
         notes: s.notes.clone(),
     }
 }
@@ -63,6 +68,7 @@ impl Snapshot {
             session.add_trace(dir, t, None, true).map_err(|e| e.to_string())?;
         }
         session.calibration = self.calibration.clone();
+        session.diagnosis = self.diagnosis.clone();
         Ok(session)
     }
 
@@ -162,6 +168,7 @@ pub fn export_report(s: &AppState, path: &Path) -> Result<(), String> {
     let mut session = Session::new(snap.bench, snap.robot);
     session.plans = snap.plans;
     session.calibration = snap.calibration;
+    session.diagnosis = snap.diagnosis;
     session.notes = snap.notes;
     let html = photorobot_core::report::render_html(&session);
     photorobot_core::files::write_atomic(path, html.as_bytes()).map_err(|e| e.to_string())

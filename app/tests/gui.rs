@@ -300,6 +300,16 @@ fn diagnosis_view_runs_the_workflow_step_by_step() {
         result.residual_rms_before_nm, result.residual_rms_after_nm
     ));
     screenshot(&mut h, "diagnosis-workflow");
+    // Saved with the session.
+    let saved = tmp.path().join("saved");
+    h.state_mut().state.dialogs =
+        Box::new(ScriptedDialogs { folders: vec![Some(saved.clone())], ..Default::default() });
+    h.state_mut().save(true);
+    wait_until(&mut h, "the save", Duration::from_secs(60), |w| w.state.saving == 0);
+    let session = photorobot_core::session::Session::load(&saved).expect("the saved session loads");
+    let record = session.diagnosis.expect("the diagnosis is in the session");
+    assert!(record.verdict.contains(&format!("{:.2} nm before", result.residual_rms_before_nm)), "{}", record.verdict);
+    assert_eq!(record.effects.len(), result.effects.len() + result.partial.len());
 }
 
 #[test]
@@ -362,7 +372,7 @@ fn settings_persist_between_runs_and_the_theme_toggles() {
     let mut h = harness(workbench(Settings::default(), ScriptedDialogs::default()));
     assert!(h.state().state.settings.dark);
     h.get_by_label("Light theme").click();
-    h.run_steps(2);
+    h.run_steps(3);
     assert!(!h.state().state.settings.dark);
     h.get_by_label("Dark theme");
     let mean_brightness = |h: &mut Harness<'_, Workbench>| {
@@ -370,13 +380,14 @@ fn settings_persist_between_runs_and_the_theme_toggles() {
         image.pixels().map(|p| (p.0[0] as f64 + p.0[1] as f64 + p.0[2] as f64) / 3.0).sum::<f64>()
             / (image.width() * image.height()) as f64
     };
-    assert!(mean_brightness(&mut h) > 180.0, "the light theme is light");
+    let light = mean_brightness(&mut h);
+    assert!(light > 180.0, "the light theme is light: mean brightness {light}");
     screenshot(&mut h, "light-theme");
     h.get_by_label("Dark theme").click();
-    h.run_steps(2);
+    h.run_steps(3);
     assert!(mean_brightness(&mut h) < 80.0, "the dark theme is dark");
     h.get_by_label("Light theme").click();
-    h.run_steps(2);
+    h.run_steps(3);
     h.state_mut().state.settings.seed = 42;
     let mut app = App { workbench: h.into_state() };
     let mut storage = MemoryStorage::default();

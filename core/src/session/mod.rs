@@ -561,3 +561,39 @@ fn create_dir(dir: &Path) -> Result<(), FileError> {
 
 #[cfg(test)]
 mod tests;
+
+impl DiagnosisRecord {
+    /// The session's record of a diagnosis result: the named effects (then the partial ones),
+    /// the verdict in words with the residual before and after.
+    pub fn from_result(r: &crate::diagnose::DiagnosisResult) -> Self {
+        let finding = |e: &crate::diagnose::NamedEffect, note: &str| EffectFinding {
+            name: e.name.clone(),
+            estimate: e.estimate,
+            unit: e.unit.clone(),
+            sigma: e.sigma,
+            score: e.score,
+            score_kind: "F statistic".into(),
+            absorbed_fraction: Some(e.absorbed_share),
+            note: if e.ambiguous_with.is_empty() {
+                note.to_string()
+            } else {
+                format!("{note}cannot be told from: {}", e.ambiguous_with.join(", "))
+            },
+        };
+        let mut effects: Vec<EffectFinding> = r.effects.iter().map(|e| finding(e, "")).collect();
+        effects.extend(r.partial.iter().map(|e| finding(e, "added, residual still above the noise; ")));
+        let verdict = match r.verdict {
+            crate::diagnose::Verdict::Named => "named",
+            crate::diagnose::Verdict::None => "none: no significant missing effect",
+            crate::diagnose::Verdict::Unexplained => "unexplained structure remains",
+        };
+        let mut verdict = format!(
+            "{verdict}; gap-change residual RMS {:.2} nm before, {:.2} nm after",
+            r.residual_rms_before_nm, r.residual_rms_after_nm
+        );
+        if let Some(g) = r.residual_where.first().filter(|_| r.verdict == crate::diagnose::Verdict::Unexplained) {
+            verdict.push_str(&format!("; worst: {} {} at {:.1} σ", g.by, g.key, g.rms_sigma));
+        }
+        Self { effects, verdict }
+    }
+}
