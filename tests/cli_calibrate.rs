@@ -6,11 +6,14 @@ use photorobot_app::cli::{run, Outcome};
 use photorobot_core::model::extrinsics::Extrinsics;
 use serde_json::Value;
 
-fn calibrate(mode: &str, dir: &std::path::Path) -> Value {
+fn calibrate(mode: &str, dir: &std::path::Path, traces: Option<&std::path::Path>) -> Value {
     let mut out = Vec::new();
     let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--seed", "7", "--mode", mode, "--json", "--out"];
     let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
     argv.push(dir.display().to_string());
+    if let Some(t) = traces {
+        argv.extend(["--traces".to_string(), t.display().to_string()]);
+    }
     assert_eq!(run(argv, &mut out).unwrap(), Outcome::Done);
     serde_json::from_slice(&out).unwrap()
 }
@@ -27,7 +30,7 @@ fn validation(doc: &Value, motion: &str) -> (f64, f64) {
 #[test]
 fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates() {
     let dir = tempfile::tempdir().unwrap();
-    let doc = calibrate("joint", dir.path());
+    let doc = calibrate("joint", dir.path(), None);
     eprintln!("{}", serde_json::to_string_pretty(&doc["parameters"]).unwrap());
     eprintln!("{}", serde_json::to_string_pretty(&doc["validation"]).unwrap());
     assert_eq!(doc["converged"], true);
@@ -85,4 +88,27 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
         assert!((p.value - value(&p.name)).abs() <= 1e-14 * p.value.abs().max(1e-12), "{}", p.name);
     }
     assert_eq!(calibration.extrinsics, e);
+
+    // Paper mode on the same bench's strategy 1 and 2 traces (identification only): the lamella
+    // angles within 3σ, and what the paper's data cannot determine flagged (SPEC 6.4).
+    let s12 = tempfile::tempdir().unwrap();
+    for r in session.traces.iter().filter(|r| r.complete && r.step.is_some_and(|(p, _)| p < 2)) {
+        let name = std::path::Path::new(&r.file).file_name().unwrap();
+        std::fs::copy(dir.path().join(&r.file), s12.path().join(name)).unwrap();
+    }
+    let paper_out = tempfile::tempdir().unwrap();
+    let paper = calibrate("paper", &paper_out.path().join("session"), Some(s12.path()));
+    eprintln!("{}", serde_json::to_string_pretty(&paper["parameters"]).unwrap());
+    for name in ["beta_et", "theta_et"] {
+        let p = parameter(&paper, name);
+        assert_eq!(p["determined"], true, "paper mode determines {name}");
+        let sigma = p["sigma"].as_f64().unwrap();
+        let err = p["value"].as_f64().unwrap() - truth[index(name)];
+        assert!(sigma <= 0.005 && err.abs() <= 3.0 * sigma, "{name}: error {err}, σ {sigma}");
+    }
+    for name in ["beta_wf", "theta_wf"] {
+        assert_eq!(parameter(&paper, name)["determined"], false, "the paper's data cannot determine {name}");
+    }
+    let split = ["Z_et", "y_wf"].iter().filter(|n| parameter(&paper, n)["determined"] == false).count();
+    assert!(split >= 1, "the split of the gap between Z_et and y_wf is flagged");
 }
