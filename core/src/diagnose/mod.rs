@@ -24,6 +24,7 @@ pub mod fit;
 pub mod motions;
 pub mod replay;
 pub mod scoring;
+pub mod validation;
 
 use crate::identify::{Observation, ObservationKind, N_EXTRINSICS};
 use crate::measure::PhaseModel;
