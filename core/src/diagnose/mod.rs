@@ -239,6 +239,9 @@ impl Step {
                         "\nran on {b}: {added_observations} observations added; baseline refitted, rms {rms_sigma:.2}σ"
                     )
                     }
+                    None if motions.is_empty() => {
+                        s += "\nno motion of the pool would show them better than the data already do"
+                    }
                     None => s += "\nno bench to run them: they are proposed, not run",
                 }
                 s
