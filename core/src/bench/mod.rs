@@ -92,6 +92,11 @@ pub trait Bench: Send {
         meta: TraceMeta,
         control: &mut RunControl<'_>,
     ) -> Result<Option<Trace>, BenchError>;
+    /// The stage controllers' view of every joint axis, for a bench on controllers (`None` for a
+    /// simulated bench).
+    fn hardware_status(&mut self) -> Option<Vec<crate::hardware::AxisStatus>> {
+        None
+    }
 }
 
 /// Why a plan stopped. The traces recorded before the stop are in [`PlanRun::traces`].
