@@ -121,7 +121,7 @@ pub fn mapping_of(robot: &RobotDescription) -> Vec<JointDrive> {
 /// What a background job reports.
 enum Done {
     Identified(usize, Result<Identity, String>),
-    Connected(Result<(Box<ControllerBench>, PhaseModel), String>),
+    Connected(Result<Box<(ControllerBench, PhaseModel)>, String>),
 }
 
 /// The bench the worker runs on, as the panel connected it.
@@ -223,11 +223,12 @@ impl ConnectionPanel {
                 Done::Connected(r) => {
                     self.connecting = false;
                     match r {
-                        Ok((bench, nominal)) => {
-                            let name = photorobot_core::bench::Bench::name(bench.as_ref());
+                        Ok(opened) => {
+                            let (bench, nominal) = *opened;
+                            let name = photorobot_core::bench::Bench::name(&bench);
                             let ctx2 = ctx.clone();
                             let worker = Worker::start(
-                                bench,
+                                Box::new(bench),
                                 nominal,
                                 s.settings.pace(),
                                 Box::new(move || ctx2.request_repaint()),
@@ -370,7 +371,7 @@ fn open_bench(
     preset_name: &str,
     c: &ConnectionSettings,
     local: Option<(Box<dyn Laser>, Arc<EmuClock>)>,
-) -> Result<(Box<ControllerBench>, PhaseModel), String> {
+) -> Result<Box<(ControllerBench, PhaseModel)>, String> {
     let preset = BenchPreset::resolve(preset_name).map_err(|e| e.to_string())?;
     let robot = mapped(preset.robot_description().map_err(|e| e.to_string())?, c);
     let (laser, clock) = local.unwrap_or_else(|| {
@@ -389,7 +390,7 @@ fn open_bench(
             BenchError::Fault(m) | BenchError::Config(m) => m,
             other => other.to_string(),
         })?;
-    Ok((Box::new(bench), nominal))
+    Ok(Box::new((bench, nominal)))
 }
 
 /// Put `worker` in place of the running one: a new session on the new bench (as changing the
