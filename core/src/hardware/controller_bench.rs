@@ -490,8 +490,12 @@ impl ControllerBench {
             let on_target = keep(&mut error, c.on_target(&[m.axis])).and_then(|p| p.first().copied());
             let servo_on = keep(&mut error, c.servo_on(&[m.axis])).flatten().and_then(|p| p.first().copied());
             let referenced = keep(&mut error, c.is_referenced(m.axis));
+            // A link closed by a fault answers "not connected" from then on: keep the fault that closed it.
             if let Some(e) = error {
-                self.last_errors[m.controller] = Some(e.to_string());
+                let last = &mut self.last_errors[m.controller];
+                if !(matches!(e, HwError::NotConnected { .. }) && last.is_some()) {
+                    *last = Some(e.to_string());
+                }
             }
             let axis = c.axes()[m.axis].clone();
             out.push(AxisStatus {

@@ -193,6 +193,10 @@ mod tests {
         // Stopped emulators close their connections: the link's loss shows as the controller's last error, on its axes only.
         drop(emu);
         let status = bench.axis_status();
-        assert!(status[0].error.as_deref().is_some_and(|e| e.starts_with("PI E-712: ")), "{:?}", status[0]);
+        let lost = status[0].error.clone().unwrap();
+        assert!(lost.starts_with("PI E-712: connection lost during `POS? 3`"), "{lost}");
+        // Later polls find the link closed: the error that closed it stays.
+        assert_eq!(bench.axis_status()[1].error.as_deref(), Some(lost.as_str()));
+        assert!(status[3].error.as_deref().is_some_and(|e| e.starts_with("SmarAct MCS: ")), "{:?}", status[3]);
     }
 }
