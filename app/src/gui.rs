@@ -118,6 +118,8 @@ impl Workbench {
     pub fn show(&mut self, ui: &mut egui::Ui) {
         self.state.poll_worker();
         let ctx = ui.ctx().clone();
+        // Identify and Connect finish on other threads whichever tab is open.
+        self.connection.poll(&mut self.state, &ctx);
         if self.applied_dark != Some(self.state.settings.dark) {
             let dark = self.state.settings.dark;
             ctx.set_visuals(if dark { egui::Visuals::dark() } else { egui::Visuals::light() });

@@ -116,8 +116,12 @@ fn connection_panel_drives_the_emulated_controllers_and_explains_failures() {
     h.get_by_label("axes: 1 (µm), 2 (µm), 3 (µm)");
 
     // Connect: the worker now runs on the controllers; the status table reads them.
+    // The connection completes whichever tab is open.
     h.get_by_label("Connect").click();
+    h.run_steps(1);
+    open(&mut h, Tab::Robot);
     wait_until(&mut h, "the connection", Duration::from_secs(30), |w| w.connection.connected.is_some());
+    open(&mut h, Tab::Connection);
     assert!(h.state().connection.connected.as_ref().unwrap().emulated);
     assert!(h.state().state.worker.bench_name.starts_with("femto-hardware (PI E-712 at 127.0.0.1:"));
     wait_until(&mut h, "the axis status", Duration::from_secs(20), |w| w.state.hardware_status.is_some());

@@ -208,8 +208,8 @@ fn mapped(mut robot: RobotDescription, c: &ConnectionSettings) -> RobotDescripti
 }
 
 impl ConnectionPanel {
-    /// Apply what the background jobs finished.
-    fn poll(&mut self, s: &mut AppState, ctx: &egui::Context) {
+    /// Apply what the background jobs finished (called every frame by the window).
+    pub fn poll(&mut self, s: &mut AppState, ctx: &egui::Context) {
         while let Ok(done) = self.jobs.1.try_recv() {
             match done {
                 Done::Identified(i, r) => {
@@ -269,7 +269,7 @@ impl ConnectionPanel {
         });
     }
 
-    fn connect(&mut self, s: &AppState, ctx: &egui::Context) {
+    fn connect(&mut self, s: &mut AppState, ctx: &egui::Context) {
         let c = s.settings.connection.clone();
         let preset_name = s.settings.preset.clone();
         let addresses: Vec<(String, String)> = c.controllers.iter().map(|a| (a.name.clone(), a.address())).collect();
@@ -284,6 +284,8 @@ impl ConnectionPanel {
         let ctx = ctx.clone();
         self.connecting = true;
         self.message = None;
+        let list: Vec<String> = addresses.iter().map(|(n, a)| format!("{n} at {a}")).collect();
+        s.status = format!("connecting to {}", list.join(", "));
         std::thread::spawn(move || {
             let r = open_bench(&preset_name, &c, local).map_err(|e| {
                 let mut e = e;
@@ -410,7 +412,6 @@ fn position(v: Option<f64>, unit: AxisUnit) -> String {
 /// Draw the connection view.
 pub fn ui(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel) {
     let ctx = ui.ctx().clone();
-    p.poll(s, &ctx);
     // The settings window may have put a virtual bench in place of the hardware one.
     if p.connected.as_ref().is_some_and(|c| c.bench_name != s.worker.bench_name) {
         p.connected = None;
