@@ -75,6 +75,8 @@ pub enum Command {
     /// Report the stage controllers' view of every joint axis ([`Event::HardwareStatus`]; nothing on a
     /// simulated bench).
     HardwareStatus,
+    /// Open the links to the stage controllers again after a fault (the outcome in the status).
+    Reconnect,
     /// Change the pacing.
     SetPace(Pace),
     /// Stop the thread.
@@ -280,6 +282,16 @@ impl Thread {
             match command {
                 Command::Shutdown => return,
                 Command::SetPace(p) => self.pace = p,
+                Command::Reconnect => {
+                    self.send(Event::Busy(Some("reconnecting to the controllers".into())));
+                    let outcome = match self.bench.reconnect() {
+                        Ok(()) => "reconnected".to_string(),
+                        Err(e) => format!("reconnect failed: {e}"),
+                    };
+                    self.send(Event::Position(self.bench.position_display()));
+                    self.send(Event::Busy(Some(outcome)));
+                    self.send(Event::Busy(None));
+                }
                 Command::HardwareStatus => {
                     if let Some(status) = self.bench.hardware_status() {
                         self.send(Event::HardwareStatus(status));

@@ -1,6 +1,6 @@
 //! GUI test of the Connection view (egui_kittest, headless): local emulators started from the panel,
 //! both controllers identified, the hardware bench connected, a jog through the drivers seen in the
-//! status table, a wrong device and a closed port explained, the settings persisted. With
+//! status table, a dropped link and Reconnect, a wrong device and a closed port explained, the settings persisted. With
 //! PHOTOROBOT_SCREENSHOTS=1 the view is written to screenshots/connection.png (Mesa llvmpipe):
 //! `PHOTOROBOT_SCREENSHOTS=1 cargo test -p photorobot --test connection`.
 
@@ -9,6 +9,7 @@ use egui_kittest::Harness;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::{App, Tab, Workbench};
 use photorobot_app::state::Settings;
+use photorobot_core::hardware::emulator::{Fault, FaultSpec};
 use std::time::{Duration, Instant};
 
 const SIZE: egui::Vec2 = egui::vec2(1400.0, 900.0);
@@ -149,6 +150,22 @@ fn connection_panel_drives_the_emulated_controllers_and_explains_failures() {
     assert_eq!(h.query_all_by_label("on target").count(), 6);
     assert!(h.query_all_by_label("none").count() >= 6, "no axis has an error");
     screenshot(&mut h, "connection");
+
+    // A fault on the link: the status table names it on the PI axes; Reconnect clears it.
+    h.state().connection.emulators.as_ref().unwrap().pi.inject(FaultSpec::on_command("POS?", 0, Fault::DropConnection));
+    wait_until(&mut h, "the fault in the status", Duration::from_secs(20), |w| {
+        w.state.hardware_status.as_ref().is_some_and(|(_, axes)| axes[0].error.is_some())
+    });
+    let lost = "PI E-712: connection lost during `POS? 3`: closed by the peer";
+    assert_eq!(h.query_all_by_label(lost).count(), 3, "the fault shows on the three PI axes");
+    h.get_by_label("Reconnect").click();
+    wait_until(&mut h, "the reconnection", Duration::from_secs(20), |w| {
+        w.state.busy.is_none()
+            && w.state.status == "reconnected"
+            && w.state.hardware_status.as_ref().is_some_and(|(_, axes)| axes.iter().all(|a| a.error.is_none()))
+    });
+    assert_eq!(h.query_all_by_label("none").count(), 6);
+    h.get_by_label("q1 = 10.0000 µm");
 
     // Disconnect: back on the virtual bench.
     h.get_by_label("Disconnect").click();

@@ -577,8 +577,17 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
                     p.connect(s, ctx);
                 }
             }
-        } else if ui.add_enabled(idle, egui::Button::new(RichText::new("Disconnect").size(16.0))).clicked() {
-            p.disconnect(s, ctx);
+        } else {
+            if ui.add_enabled(idle, egui::Button::new(RichText::new("Disconnect").size(16.0))).clicked() {
+                p.disconnect(s, ctx);
+            }
+            if ui
+                .add_enabled(idle, egui::Button::new(RichText::new("Reconnect").size(16.0)))
+                .on_hover_text("after a fault: open the links again and restore closed loop; the session is kept")
+                .clicked()
+            {
+                s.worker.send(Command::Reconnect);
+            }
         }
         if p.connecting {
             ui.spinner();

@@ -97,6 +97,10 @@ pub trait Bench: Send {
     fn hardware_status(&mut self) -> Option<Vec<crate::hardware::AxisStatus>> {
         None
     }
+    /// Open the links to the stage controllers again after a fault (nothing to do on a simulated bench).
+    fn reconnect(&mut self) -> Result<(), BenchError> {
+        Ok(())
+    }
 }
 
 /// Why a plan stopped. The traces recorded before the stop are in [`PlanRun::traces`].

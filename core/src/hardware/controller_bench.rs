@@ -922,6 +922,10 @@ impl Bench for ControllerBench {
         Some(self.axis_status())
     }
 
+    fn reconnect(&mut self) -> Result<(), BenchError> {
+        ControllerBench::reconnect(self)
+    }
+
     fn run_segment(
         &mut self,
         segment: &TimedSegment,
