@@ -2616,6 +2616,60 @@ mod tests {
         check_scenario("reversal", &|s| reversal(1e-3, phases[(s - 30) as usize % 4], s), 30..34);
     }
 
+    /// A 20 µm axial move whose first sample sits at fringe phase `start_phase`, with or
+    /// without a pause before the motion.
+    fn start_at(start_phase: f64, pause_first: usize, seed: u64) -> Trace {
+        let mut q = pause(0.0, pause_first);
+        q.extend(move_segment(0.0, 20_000.0, 25.0, 40));
+        q.extend(pause(20_000.0, 100));
+        let probe = TwoBeamSignal {
+            wavelength_nm: WL,
+            n_air: N_AIR,
+            gap_start_nm: GAP0,
+            rayleigh_range_nm: Some(ZR),
+            phase_offset_rad: 0.0,
+            harmonic_rel: 0.0,
+            harmonic_phase_rad: 0.0,
+            noise_sigma: 0.0,
+        };
+        // the harmonic (2 %, phase 0.6) moves the extremum of the fringe by < 0.02 rad
+        make_trace(&q, &|x| x, &mild(), 1e-3, start_phase - probe.phase_rad(0.0), seed)
+    }
+
+    /// Start-phase error: dL is relative to the first sample, so an error ε in the phase
+    /// estimated at the first sample shifts every later dL by -ε/κ. Measured as the median
+    /// of dL - truth over the first two fringes of travel after the start (and the rms over
+    /// the whole trace).
+    fn start_offset(t: &Trace) -> (f64, f64) {
+        let tr = track_phase(&t.intensity, &t.hint, WL, N_AIR, &gouy_cfg(t)).unwrap();
+        let two_fringes = WL / N_AIR;
+        let mut errs: Vec<f64> =
+            (0..t.dl.len()).filter(|&k| t.dl[k].abs() <= two_fringes).map(|k| tr.dl_nm[k] - t.dl[k]).collect();
+        errs.sort_by(f64::total_cmp);
+        let n = t.dl.len() as f64;
+        let rms = ((0..t.dl.len()).map(|k| (tr.dl_nm[k] - t.dl[k]).powi(2)).sum::<f64>() / n).sqrt();
+        (errs[errs.len() / 2], rms)
+    }
+
+    #[test]
+    fn trace_starting_on_a_fringe_extremum_has_no_start_phase_offset() {
+        let mut worst = 0f64;
+        for (i, start) in [0.0, PI, 1.3, PI / 2.0].into_iter().enumerate() {
+            for pause_first in [0usize, 100] {
+                for seed in 0..3u64 {
+                    let t = start_at(start, pause_first, 40 + 10 * i as u64 + seed);
+                    let (off, rms) = start_offset(&t);
+                    eprintln!(
+                        "start phase {start:.2} rad, pause {pause_first}, seed {seed}: start offset {off:.3} nm, rms {rms:.3} nm"
+                    );
+                    worst = worst.max(off.abs());
+                }
+            }
+        }
+        eprintln!("worst start offset {worst:.3} nm");
+        assert!(worst <= 2.0, "start offset {worst} nm");
+    }
+
     #[test]
     fn counting_with_a_given_sign_is_within_one_step_on_monotonic_moves() {
         for (t, sign) in [(lateral(1e-3, 0.4, 1), MoveSign::Increasing), (axial(1e-3, 2.0, 2), MoveSign::Increasing)] {
