@@ -44,13 +44,12 @@ pub const DETECTABLE_SCORE: f64 = 25.0;
 /// Absorbed share from which a candidate counts as equivalent to an extrinsic change.
 pub const EQUIVALENT_SHARE: f64 = 0.999;
 /// How the diagnosis turns traces into observations: σ floors at SPEC section 9's noise (dL
-/// 2 nm, here 2.5 nm: the tracker's own systematic error on multi-beam fringes is 2.3 nm rms,
-/// see [`crate::identify::measurements::ExtractOptions`]; absolute gaps 20 nm), what a bench
-/// reaches beyond the fringe analysis' own σ (stage noise, sweep-model limits).
+/// 2 nm, absolute gaps 20 nm), what a bench reaches beyond the fringe analysis' own σ (stage
+/// noise, sweep-model limits); the identifier's floors are tighter.
 pub const EXTRACT_OPTIONS: crate::identify::measurements::ExtractOptions =
     crate::identify::measurements::ExtractOptions {
         points_per_motion: 4,
-        sigma_floor_nm: 2.5,
+        sigma_floor_nm: 2.0,
         gap_sigma_floor_um: 0.02,
     };
 /// Label prefix of the discriminating motions ([`motions::pool`]).

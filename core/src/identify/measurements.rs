@@ -11,10 +11,7 @@ use crate::trace::Trace;
 pub struct ExtractOptions {
     /// Gap-change observations per motion (evenly spaced from the start; the end always).
     pub points_per_motion: usize,
-    /// Floor of the gap-change σ (nm): what the fringe analysis cannot see (stage noise, drift)
-    /// and its own systematic error on multi-beam fringes (2.3 nm rms against the model truth
-    /// over the motions of strategies 1, 2 and the joint extras on table2-ideal, seed 3, see
-    /// `core/examples/calib_debug.rs` with `PER_TRACE=1`).
+    /// Floor of the gap-change σ (nm): what the fringe analysis cannot see (stage noise, drift).
     pub sigma_floor_nm: f64,
     /// Floor of the absolute-gap σ (µm): wavelength calibration and model limits.
     pub gap_sigma_floor_um: f64,
@@ -22,7 +19,7 @@ pub struct ExtractOptions {
 
 impl Default for ExtractOptions {
     fn default() -> Self {
-        Self { points_per_motion: 4, sigma_floor_nm: 2.5, gap_sigma_floor_um: 0.005 }
+        Self { points_per_motion: 4, sigma_floor_nm: 1.0, gap_sigma_floor_um: 0.005 }
     }
 }
 
@@ -58,13 +55,7 @@ pub fn observations_from_trace(
             let misfit = detector_noise(&trace.irradiance)
                 .filter(|&d| d > 0.0)
                 .map_or(1.0, |d| (m.track.noise_sigma / d).max(1.0));
-            // A tilt scan is for its fringe amplitudes: its envelope changes by a factor of two
-            // within a few fringes and its phase has a turning point, and the tracker's dL there
-            // is off by 11 nm rms (against the model truth, table2-ideal seed 3: `PER_TRACE=1
-            // cargo run --release -p photorobot-core --example calib_debug -- table2-ideal joint 3`)
-            // where other motions are off by 2.3 nm. Its gap changes are not used.
-            let gap_changes = if label.starts_with("tilt scan") { 0 } else { k };
-            for p in 1..=gap_changes {
+            for p in 1..=k {
                 let i = (p * (n - 1)) / k;
                 let fit_nm = if i == n - 1 { m.track.sigma_fit_nm } else { m.track.sigma_dl_nm[i] };
                 // The cyclic error of the harmonic estimate acts at every point, not only at
