@@ -21,8 +21,13 @@
 //!    `J` at the prior ([`joint::evaluate`], internal units mrad and µm). The information of a
 //!    candidate is `F = JᵀJ` with its detector-gain nuisance parameter (one per tilt scan)
 //!    eliminated by the Schur complement `F_ee − F_eg F_gg⁻¹ F_ge`, so informations of
-//!    different candidates add. The design is thus *locally* optimal at the prior, like any
-//!    design for a nonlinear model.
+//!    different candidates add. The pilot's truth being the prior, its residuals at the prior
+//!    are pure noise, and the pool's robust reduced χ² of each observation kind (median of r²;
+//!    the fringe amplitudes scatter several times more than the σ the extraction gives them)
+//!    predicts the residual variance of a design. The identifier's report scales every σ by
+//!    `√max(1, χ²_red)` of the whole fit, so the predicted σ are scaled the same way:
+//!    `σ_t(S) · √max(1, Σ_{k∈S} E[Σr²]_k / (m_S − 8 − gains_S))`. The design is *locally* optimal at
+//!    the prior, like any design for a nonlinear model.
 //! 3. **Targets** ([`Target`]): a required σ on a linear combination `cᵀp` of the parameters
 //!    (display units), e.g. σ(β_et) ≤ 0.005° or σ(y_wf − Z_et) ≤ 0.0167 µm. The predicted σ is
 //!    `√(c'ᵀ I⁻¹ c')` with `I = Λ₀ + Σ_{k∈S} F_k`. A target may count only some candidates and
@@ -290,13 +295,30 @@ pub fn extrinsic_information(weighted_jacobian: &DMatrix<f64>, column_parameter:
 /// What the pilot run found for one candidate.
 #[derive(Debug, Clone)]
 pub struct PilotResult {
-    /// Fisher information (internal units, 8 × 8).
+    /// Fisher information (internal units, 8 × 8) from the σ the extraction assigns.
     pub information: DMatrix<f64>,
     /// Observations the extraction gave.
     pub observations: usize,
+    /// Expected sum of squared normalised residuals of those observations: each counts the
+    /// pool's reduced χ² of its kind ([`pilot`]).
+    pub expected_chi2: f64,
+    /// Nuisance parameters (detector gains) the candidate adds.
+    pub nuisance: usize,
     /// Why the trace gave nothing, if it did not.
     pub failure: Option<String>,
 }
+
+/// Observation kinds, for the σ scaling of the pilot: gap change, absolute gap, amplitude.
+fn kind_index(o: &crate::identify::Observation) -> usize {
+    match o.kind {
+        crate::identify::ObservationKind::GapChange { .. } => 0,
+        crate::identify::ObservationKind::AbsoluteGap { .. } => 1,
+        crate::identify::ObservationKind::FringeAmplitude { .. } => 2,
+    }
+}
+
+/// Names of the observation kinds of [`kind_index`].
+pub const KIND_NAMES: [&str; 3] = ["gap change", "absolute gap", "fringe amplitude"];
 
 /// The pilot bench: the preset with the prior as truth and no hidden effects.
 fn pilot_bench(preset: &BenchPreset, prior: &Extrinsics, seed: u64) -> Result<VirtualBench, DesignError> {
@@ -326,13 +348,18 @@ fn run_pilot(bench: &mut VirtualBench, plans: &[Plan]) -> Result<Vec<crate::trac
 }
 
 /// Run every candidate once on the pilot bench (see the module documentation) and compute its
-/// Fisher information at the prior.
+/// Fisher information at the prior. The pilot's truth is the prior, so its residuals at the
+/// prior are pure noise: the σ the extraction assigns to each observation kind are checked
+/// against that scatter over the whole pool, and a kind whose scatter exceeds its σ (robust
+/// reduced χ², median of r² / 0.4549, above 1) has its σ scaled up by `√χ²` — the scaling the identifier's report applies too
+/// (never down: the report floors χ² at 1). Also returns the reduced χ² per kind
+/// ([`KIND_NAMES`]; `None` for a kind the pool never observed).
 pub fn pilot(
     preset: &BenchPreset,
     prior: &Extrinsics,
     candidates: &[Candidate],
     seed: u64,
-) -> Result<Vec<PilotResult>, DesignError> {
+) -> Result<(Vec<PilotResult>, [Option<f64>; 3]), DesignError> {
     use rayon::prelude::*;
     let mut bench = pilot_bench(preset, prior, seed)?;
     let model = model_for(preset, prior)?;
@@ -356,54 +383,87 @@ pub fn pilot(
         )));
     }
     let opts = ExtractOptions::default();
-    Ok(traces
+    // Per candidate: weighted Jacobian, its columns, normalised residuals and observation kinds.
+    type Evaluated = Result<(DMatrix<f64>, Vec<Option<usize>>, Vec<f64>, Vec<usize>), String>;
+    let evaluated: Vec<Evaluated> = traces
         .par_iter()
-        .zip(candidates)
-        .map(|(t, c)| {
-            debug_assert_eq!(t.meta.label, c.label);
-            match observations_from_trace(t, &model, &opts, 0) {
-                Ok(obs) => {
-                    let obs: Vec<_> = obs
-                        .into_iter()
-                        .filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0)
-                        .collect();
-                    let est = joint::evaluate(&model, &obs, prior, &JointOptions::default());
-                    let information = if obs.is_empty() {
-                        DMatrix::zeros(N_EXTRINSICS, N_EXTRINSICS)
-                    } else {
-                        extrinsic_information(&est.weighted_jacobian, &est.column_parameter)
-                    };
-                    let ok = information.iter().all(|v| v.is_finite());
-                    PilotResult {
-                        information: if ok { information } else { DMatrix::zeros(N_EXTRINSICS, N_EXTRINSICS) },
-                        observations: obs.len(),
-                        failure: (!ok).then(|| "non-finite Jacobian at the prior".to_string()),
-                    }
-                }
-                Err(e) => PilotResult {
-                    information: DMatrix::zeros(N_EXTRINSICS, N_EXTRINSICS),
-                    observations: 0,
-                    failure: Some(e.to_string()),
-                },
+        .map(|t| {
+            let obs: Vec<_> = observations_from_trace(t, &model, &opts, 0)
+                .map_err(|e| e.to_string())?
+                .into_iter()
+                .filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0)
+                .collect();
+            if obs.is_empty() {
+                return Err("no usable observation".into());
             }
+            let est = joint::evaluate(&model, &obs, prior, &JointOptions::default());
+            if !est.weighted_jacobian.iter().all(|v| v.is_finite()) {
+                return Err("non-finite Jacobian at the prior".into());
+            }
+            let kinds = obs.iter().map(kind_index).collect();
+            Ok((est.weighted_jacobian, est.column_parameter, est.normalised_residuals, kinds))
         })
-        .collect())
+        .collect();
+    // Robust reduced χ² per kind: median of r² over its median for unit-variance Gaussian
+    // noise (0.4549), so a few outliers of the degenerate prior geometry do not set the scale.
+    let mut r2: [Vec<f64>; 3] = Default::default();
+    for (_, _, r, kinds) in evaluated.iter().flatten() {
+        for (ri, &k) in r.iter().zip(kinds) {
+            if ri.is_finite() {
+                r2[k].push(ri * ri);
+            }
+        }
+    }
+    let reduced: [Option<f64>; 3] = std::array::from_fn(|k| {
+        let v = &mut r2[k].clone();
+        v.sort_by(f64::total_cmp);
+        (!v.is_empty()).then(|| v[v.len() / 2] / 0.4549)
+    });
+    let results = evaluated
+        .into_iter()
+        .map(|e| match e {
+            Ok((j, cols, _, kinds)) => PilotResult {
+                information: extrinsic_information(&j, &cols),
+                observations: kinds.len(),
+                expected_chi2: kinds.iter().map(|&k| reduced[k].unwrap_or(1.0)).sum(),
+                nuisance: cols.iter().filter(|c| c.is_none()).count(),
+                failure: None,
+            },
+            Err(why) => PilotResult {
+                information: DMatrix::zeros(N_EXTRINSICS, N_EXTRINSICS),
+                observations: 0,
+                expected_chi2: 0.0,
+                nuisance: 0,
+                failure: Some(why),
+            },
+        })
+        .collect();
+    Ok((results, reduced))
 }
 
 /// The Fisher information (internal units) of whole plans run one after the other, from the
-/// same pilot bench and extraction (one gain per tilt-scan trace, eliminated).
+/// same pilot bench and extraction (one gain per tilt-scan trace, eliminated), with the
+/// expected Σr² (each observation counting its kind's reduced χ² from `reduced_chi2`, as
+/// [`pilot`] gives), the number of observations and of nuisance parameters, for
+/// [`SelectionProblem::scatter`].
 pub fn plans_information(
     preset: &BenchPreset,
     prior: &Extrinsics,
     plans: &[Plan],
     seed: u64,
-) -> Result<DMatrix<f64>, DesignError> {
+    reduced_chi2: &[Option<f64>; 3],
+) -> Result<(DMatrix<f64>, (f64, f64, f64)), DesignError> {
     let mut bench = pilot_bench(preset, prior, seed)?;
     let model = model_for(preset, prior)?;
     let traces = run_pilot(&mut bench, plans)?;
     let obs = observations_from_traces(&traces, &model, &ExtractOptions::default()).observations;
     let est = joint::evaluate(&model, &obs, prior, &JointOptions::default());
-    Ok(extrinsic_information(&est.weighted_jacobian, &est.column_parameter))
+    let chi2: f64 = obs.iter().map(|o| reduced_chi2[kind_index(o)].unwrap_or(1.0)).sum();
+    let nuisance = est.column_parameter.iter().filter(|c| c.is_none()).count();
+    Ok((
+        extrinsic_information(&est.weighted_jacobian, &est.column_parameter),
+        (chi2, obs.len() as f64, nuisance as f64),
+    ))
 }
 
 /// A required standard uncertainty on a linear combination of the parameters.
@@ -512,6 +572,11 @@ pub struct SelectionProblem {
     pub prior: DMatrix<f64>,
     /// The criteria.
     pub criteria: Vec<Criterion>,
+    /// Residual-variance scaling as the identifier's report applies it, or `None` (σ from the
+    /// noise model alone): per candidate (expected Σr², observations, nuisance parameters);
+    /// the σ of a criterion counting every candidate is multiplied by
+    /// `√max(1, Σ expected Σr² / (Σ observations − parameters − Σ nuisance))`.
+    pub scatter: Option<Vec<(f64, f64, f64)>>,
 }
 
 /// A selection and what it reaches.
@@ -570,8 +635,34 @@ impl SelectionProblem {
             .collect()
     }
 
+    /// The residual-variance factor of [`SelectionProblem::scatter`] for a set given as `sums`'
+    /// chosen set (recomputed from `chosen`) with `add` and `remove`.
+    fn scatter_factor(&self, chosen: &[bool], add: &[usize], remove: &[usize]) -> f64 {
+        let Some(sc) = &self.scatter else { return 1.0 };
+        let n = self.prior.nrows() as f64;
+        let (mut chi2, mut m, mut nuisance) = (0.0, 0.0, 0.0);
+        for k in 0..chosen.len() {
+            let inside = (chosen[k] || add.contains(&k)) && !remove.contains(&k);
+            if inside {
+                chi2 += sc[k].0;
+                m += sc[k].1;
+                nuisance += sc[k].2;
+            }
+        }
+        let dof = m - n - nuisance;
+        if dof > 0.0 {
+            (chi2 / dof).max(1.0)
+        } else {
+            1.0
+        }
+    }
+
     /// σ of every criterion for the set behind `sums` with `add` added and `remove` removed.
-    fn sigmas_with(&self, sums: &[DMatrix<f64>], add: &[usize], remove: &[usize]) -> Vec<f64> {
+    fn sigmas_with(&self, chosen: &[bool], sums: &[DMatrix<f64>], add: &[usize], remove: &[usize]) -> Vec<f64> {
+        self.sigmas_scaled(sums, add, remove, self.scatter_factor(chosen, add, remove))
+    }
+
+    fn sigmas_scaled(&self, sums: &[DMatrix<f64>], add: &[usize], remove: &[usize], factor: f64) -> Vec<f64> {
         let n = self.prior.nrows();
         self.criteria
             .iter()
@@ -591,8 +682,9 @@ impl SelectionProblem {
                 let idx: Vec<usize> = (0..n).filter(|&i| cr.free.as_ref().is_none_or(|f| f[i])).collect();
                 let sub = DMatrix::from_fn(idx.len(), idx.len(), |a, b| info[(idx[a], idx[b])]);
                 let c = DVector::from_fn(idx.len(), |a, _| cr.c[idx[a]]);
+                let f = if cr.members.is_none() { factor } else { 1.0 };
                 match sub.cholesky() {
-                    Some(ch) => c.dot(&ch.solve(&c)).max(0.0).sqrt(),
+                    Some(ch) => (f * c.dot(&ch.solve(&c))).max(0.0).sqrt(),
                     None => f64::INFINITY,
                 }
             })
@@ -601,7 +693,7 @@ impl SelectionProblem {
 
     /// Predicted σ of every criterion for a set of candidates (mask).
     pub fn sigmas(&self, chosen: &[bool]) -> Vec<f64> {
-        self.sigmas_with(&self.sums(chosen), &[], &[])
+        self.sigmas_scaled(&self.sums(chosen), &[], &[], self.scatter_factor(chosen, &[], &[]))
     }
 
     fn deficiency_of(&self, sigmas: &[f64]) -> f64 {
@@ -630,11 +722,11 @@ impl SelectionProblem {
     fn greedy(&self, chosen: &mut [bool]) {
         let n = chosen.len();
         let mut sums = self.sums(chosen);
-        let mut f = self.deficiency_of(&self.sigmas_with(&sums, &[], &[]));
+        let mut f = self.deficiency_of(&self.sigmas_with(chosen, &sums, &[], &[]));
         while f > 0.0 {
             let mut best: Option<(usize, f64, f64)> = None;
             for k in (0..n).filter(|&k| !chosen[k]) {
-                let fk = self.deficiency_of(&self.sigmas_with(&sums, &[k], &[]));
+                let fk = self.deficiency_of(&self.sigmas_with(chosen, &sums, &[k], &[]));
                 let score = (f - fk) / self.cost[k];
                 if f - fk > 1e-12 && best.is_none_or(|b| score > b.1) {
                     best = Some((k, score, fk));
@@ -651,7 +743,7 @@ impl SelectionProblem {
             };
             chosen[k] = true;
             sums = self.sums(chosen);
-            f = self.deficiency_of(&self.sigmas_with(&sums, &[], &[]));
+            f = self.deficiency_of(&self.sigmas_with(chosen, &sums, &[], &[]));
         }
     }
 
@@ -666,7 +758,7 @@ impl SelectionProblem {
             ins.sort_by(|&a, &b| self.cost[b].total_cmp(&self.cost[a]));
             for &k in &ins {
                 let sums = self.sums(chosen);
-                if self.feasible_of(&self.sigmas_with(&sums, &[], &[k])) {
+                if self.feasible_of(&self.sigmas_with(chosen, &sums, &[], &[k])) {
                     chosen[k] = false;
                 }
             }
@@ -680,7 +772,7 @@ impl SelectionProblem {
                     let gain = self.cost[k] - self.cost[j];
                     if gain > 1e-12
                         && best.as_ref().is_none_or(|b| gain > b.0)
-                        && self.feasible_of(&self.sigmas_with(&sums, &[j], &[k]))
+                        && self.feasible_of(&self.sigmas_with(chosen, &sums, &[j], &[k]))
                     {
                         best = Some((gain, vec![k], j));
                     }
@@ -690,7 +782,7 @@ impl SelectionProblem {
                         let gain = self.cost[k] + self.cost[k2] - self.cost[j];
                         if gain > 1e-12
                             && best.as_ref().is_none_or(|b| gain > b.0)
-                            && self.feasible_of(&self.sigmas_with(&sums, &[j], &[k, k2]))
+                            && self.feasible_of(&self.sigmas_with(chosen, &sums, &[j], &[k, k2]))
                         {
                             best = Some((gain, vec![k, k2], j));
                         }
@@ -733,9 +825,9 @@ pub fn select(problem: &SelectionProblem) -> Result<Selection, DesignError> {
     // Starts: the empty set, and each of the (at most 8) best first picks forced in.
     let empty = vec![false; n];
     let sums = problem.sums(&empty);
-    let f0 = problem.deficiency_of(&problem.sigmas_with(&sums, &[], &[]));
+    let f0 = problem.deficiency_of(&problem.sigmas_with(&empty, &sums, &[], &[]));
     let mut firsts: Vec<(usize, f64)> = (0..n)
-        .map(|k| (k, (f0 - problem.deficiency_of(&problem.sigmas_with(&sums, &[k], &[]))) / problem.cost[k]))
+        .map(|k| (k, (f0 - problem.deficiency_of(&problem.sigmas_with(&empty, &sums, &[k], &[]))) / problem.cost[k]))
         .collect();
     firsts.sort_by(|a, b| b.1.total_cmp(&a.1));
     let mut best: Option<Vec<bool>> = None;
@@ -852,6 +944,9 @@ pub struct Design {
     pub prior: Extrinsics,
     /// The margin used.
     pub margin: f64,
+    /// Reduced χ² of each observation kind ([`KIND_NAMES`]) on the pilot bench at its truth:
+    /// σ of a kind above 1 were scaled up by its square root.
+    pub pilot_reduced_chi2: [Option<f64>; 3],
 }
 
 fn criteria(targets: &[Target], margin: f64, candidates: &[Candidate]) -> Vec<Criterion> {
@@ -886,12 +981,13 @@ pub fn design(preset: &BenchPreset, options: &DesignOptions, reference: &[Plan])
     }
     let robot = preset.robot_description().map_err(|e| DesignError::Pilot(e.to_string()))?;
     let pool = candidate_pool(&robot, &preset.motion);
-    let pilot = pilot(preset, &options.prior, &pool, options.seed)?;
+    let (pilot, reduced_chi2) = pilot(preset, &options.prior, &pool, options.seed)?;
     let problem = SelectionProblem {
         information: pilot.iter().map(|p| p.information.clone()).collect(),
         cost: pool.iter().map(Candidate::cost_s).collect(),
         prior: weak_prior(),
         criteria: criteria(&options.targets, options.margin, &pool),
+        scatter: Some(pilot.iter().map(|p| (p.expected_chi2, p.observations as f64, p.nuisance as f64)).collect()),
     };
     let sel = select(&problem).map_err(|e| match e {
         DesignError::Unreachable(why) => DesignError::Unreachable(format!(
@@ -927,7 +1023,7 @@ pub fn design(preset: &BenchPreset, options: &DesignOptions, reference: &[Plan])
     let reference_sigmas = if reference.is_empty() {
         None
     } else {
-        let f = plans_information(preset, &options.prior, reference, options.seed)?;
+        let f = plans_information(preset, &options.prior, reference, options.seed, &reduced_chi2)?;
         // The reference plan's sweeps alone, for the bootstrap targets.
         let sweeps: Vec<Plan> = reference
             .iter()
@@ -941,11 +1037,12 @@ pub fn design(preset: &BenchPreset, options: &DesignOptions, reference: &[Plan])
                 ..p.clone()
             })
             .collect();
-        let f_sweeps = plans_information(preset, &options.prior, &sweeps, options.seed)?;
+        let f_sweeps = plans_information(preset, &options.prior, &sweeps, options.seed, &reduced_chi2)?;
         let p = SelectionProblem {
-            information: vec![f, f_sweeps],
+            information: vec![f.0, f_sweeps.0],
             cost: vec![1.0, 1.0],
             prior: weak_prior(),
+            scatter: Some(vec![f.1, (0.0, 0.0, 0.0)]),
             criteria: options
                 .targets
                 .iter()
@@ -998,6 +1095,7 @@ pub fn design(preset: &BenchPreset, options: &DesignOptions, reference: &[Plan])
         reference: reference_sigmas.map(|(_, names, total)| (names, total)),
         prior: options.prior,
         margin: options.margin,
+        pilot_reduced_chi2: reduced_chi2,
     })
 }
 
@@ -1052,7 +1150,7 @@ pub fn assemble(chosen: &[&Candidate], robot: &RobotDescription, limits: &Motion
 
 /// The plan as RON text with a header comment (each line prefixed with `// `).
 pub fn plan_ron_with_header(plan: &Plan, header: &str) -> Result<String, DesignError> {
-    let body = ron::ser::to_string_pretty(plan, ron::ser::PrettyConfig::default())
+    let body = ron::ser::to_string_pretty(plan, ron::ser::PrettyConfig::default().struct_names(true).depth_limit(2))
         .map_err(|e| DesignError::Input(format!("plan to RON: {e}")))?;
     let mut out = String::new();
     for line in header.lines() {
@@ -1081,6 +1179,7 @@ mod tests {
             information: points.iter().map(|&(x, s, _)| measurement(x, s)).collect(),
             cost: points.iter().map(|p| p.2).collect(),
             prior: DMatrix::identity(3, 3) * 1e-6,
+            scatter: None,
             criteria: (0..3)
                 .map(|i| Criterion {
                     c: DVector::from_fn(3, |j, _| if i == j { 1.0 } else { 0.0 }),
