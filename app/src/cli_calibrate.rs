@@ -27,9 +27,9 @@ use std::sync::atomic::AtomicBool;
 /// Which identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ModeArg {
-    /// The paper's steps A, B, C on strategies 1 and 2 (about 13 min of bench time).
+    /// The paper's steps A, B, C on strategies 1 and 2 (10.9 min of bench time).
     Paper,
-    /// Every parameter from every measurement, with tilt scans and absolute gaps (about 13 min more).
+    /// Every parameter from every measurement, with tilt scans and absolute gaps (2.0 min more; or --plan).
     Joint,
 }
 
