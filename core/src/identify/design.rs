@@ -415,7 +415,7 @@ pub fn pilot(
         }
     }
     let reduced: [Option<f64>; 3] = std::array::from_fn(|k| {
-        let v = &mut r2[k].clone();
+        let mut v = r2[k].clone();
         v.sort_by(f64::total_cmp);
         (!v.is_empty()).then(|| v[v.len() / 2] / 0.4549)
     });
@@ -441,6 +441,9 @@ pub fn pilot(
     Ok((results, reduced))
 }
 
+/// Residual-variance data of a candidate or plan: expected Σr², observations, nuisance parameters.
+pub type Scatter = (f64, f64, f64);
+
 /// The Fisher information (internal units) of whole plans run one after the other, from the
 /// same pilot bench and extraction (one gain per tilt-scan trace, eliminated), with the
 /// expected Σr² (each observation counting its kind's reduced χ² from `reduced_chi2`, as
@@ -452,7 +455,7 @@ pub fn plans_information(
     plans: &[Plan],
     seed: u64,
     reduced_chi2: &[Option<f64>; 3],
-) -> Result<(DMatrix<f64>, (f64, f64, f64)), DesignError> {
+) -> Result<(DMatrix<f64>, Scatter), DesignError> {
     let mut bench = pilot_bench(preset, prior, seed)?;
     let model = model_for(preset, prior)?;
     let traces = run_pilot(&mut bench, plans)?;
@@ -576,7 +579,7 @@ pub struct SelectionProblem {
     /// noise model alone): per candidate (expected Σr², observations, nuisance parameters);
     /// the σ of a criterion counting every candidate is multiplied by
     /// `√max(1, Σ expected Σr² / (Σ observations − parameters − Σ nuisance))`.
-    pub scatter: Option<Vec<(f64, f64, f64)>>,
+    pub scatter: Option<Vec<Scatter>>,
 }
 
 /// A selection and what it reaches.
