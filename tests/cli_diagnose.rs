@@ -87,6 +87,20 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
     // see the report of issue 6).
     let (before, after) = (v["residual_rms_before_nm"].as_f64().unwrap(), v["residual_rms_after_nm"].as_f64().unwrap());
     assert!(after * 5.0 < before, "{before} → {after} nm");
+    // The extended model in use: the validation motions planned through the IGM with the effect
+    // leave the cavity nearly unchanged where the model without it does not (the hidden pivot
+    // moves P_r along the beam by about 20 µm × 3° in the 6° rotations).
+    let rows = v["validation"].as_array().expect("validation rows");
+    assert_eq!(rows.len(), 4, "{rows:?}");
+    for r in rows {
+        let (without, with) = (r["without_effect_nm"].as_f64().unwrap(), r["with_effect_nm"].as_f64().unwrap());
+        eprintln!("{}: {without:.1} nm without the effect, {with:.1} nm with it", r["motion"]);
+        if r["motion"].as_str().unwrap().starts_with("rotation 6°") {
+            assert!(with * 10.0 < without && with < 30.0, "{}: {without} → {with} nm", r["motion"]);
+        } else {
+            assert!(with <= without.max(50.0), "{}: {without} → {with} nm", r["motion"]);
+        }
+    }
 }
 
 #[test]

@@ -8,8 +8,9 @@
 //! nothing runs and the report says which motions would tell the absorbed candidates apart.
 
 use crate::cli::CliError;
-use photorobot_core::bench::{BenchPreset, VirtualBench};
+use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
 use photorobot_core::diagnose::motions::{BenchRunner, MotionRunner};
+use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
 use photorobot_core::diagnose::{Diagnosis, DiagnosisResult, Step};
 use photorobot_core::files::FileError;
 use photorobot_core::measure::PhaseModel;
@@ -42,6 +43,9 @@ struct JsonOut<'a> {
     result: &'a DiagnosisResult,
     steps: &'a [Step],
     skipped_traces: &'a [(String, String)],
+    /// The validation motions planned without and with the added effects (empty without a
+    /// bench or without added effects).
+    validation: &'a [EffectValidationRow],
 }
 
 fn invalid(file: &Path, field: &str, problem: String) -> CliError {
@@ -128,13 +132,75 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     }
     let result =
         d.result().cloned().ok_or_else(|| CliError::Argument { argument: "session", problem: "no result".into() })?;
+    drop(runner);
+    // The extended model in use: the validation motions planned with and without the effects
+    // added (named, or tried and kept as partial), on the same bench.
+    let effects = d.state().map(|s| s.library_effects()).unwrap_or_default();
+    let validation = match bench.as_mut() {
+        Some(b) if !effects.is_empty() => {
+            if !a.json {
+                writeln!(
+                    out,
+                    "
+## validation with and without the added effects (on {})",
+                    b.name()
+                )?;
+            }
+            validate_with_effects(b, &base, &extrinsics, &result.extrinsics, &effects)
+                .map_err(|e| CliError::Argument { argument: "session", problem: format!("extended model: {e}") })?
+        }
+        _ => Vec::new(),
+    };
+    save_record(&a.session, &result, &effects, &validation)?;
     if a.json {
-        let text =
-            serde_json::to_string_pretty(&JsonOut { result: &result, steps: &d.steps, skipped_traces: &skipped })
-                .map_err(std::io::Error::other)?;
+        let text = serde_json::to_string_pretty(&JsonOut {
+            result: &result,
+            steps: &d.steps,
+            skipped_traces: &skipped,
+            validation: &validation,
+        })
+        .map_err(std::io::Error::other)?;
         writeln!(out, "{text}")?;
     } else {
+        print_validation(&validation, out)?;
         print_result(&result, out)?;
+    }
+    Ok(())
+}
+
+/// Save the diagnosis, with its extended model and validation, into the folder's `session.ron`
+/// when there is one (atomically; a folder of bare traces is left as it is).
+fn save_record(
+    dir: &Path,
+    result: &DiagnosisResult,
+    effects: &[photorobot_core::model::effects::Effect],
+    validation: &[EffectValidationRow],
+) -> Result<(), CliError> {
+    use photorobot_core::session::{session_path, DiagnosisRecord, Session};
+    if !session_path(dir).exists() {
+        return Ok(());
+    }
+    let mut session = Session::load(dir)?;
+    let mut record = DiagnosisRecord::from_result(result);
+    record.model_effects = effects.to_vec();
+    record.extrinsics = Some(result.extrinsics);
+    record.validation = validation.to_vec();
+    session.diagnosis = Some(record);
+    session.save(dir)?;
+    Ok(())
+}
+
+fn print_validation(rows: &[EffectValidationRow], out: &mut dyn Write) -> std::io::Result<()> {
+    if rows.is_empty() {
+        return Ok(());
+    }
+    let nm = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1}"));
+    writeln!(out, "  {:<52} {:>16} {:>14}", "motion (FP cavity variation, peak to peak)", "without (nm)", "with (nm)")?;
+    for r in rows {
+        writeln!(out, "  {:<52} {:>16} {:>14}", r.motion, nm(r.without_effect_nm), nm(r.with_effect_nm))?;
+        if let Some(n) = &r.note {
+            writeln!(out, "    {n}")?;
+        }
     }
     Ok(())
 }

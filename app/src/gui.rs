@@ -29,12 +29,23 @@ pub enum Tab {
     Validation,
     /// Discrepancy workflow.
     Diagnosis,
+    /// Bench choice, controllers, axis mapping and status.
+    Connection,
 }
 
 impl Tab {
     /// Every tab in display order.
-    pub const ALL: [Tab; 8] =
-        [Tab::Live, Tab::Align, Tab::Robot, Tab::Wizard, Tab::Traces, Tab::Results, Tab::Validation, Tab::Diagnosis];
+    pub const ALL: [Tab; 9] = [
+        Tab::Live,
+        Tab::Align,
+        Tab::Robot,
+        Tab::Wizard,
+        Tab::Traces,
+        Tab::Results,
+        Tab::Validation,
+        Tab::Diagnosis,
+        Tab::Connection,
+    ];
 
     /// Its title.
     pub fn title(self) -> &'static str {
@@ -47,6 +58,7 @@ impl Tab {
             Tab::Results => "Results",
             Tab::Validation => "Validation",
             Tab::Diagnosis => "Diagnosis",
+            Tab::Connection => "Connection",
         }
     }
 }
@@ -59,6 +71,8 @@ pub struct Workbench {
     pub tab: Tab,
     /// The inspector's selection and plot cache.
     pub inspector: Inspector,
+    /// The connection panel (emulators, identify results, the hardware bench).
+    pub connection: views::connection::ConnectionPanel,
     /// Settings being edited (applied on "Apply").
     editing: Option<Settings>,
     /// The theme the visuals were last set to.
@@ -91,6 +105,7 @@ impl Workbench {
             state: AppState::new(settings, worker, dialogs),
             tab: Tab::Wizard,
             inspector: Inspector::default(),
+            connection: Default::default(),
             editing: None,
             applied_dark: None,
             pending: None,
@@ -103,6 +118,8 @@ impl Workbench {
     pub fn show(&mut self, ui: &mut egui::Ui) {
         self.state.poll_worker();
         let ctx = ui.ctx().clone();
+        // Identify and Connect finish on other threads whichever tab is open.
+        self.connection.poll(&mut self.state, &ctx);
         if self.applied_dark != Some(self.state.settings.dark) {
             let dark = self.state.settings.dark;
             ctx.set_visuals(if dark { egui::Visuals::dark() } else { egui::Visuals::light() });
@@ -115,7 +132,9 @@ impl Workbench {
             ui.horizontal(|ui| {
                 ui.heading("photorobot");
                 ui.menu_button("File", |ui| self.file_menu(ui));
-                ui.label(format!("bench: {}", self.state.worker.bench_name));
+                // A hardware bench's name lists every controller's address: the hover has it.
+                let bench = &self.state.worker.bench_name;
+                ui.label(format!("bench: {}", bench.split(" (").next().unwrap_or(bench))).on_hover_text(bench);
                 let name = self
                     .state
                     .session_dir
@@ -169,6 +188,7 @@ impl Workbench {
             Tab::Results => views::results::ui(ui, &mut self.state),
             Tab::Validation => views::validation::ui(ui, &mut self.state),
             Tab::Diagnosis => views::diagnosis::ui(ui, &mut self.state),
+            Tab::Connection => views::connection::ui(ui, &mut self.state, &mut self.connection),
         });
         if go_to_align {
             self.tab = Tab::Align;

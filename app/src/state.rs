@@ -33,6 +33,8 @@ pub struct Settings {
     pub live_window_s: f64,
     /// Recently opened or saved session folders, newest first.
     pub recent: Vec<String>,
+    /// The connection panel: controller addresses, ports, axis mapping.
+    pub connection: crate::views::connection::ConnectionSettings,
 }
 
 impl Default for Settings {
@@ -45,6 +47,7 @@ impl Default for Settings {
             speed: 0.0,
             live_window_s: 5.0,
             recent: vec![],
+            connection: Default::default(),
         }
     }
 }
@@ -302,6 +305,8 @@ pub struct AppState {
     saves: (std::sync::mpsc::Sender<String>, std::sync::mpsc::Receiver<String>),
     /// Number of saves still running.
     pub saving: usize,
+    /// The stage controllers' view of every joint axis (a bench on controllers), and when it came.
+    pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::hardware::AxisStatus>)>,
 }
 
 impl AppState {
@@ -336,6 +341,7 @@ impl AppState {
             notes: String::new(),
             saves: std::sync::mpsc::channel(),
             saving: 0,
+            hardware_status: None,
         }
     }
 
@@ -483,6 +489,7 @@ impl AppState {
             Event::Analysed { index, result } => {
                 self.analyses.insert(index, result);
             }
+            Event::HardwareStatus(axes) => self.hardware_status = Some((std::time::Instant::now(), axes)),
             Event::Busy(b) => {
                 if let Some(msg) = &b {
                     self.status.clone_from(msg);

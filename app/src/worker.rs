@@ -72,6 +72,11 @@ pub enum Command {
         /// The calibrated extrinsics.
         extrinsics: Extrinsics,
     },
+    /// Report the stage controllers' view of every joint axis ([`Event::HardwareStatus`]; nothing on a
+    /// simulated bench).
+    HardwareStatus,
+    /// Open the links to the stage controllers again after a fault (the outcome in the status).
+    Reconnect,
     /// Change the pacing.
     SetPace(Pace),
     /// Stop the thread.
@@ -145,6 +150,8 @@ pub enum Event {
     Diagnosed(Result<Box<DiagnosisResult>, String>),
     /// The worker started (`Some(what)`) or finished (`None`) a job.
     Busy(Option<String>),
+    /// The stage controllers' view of every joint axis (a bench on controllers only).
+    HardwareStatus(Vec<photorobot_core::hardware::AxisStatus>),
 }
 
 /// The UI's handle on the worker thread.
@@ -275,6 +282,21 @@ impl Thread {
             match command {
                 Command::Shutdown => return,
                 Command::SetPace(p) => self.pace = p,
+                Command::Reconnect => {
+                    self.send(Event::Busy(Some("reconnecting to the controllers".into())));
+                    let outcome = match self.bench.reconnect() {
+                        Ok(()) => "reconnected".to_string(),
+                        Err(e) => format!("reconnect failed: {e}"),
+                    };
+                    self.send(Event::Position(self.bench.position_display()));
+                    self.send(Event::Busy(Some(outcome)));
+                    self.send(Event::Busy(None));
+                }
+                Command::HardwareStatus => {
+                    if let Some(status) = self.bench.hardware_status() {
+                        self.send(Event::HardwareStatus(status));
+                    }
+                }
                 Command::Run { job, plan } => {
                     self.send(Event::Busy(Some(format!("running {}", plan.name))));
                     let pace = self.pace;

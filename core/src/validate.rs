@@ -204,12 +204,26 @@ pub fn run_validation(
     motion: ValidationMotion,
     start: [f64; 6],
 ) -> Result<ValidationFigure, ValidationError> {
+    run_validation_planned(bench, analysis, planned_with, analysis, motion, start)
+}
+
+/// [`run_validation`] with the motion planned through the IGM of `planning` (its robot chain:
+/// e.g. the nominal robot, or the robot with the effects a diagnosis added) and measured with
+/// `analysis`.
+pub fn run_validation_planned(
+    bench: &mut dyn Bench,
+    planning: &PhaseModel,
+    planned_with: &Extrinsics,
+    analysis: &PhaseModel,
+    motion: ValidationMotion,
+    start: [f64; 6],
+) -> Result<ValidationFigure, ValidationError> {
     let count = match motion {
         ValidationMotion::Circle => 72,
         ValidationMotion::RotationOpticalAxis => 46,
         _ => 24,
     };
-    let w = waypoints(analysis, planned_with, motion, start, count)?;
+    let w = waypoints(planning, planned_with, motion, start, count)?;
     let p = plan(motion, &w);
     let cancel = AtomicBool::new(false);
     let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };

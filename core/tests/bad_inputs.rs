@@ -71,6 +71,7 @@ fn session_text() -> String {
             note: String::new(),
         }],
         verdict: "q2 scale".into(),
+        ..Default::default()
     });
     to_ron_string(&s, Path::new("session.ron")).unwrap()
 }

@@ -4,6 +4,7 @@
 //! [`AppState`]: crate::state::AppState
 
 pub mod align;
+pub mod connection;
 pub mod diagnosis;
 pub mod frames;
 pub mod inspector;

@@ -92,6 +92,15 @@ pub trait Bench: Send {
         meta: TraceMeta,
         control: &mut RunControl<'_>,
     ) -> Result<Option<Trace>, BenchError>;
+    /// The stage controllers' view of every joint axis, for a bench on controllers (`None` for a
+    /// simulated bench).
+    fn hardware_status(&mut self) -> Option<Vec<crate::hardware::AxisStatus>> {
+        None
+    }
+    /// Open the links to the stage controllers again after a fault (nothing to do on a simulated bench).
+    fn reconnect(&mut self) -> Result<(), BenchError> {
+        Ok(())
+    }
 }
 
 /// Why a plan stopped. The traces recorded before the stop are in [`PlanRun::traces`].

@@ -24,6 +24,7 @@ pub mod fit;
 pub mod motions;
 pub mod replay;
 pub mod scoring;
+pub mod validation;
 
 use crate::identify::{Observation, ObservationKind, N_EXTRINSICS};
 use crate::measure::PhaseModel;
@@ -43,12 +44,13 @@ pub const DETECTABLE_SCORE: f64 = 25.0;
 /// Absorbed share from which a candidate counts as equivalent to an extrinsic change.
 pub const EQUIVALENT_SHARE: f64 = 0.999;
 /// How the diagnosis turns traces into observations: σ floors at SPEC section 9's noise (dL
-/// 2 nm, absolute gaps 20 nm), what a bench reaches beyond the fringe analysis' own σ (stage
-/// noise, sweep-model limits); the identifier's floors are tighter.
+/// 2 nm, here 2.5 nm: the tracker's own systematic error on multi-beam fringes is 2.3 nm rms,
+/// see [`crate::identify::measurements::ExtractOptions`]; absolute gaps 20 nm), what a bench
+/// reaches beyond the fringe analysis' own σ (stage noise, sweep-model limits).
 pub const EXTRACT_OPTIONS: crate::identify::measurements::ExtractOptions =
     crate::identify::measurements::ExtractOptions {
         points_per_motion: 4,
-        sigma_floor_nm: 2.0,
+        sigma_floor_nm: 2.5,
         gap_sigma_floor_um: 0.02,
     };
 /// Label prefix of the discriminating motions ([`motions::pool`]).
@@ -237,6 +239,9 @@ impl Step {
                         s += &format!(
                         "\nran on {b}: {added_observations} observations added; baseline refitted, rms {rms_sigma:.2}σ"
                     )
+                    }
+                    None if motions.is_empty() => {
+                        s += "\nno motion of the pool would show them better than the data already do"
                     }
                     None => s += "\nno bench to run them: they are proposed, not run",
                 }

@@ -221,6 +221,72 @@ impl Laser for EmulatedLaser {
     }
 }
 
+/// A laser the software cannot drive (no laser driver yet): it stays at its nominal wavelength, and a
+/// plan that sweeps is refused with a message saying so.
+pub struct FixedLaser {
+    nominal_nm: f64,
+}
+
+impl FixedLaser {
+    /// A laser resting at `nominal_nm`.
+    pub fn new(nominal_nm: f64) -> Self {
+        FixedLaser { nominal_nm }
+    }
+}
+
+impl Laser for FixedLaser {
+    fn nominal_nm(&self) -> f64 {
+        self.nominal_nm
+    }
+    fn set_wavelength(&mut self, nm: f64) -> Result<(), HwError> {
+        if (nm - self.nominal_nm).abs() < 1e-9 {
+            Ok(())
+        } else {
+            Err(self.refuse())
+        }
+    }
+    fn start_sweep(&mut self, _from_nm: f64, _to_nm: f64, _rate_nm_per_s: f64) -> Result<(), HwError> {
+        Err(self.refuse())
+    }
+}
+
+impl FixedLaser {
+    fn refuse(&self) -> HwError {
+        HwError::Usage {
+            controller: "laser".into(),
+            problem: format!(
+                "no tunable-laser driver on this bench (fixed at {} nm): wavelength sweeps cannot run",
+                self.nominal_nm
+            ),
+        }
+    }
+}
+
+/// One joint's axis as its controller reports it now (the connection panel's status table).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AxisStatus {
+    /// Joint name ("q1").
+    pub joint: String,
+    /// Controller name ("PI E-712").
+    pub controller: String,
+    /// Axis or channel identifier on the controller.
+    pub axis: String,
+    /// Unit of `position` and `q_display` (µm or °).
+    pub unit: AxisUnit,
+    /// The controller's position of the axis (µm or °), `None` when the query failed.
+    pub position: Option<f64>,
+    /// The joint value, `(position - zero)·sign` (µm or °).
+    pub q_display: Option<f64>,
+    /// On target and standing still (`false`: moving).
+    pub on_target: Option<bool>,
+    /// Closed loop on (`None`: the controller does not report it, or the query failed).
+    pub servo_on: Option<bool>,
+    /// Referenced (absolute position known).
+    pub referenced: Option<bool>,
+    /// The last error of this axis' controller (a failed query now, or the last fault).
+    pub error: Option<String>,
+}
+
 /// Longest round trip (s, real time) of a position poll kept in a recording.
 const MAX_POLL_RTT_S: f64 = 0.002;
 
@@ -246,6 +312,8 @@ pub struct ControllerBench {
     clock: Arc<EmuClock>,
     q_display: [f64; 6],
     velocities: [f64; 6],
+    /// The last error of each controller (a fault during a segment, a failed status query).
+    last_errors: Vec<Option<String>>,
 }
 
 /// Samples read from the recorder, not yet turned into trace rows.
@@ -375,6 +443,7 @@ impl ControllerBench {
                 )));
             }
         }
+        let n_controllers = controllers.len();
         let mut bench = ControllerBench {
             config,
             robot,
@@ -387,6 +456,7 @@ impl ControllerBench {
             clock,
             q_display: [0.0; 6],
             velocities: [f64::NAN; 6],
+            last_errors: vec![None; n_controllers],
         };
         bench.q_display = bench.read_joints().map_err(fault)?;
         Ok(bench)
@@ -399,12 +469,59 @@ impl ControllerBench {
 
     /// Reconnect every controller (after a fault), restore the session and read the joints.
     pub fn reconnect(&mut self) -> Result<(), BenchError> {
-        for c in &mut self.controllers {
+        for (c, e) in self.controllers.iter_mut().zip(&mut self.last_errors) {
             c.reconnect().map_err(fault)?;
+            *e = None;
         }
         self.velocities = [f64::NAN; 6];
         self.q_display = self.read_joints().map_err(fault)?;
         Ok(())
+    }
+
+    /// Every joint's axis as its controller reports it now: position, on target, servo, referenced,
+    /// and the controller's last error. A failed query leaves its field `None` and becomes the
+    /// controller's last error; a link closed by a fault is not reopened here ([`Self::reconnect`]).
+    pub fn axis_status(&mut self) -> Vec<AxisStatus> {
+        let mut out = Vec::with_capacity(6);
+        for (j, m) in self.joints.iter().enumerate() {
+            let c = &mut self.controllers[m.controller];
+            let mut error: Option<HwError> = None;
+            let position = keep(&mut error, c.positions(&[m.axis])).and_then(|p| p.first().copied());
+            let on_target = keep(&mut error, c.on_target(&[m.axis])).and_then(|p| p.first().copied());
+            let servo_on = keep(&mut error, c.servo_on(&[m.axis])).flatten().and_then(|p| p.first().copied());
+            let referenced = keep(&mut error, c.is_referenced(m.axis));
+            // A link closed by a fault answers "not connected" from then on: keep the fault that closed it.
+            if let Some(e) = error {
+                let last = &mut self.last_errors[m.controller];
+                if !(matches!(e, HwError::NotConnected { .. }) && last.is_some()) {
+                    *last = Some(e.to_string());
+                }
+            }
+            let axis = c.axes()[m.axis].clone();
+            out.push(AxisStatus {
+                joint: self.robot.links[j].name.clone(),
+                controller: self.config.controllers[m.controller].name.clone(),
+                axis: axis.id,
+                unit: axis.unit,
+                position,
+                q_display: position.map(|p| (p - m.zero) * m.sign),
+                on_target,
+                servo_on,
+                referenced,
+                error: self.last_errors[m.controller].clone(),
+            });
+        }
+        out
+    }
+
+    /// Remember a fault as its controller's last error (every controller's when it names none of them).
+    fn remember(&mut self, e: &HwError) {
+        let named = self.config.controllers.iter().position(|c| c.name == e.controller());
+        for (i, last) in self.last_errors.iter_mut().enumerate() {
+            if named.is_none_or(|n| n == i) {
+                *last = Some(e.to_string());
+            }
+        }
     }
 
     /// Read every joint (µm, °).
@@ -751,6 +868,17 @@ impl ControllerBench {
     }
 }
 
+/// The value of `r`, or `None` with its error kept in `error` (the first one wins).
+fn keep<T>(error: &mut Option<HwError>, r: Result<T, HwError>) -> Option<T> {
+    match r {
+        Ok(v) => Some(v),
+        Err(e) => {
+            error.get_or_insert(e);
+            None
+        }
+    }
+}
+
 enum Stop {
     Done,
     Cancelled,
@@ -790,6 +918,14 @@ impl Bench for ControllerBench {
         self.clock.now_s()
     }
 
+    fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
+        Some(self.axis_status())
+    }
+
+    fn reconnect(&mut self) -> Result<(), BenchError> {
+        ControllerBench::reconnect(self)
+    }
+
     fn run_segment(
         &mut self,
         segment: &TimedSegment,
@@ -818,6 +954,7 @@ impl Bench for ControllerBench {
                 Err(BenchError::Cancelled { partial: take_trace(acq).map(Box::new) })
             }
             Err(e) => {
+                self.remember(&e);
                 // Keep whatever the recorder still holds (its link may be the healthy one).
                 if let Some(a) = acq.as_mut() {
                     let _ = self.read_recorder(a, None);

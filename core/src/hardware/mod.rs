@@ -12,6 +12,7 @@
 pub mod controller_bench;
 pub mod emulator;
 pub mod pi_gcs;
+pub mod probe;
 pub mod smaract;
 pub mod virtual_stages;
 
@@ -22,7 +23,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
-pub use controller_bench::{ControllerBench, HardwareConfig};
+pub use controller_bench::{AxisStatus, ControllerBench, HardwareConfig};
 pub use pi_gcs::{GcsError, PiGcs};
 pub use smaract::{McsError, SmarActMcs};
 pub use virtual_stages::VirtualStages;
@@ -194,6 +195,23 @@ impl HwError {
         }
     }
 
+    /// The controller the error comes from (as named in messages).
+    pub fn controller(&self) -> &str {
+        match self {
+            HwError::Connect { controller, .. }
+            | HwError::Disconnected { controller, .. }
+            | HwError::Timeout { controller, .. }
+            | HwError::NotConnected { controller }
+            | HwError::Gcs { controller, .. }
+            | HwError::Mcs { controller, .. }
+            | HwError::BadReply { controller, .. }
+            | HwError::OutOfRange { controller, .. }
+            | HwError::LimitReached { controller, .. }
+            | HwError::WaitTimeout { controller, .. }
+            | HwError::Usage { controller, .. } => controller,
+        }
+    }
+
     /// True when the link is gone (disconnect, timeout, not connected): reconnect before going on.
     pub fn needs_reconnect(&self) -> bool {
         matches!(self, HwError::Disconnected { .. } | HwError::Timeout { .. } | HwError::NotConnected { .. })
@@ -252,6 +270,11 @@ pub trait StageController: Send {
     fn is_referenced(&mut self, axis: usize) -> Result<bool, HwError>;
     /// Start a reference move of the axis (returns at once; wait with [`StageController::wait_on_target`]).
     fn reference(&mut self, axis: usize) -> Result<(), HwError>;
+    /// Whether each of `axes` is in closed-loop (servo) mode, where the controller reports it
+    /// (`None`: the controller has no such query; the MCS positioners always move closed loop).
+    fn servo_on(&mut self, _axes: &[usize]) -> Result<Option<Vec<bool>>, HwError> {
+        Ok(None)
+    }
     /// Open the link again after a fault (and restore the session settings).
     fn reconnect(&mut self) -> Result<(), HwError>;
     /// The data recorder, if the controller has one.

@@ -120,8 +120,30 @@ impl PiGcs {
         Ok(pi)
     }
 
-    fn init(&mut self) -> Result<(), HwError> {
+    /// Ask a controller at `address` who it is (`*IDN?`) and which axes it has (`SAI?`), changing
+    /// nothing (no `SVO`): the connection panel's "Identify". A reply in another protocol (a SmarAct
+    /// MCS answers `:E-1,1`) is refused as not a GCS controller.
+    pub fn identify(name: &str, address: &str, timeout_s: f64) -> Result<(String, Vec<AxisInfo>), HwError> {
+        let link = Link::connect(name, address, timeout_s)?;
+        let mut pi = PiGcs {
+            name: name.to_string(),
+            link,
+            axes: vec![],
+            idn: String::new(),
+            armed_axes: vec![],
+            armed_inputs: 0,
+            limits: vec![],
+        };
+        pi.read_identity()?;
+        Ok((pi.idn, pi.axes))
+    }
+
+    fn read_identity(&mut self) -> Result<(), HwError> {
         self.idn = self.query("*IDN?")?.join(" ");
+        if self.idn.trim().is_empty() || self.idn.starts_with(':') {
+            let idn = self.idn.clone();
+            return Err(self.bad("*IDN?", &idn, "a PI identification string (is this a PI GCS controller?)"));
+        }
         let ids = self.query("SAI?")?;
         self.axes = ids
             .iter()
@@ -132,6 +154,11 @@ impl PiGcs {
         if self.axes.is_empty() {
             return Err(self.bad("SAI?", "", "at least one axis identifier"));
         }
+        Ok(())
+    }
+
+    fn init(&mut self) -> Result<(), HwError> {
+        self.read_identity()?;
         self.limits = vec![None; self.axes.len()];
         let svo: Vec<String> = self.axes.iter().map(|a| format!("{} 1", a.id)).collect();
         self.command(&format!("SVO {}", svo.join(" ")))?;
@@ -390,6 +417,20 @@ impl StageController for PiGcs {
     fn is_referenced(&mut self, axis: usize) -> Result<bool, HwError> {
         let v = self.query_per_axis("FRF?", &[axis])?;
         Ok(v[0] == "1")
+    }
+
+    /// `SVO?`.
+    fn servo_on(&mut self, axes: &[usize]) -> Result<Option<Vec<bool>>, HwError> {
+        let values = self.query_per_axis("SVO?", axes)?;
+        values
+            .iter()
+            .map(|v| match v.as_str() {
+                "0" => Ok(false),
+                "1" => Ok(true),
+                other => Err(self.bad("SVO?", other, "0 or 1")),
+            })
+            .collect::<Result<Vec<bool>, HwError>>()
+            .map(Some)
     }
 
     fn reference(&mut self, axis: usize) -> Result<(), HwError> {

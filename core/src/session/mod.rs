@@ -123,6 +123,15 @@ pub struct DiagnosisRecord {
     /// The conclusion in words ("residual at the noise floor after adding …", "no candidate
     /// explains the residual: it lives in …").
     pub verdict: String,
+    /// The extended model: the library effects added, with their values (empty when none).
+    #[serde(default)]
+    pub model_effects: Vec<crate::model::effects::Effect>,
+    /// The extrinsics refitted with those effects, when the diagnosis changed them.
+    #[serde(default)]
+    pub extrinsics: Option<crate::model::extrinsics::Extrinsics>,
+    /// The validation motions planned without and with the effects.
+    #[serde(default)]
+    pub validation: Vec<crate::diagnose::validation::EffectValidationRow>,
 }
 
 /// One candidate effect as the diagnosis scored it.
@@ -594,6 +603,6 @@ impl DiagnosisRecord {
         if let Some(g) = r.residual_where.first().filter(|_| r.verdict == crate::diagnose::Verdict::Unexplained) {
             verdict.push_str(&format!("; worst: {} {} at {:.1} σ", g.by, g.key, g.rms_sigma));
         }
-        Self { effects, verdict }
+        Self { effects, verdict, ..Default::default() }
     }
 }

@@ -37,6 +37,20 @@ pub(crate) fn sample_session(dir: &Path) -> Session {
             note: String::new(),
         }],
         verdict: "residual at the noise floor after adding the joint-4 pivot offset".into(),
+        // The extended model and its validation survive the round trip.
+        model_effects: vec![crate::model::effects::Effect::PivotOffset {
+            joint: "q4".into(),
+            offset_world_um: [0.0, 19.7, 0.0],
+        }],
+        extrinsics: Some(crate::model::extrinsics::Extrinsics::nominal_design()),
+        validation: vec![crate::diagnose::validation::EffectValidationRow {
+            motion: "rotation 6° about X_f through P_r".into(),
+            without_effect_nm: Some(310.0),
+            with_effect_nm: Some(9.5),
+            note: None,
+            without_curve_nm: vec![0.0, 150.0, 310.0],
+            with_curve_nm: vec![0.0, 4.0, 9.5],
+        }],
     });
     s.notes = "lamella LiNbO₃ #12\nroom 20.3 °C".into();
     s

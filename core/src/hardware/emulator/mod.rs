@@ -7,6 +7,7 @@
 //! are read, at their own sample times, and a photodiode closure can ask any emulator where its axes
 //! were at that time.
 
+pub mod local;
 pub mod pi;
 pub mod smaract;
 
@@ -16,6 +17,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+pub use local::LocalEmulators;
 pub use pi::{PiEmulator, PiEmulatorConfig};
 pub use smaract::{SmarActEmulator, SmarActEmulatorConfig};
 
@@ -265,6 +267,8 @@ impl Faults {
 pub(crate) struct Server {
     pub addr: SocketAddr,
     stop: Arc<AtomicBool>,
+    /// The open connections, closed when the server stops (a stopped emulator answers no one).
+    connections: Arc<Mutex<Vec<TcpStream>>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -279,12 +283,21 @@ impl Server {
         let stop = Arc::new(AtomicBool::new(false));
         let stop2 = stop.clone();
         let serve = Arc::new(serve);
+        let connections = Arc::new(Mutex::new(Vec::<TcpStream>::new()));
+        let open = connections.clone();
         let thread = std::thread::spawn(move || {
             while !stop2.load(Ordering::Relaxed) {
                 match listener.accept() {
                     Ok((stream, _)) => {
                         let _ = stream.set_nonblocking(false);
                         let _ = stream.set_nodelay(true);
+                        if let Ok(mut open) = open.lock() {
+                            // Forget connections that are gone, so the list does not grow.
+                            open.retain(|s| s.peer_addr().is_ok());
+                            if let Ok(s) = stream.try_clone() {
+                                open.push(s);
+                            }
+                        }
                         let serve = serve.clone();
                         std::thread::spawn(move || serve(stream));
                     }
@@ -292,7 +305,7 @@ impl Server {
                 }
             }
         });
-        Ok(Server { addr, stop, thread: Some(thread) })
+        Ok(Server { addr, stop, connections, thread: Some(thread) })
     }
 }
 
@@ -301,6 +314,9 @@ impl Drop for Server {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(t) = self.thread.take() {
             let _ = t.join();
+        }
+        for s in self.connections.lock().unwrap_or_else(|e| e.into_inner()).drain(..) {
+            let _ = s.shutdown(std::net::Shutdown::Both);
         }
     }
 }

@@ -1,0 +1,207 @@
+//! GUI test of the Connection view (egui_kittest, headless): local emulators started from the panel,
+//! both controllers identified, the hardware bench connected, a jog through the drivers seen in the
+//! status table, a dropped link and Reconnect, a wrong device and a closed port explained, the settings persisted. With
+//! PHOTOROBOT_SCREENSHOTS=1 the view is written to screenshots/connection.png (Mesa llvmpipe):
+//! `PHOTOROBOT_SCREENSHOTS=1 cargo test -p photorobot --test connection`.
+
+use egui_kittest::kittest::Queryable;
+use egui_kittest::Harness;
+use photorobot_app::dialogs::ScriptedDialogs;
+use photorobot_app::gui::{App, Tab, Workbench};
+use photorobot_app::state::Settings;
+use photorobot_core::hardware::emulator::{Fault, FaultSpec};
+use std::time::{Duration, Instant};
+
+const SIZE: egui::Vec2 = egui::vec2(1400.0, 900.0);
+
+fn harness(app: Workbench) -> Harness<'static, Workbench> {
+    Harness::builder().with_size(SIZE).wgpu().build_ui_state(|ui, app: &mut Workbench| app.show(ui), app)
+}
+
+/// Step the UI (network I/O runs on other threads) until `done` holds, or fail after `timeout`.
+fn wait_until(h: &mut Harness<'_, Workbench>, what: &str, timeout: Duration, done: impl Fn(&Workbench) -> bool) {
+    let start = Instant::now();
+    loop {
+        h.run_steps(1);
+        if done(h.state()) {
+            h.run_steps(2);
+            return;
+        }
+        assert!(
+            start.elapsed() < timeout,
+            "timed out after {timeout:?} waiting for {what}; panel message: {:?}; status: {}",
+            h.state().connection.message,
+            h.state().state.status
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn open(h: &mut Harness<'_, Workbench>, tab: Tab) {
+    h.get_by_label(tab.title()).click();
+    h.run_steps(3);
+    assert_eq!(h.state().tab, tab);
+}
+
+fn screenshot(h: &mut Harness<'_, Workbench>, name: &str) {
+    let image = h.render().expect("the headless renderer (Mesa llvmpipe) renders the window");
+    let distinct: std::collections::HashSet<[u8; 4]> = image.pixels().map(|p| p.0).collect();
+    assert!(distinct.len() > 20, "the rendered frame of {name} looks blank");
+    if std::env::var_os("PHOTOROBOT_SCREENSHOTS").is_some() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../screenshots");
+        std::fs::create_dir_all(&dir).unwrap();
+        image.save(dir.join(format!("{name}.png"))).unwrap();
+    }
+}
+
+/// eframe storage in memory.
+#[derive(Default)]
+struct MemoryStorage(std::collections::HashMap<String, String>);
+
+impl eframe::Storage for MemoryStorage {
+    fn get_string(&self, key: &str) -> Option<String> {
+        self.0.get(key).cloned()
+    }
+    fn set_string(&mut self, key: &str, value: String) {
+        self.0.insert(key.to_string(), value);
+    }
+    fn remove_string(&mut self, key: &str) {
+        self.0.remove(key);
+    }
+    fn flush(&mut self) {}
+}
+
+fn identified(w: &Workbench, i: usize) -> bool {
+    w.connection.identities.get(i).is_some_and(|r| r.is_some())
+}
+
+/// Controller `i`'s Identify failed with a message containing `text`.
+fn refused(w: &Workbench, i: usize, text: &str) -> bool {
+    w.connection
+        .identities
+        .get(i)
+        .is_some_and(|r| r.as_ref().is_some_and(|r| r.as_ref().is_err_and(|e| e.contains(text))))
+}
+
+#[test]
+fn connection_panel_drives_the_emulated_controllers_and_explains_failures() {
+    let wb = Workbench::new(Settings::default(), Box::new(ScriptedDialogs::default()), Box::new(|| {}))
+        .expect("the embedded virtual bench starts");
+    let mut h = harness(wb);
+    open(&mut h, Tab::Connection);
+    h.get_by_label("running on:");
+    h.get_by_label("Hardware: stage controllers over TCP").click();
+    h.run_steps(3);
+    // The mapping comes from the robot description: q1 on the E-712's axis 3, q6 on MCS channel 2.
+    let mapping = h.state().state.settings.connection.mapping.clone();
+    assert_eq!((mapping[0].controller.as_str(), mapping[0].channel.as_str()), ("PI E-712", "3"));
+    assert_eq!((mapping[5].controller.as_str(), mapping[5].channel.as_str()), ("SmarAct MCS", "2"));
+
+    // Local emulators, then Identify both controllers: the replies are shown.
+    h.get_by_label("Start local emulators").click();
+    h.run_steps(3);
+    h.get_by_label_contains("local emulators running");
+    let emulators = h.state().connection.emulators.as_ref().expect("the emulators run").addresses();
+    let controllers = h.state().state.settings.connection.controllers.clone();
+    for (c, (name, address)) in controllers.iter().zip(&emulators) {
+        assert_eq!((&c.name, c.address()), (name, address.clone()), "the addresses point at the emulators");
+    }
+    for node in h.get_all_by_label("Identify") {
+        node.click();
+    }
+    wait_until(&mut h, "both identifications", Duration::from_secs(20), |w| identified(w, 0) && identified(w, 1));
+    let ids = h.state().connection.identities.clone();
+    assert!(ids.iter().all(|r| r.as_ref().unwrap().is_ok()), "{ids:?}");
+    h.get_by_label_contains("E-712 (emulated)");
+    h.get_by_label("SmarAct MCS, 3 channels: 0 rotary (°), 1 rotary (°), 2 rotary (°)");
+    h.get_by_label("axes: 1 (µm), 2 (µm), 3 (µm)");
+
+    // Connect: the worker now runs on the controllers; the status table reads them.
+    // The connection completes whichever tab is open.
+    h.get_by_label("Connect").click();
+    h.run_steps(1);
+    open(&mut h, Tab::Robot);
+    wait_until(&mut h, "the connection", Duration::from_secs(30), |w| w.connection.connected.is_some());
+    open(&mut h, Tab::Connection);
+    assert!(h.state().connection.connected.as_ref().unwrap().emulated);
+    assert!(h.state().state.worker.bench_name.starts_with("femto-hardware (PI E-712 at 127.0.0.1:"));
+    wait_until(&mut h, "the axis status", Duration::from_secs(20), |w| w.state.hardware_status.is_some());
+    h.get_by_label("q1 = 0.0000 µm");
+    assert_eq!(h.query_all_by_label("150.0000 µm").count(), 3, "the PI axes at their 150 µm joint zero");
+    assert_eq!(h.query_all_by_label("on target").count(), 6);
+
+    // A jog through the drivers (Robot tab); the status table follows on the Connection tab.
+    open(&mut h, Tab::Robot);
+    let target = [10.0, -5.0, 3.0, 0.2, -0.3, 0.5];
+    h.state_mut().state.jog_target = target;
+    h.get_by_label("Move to targets").click();
+    wait_until(&mut h, "the jog on the controllers", Duration::from_secs(30), |w| {
+        w.state.q_display.iter().zip(&target).all(|(q, t)| (q - t).abs() < 1e-6)
+    });
+    open(&mut h, Tab::Connection);
+    wait_until(&mut h, "the status after the jog", Duration::from_secs(20), |w| {
+        w.state.hardware_status.as_ref().is_some_and(|(_, axes)| {
+            axes.iter().zip(&target).all(|(a, t)| a.q_display.is_some_and(|q| (q - t).abs() < 1e-6))
+        })
+    });
+    h.get_by_label("160.0000 µm"); // q1 on axis 3: 150 + 10
+    h.get_by_label("q1 = 10.0000 µm");
+    h.get_by_label("q6 = 0.5000 °");
+    assert_eq!(h.query_all_by_label("on target").count(), 6);
+    assert!(h.query_all_by_label("none").count() >= 6, "no axis has an error");
+    screenshot(&mut h, "connection");
+
+    // A fault on the link: the status table names it on the PI axes; Reconnect clears it.
+    h.state().connection.emulators.as_ref().unwrap().pi.inject(FaultSpec::on_command("POS?", 0, Fault::DropConnection));
+    wait_until(&mut h, "the fault in the status", Duration::from_secs(20), |w| {
+        w.state.hardware_status.as_ref().is_some_and(|(_, axes)| axes[0].error.is_some())
+    });
+    let lost = "PI E-712: connection lost during `POS? 3`: closed by the peer";
+    assert_eq!(h.query_all_by_label(lost).count(), 3, "the fault shows on the three PI axes");
+    h.get_by_label("Reconnect").click();
+    wait_until(&mut h, "the reconnection", Duration::from_secs(20), |w| {
+        w.state.busy.is_none()
+            && w.state.status == "reconnected"
+            && w.state.hardware_status.as_ref().is_some_and(|(_, axes)| axes.iter().all(|a| a.error.is_none()))
+    });
+    assert_eq!(h.query_all_by_label("none").count(), 6);
+    h.get_by_label("q1 = 10.0000 µm");
+
+    // Disconnect: back on the virtual bench.
+    h.get_by_label("Disconnect").click();
+    wait_until(&mut h, "the disconnection", Duration::from_secs(20), |w| w.connection.connected.is_none());
+    assert!(h.state().state.worker.bench_name.contains("virtual bench"), "{}", h.state().state.worker.bench_name);
+
+    // A wrong device: the PI driver at the MCS emulator's port.
+    let mcs_port = h.state().state.settings.connection.controllers[1].port;
+    h.state_mut().state.settings.connection.controllers[0].port = mcs_port;
+    h.run_steps(1);
+    h.get_all_by_label("Identify").next().unwrap().click();
+    let wrong = "is this a PI GCS controller?";
+    wait_until(&mut h, "the wrong-device identification", Duration::from_secs(20), |w| refused(w, 0, wrong));
+    h.get_by_label_contains(wrong);
+
+    // A closed port: refused, naming address and port, for Identify and for Connect.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    h.state_mut().state.settings.connection.controllers[0].port = closed;
+    h.run_steps(1);
+    h.get_all_by_label("Identify").next().unwrap().click();
+    let refusal = format!("PI E-712: cannot connect to 127.0.0.1:{closed}: ");
+    wait_until(&mut h, "the refused identification", Duration::from_secs(20), |w| refused(w, 0, &refusal));
+    h.get_by_label_contains(&refusal);
+    h.get_by_label("Connect").click();
+    wait_until(&mut h, "the refused connection", Duration::from_secs(20), |w| {
+        !w.connection.connecting && w.connection.message.as_ref().is_some_and(|m| m.is_err())
+    });
+    h.get_by_label_contains(&format!("not connected: {refusal}"));
+    assert!(h.state().connection.connected.is_none());
+    assert!(h.state().state.worker.bench_name.contains("virtual bench"));
+
+    // The connection settings persist with the other settings.
+    let mut app = App { workbench: h.into_state() };
+    let mut storage = MemoryStorage::default();
+    eframe::App::save(&mut app, &mut storage);
+    let back: Settings = eframe::get_value(&storage, eframe::APP_KEY).expect("settings were saved");
+    assert_eq!(back.connection, app.workbench.state.settings.connection);
+    assert!(back.connection.hardware && back.connection.controllers[0].port == closed);
+}

@@ -1,0 +1,84 @@
+//! Validation with and without the named effects (issue 6, "validation figures with and without
+//! the effect"): the validation motions are planned through the IGM of the calibrated model
+//! (the nominal robot and the calibrated extrinsics) and through the IGM of the extended model
+//! (the robot with the geometric effects the diagnosis added, and the extrinsics refitted with
+//! them), run on the bench, and both measured with the extended model.
+
+use crate::bench::Bench;
+use crate::identify::calibration::CURVE_POINTS;
+use crate::measure::PhaseModel;
+use crate::model::effects::{apply_all, Effect, EffectError};
+use crate::model::extrinsics::Extrinsics;
+use crate::validate::{run_validation_planned, ValidationMotion};
+use serde::{Deserialize, Serialize};
+
+/// One validation motion run with the model without and with the effects.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EffectValidationRow {
+    /// The motion.
+    pub motion: String,
+    /// FP cavity variation, peak to peak, planned with the calibrated model (nm).
+    pub without_effect_nm: Option<f64>,
+    /// The same planned with the extended model (nm).
+    pub with_effect_nm: Option<f64>,
+    /// Why a figure is missing.
+    #[serde(default)]
+    pub note: Option<String>,
+    /// The variation along the motion planned without the effects (nm, thinned for plots).
+    #[serde(default)]
+    pub without_curve_nm: Vec<f64>,
+    /// The same planned with them (nm).
+    #[serde(default)]
+    pub with_curve_nm: Vec<f64>,
+}
+
+/// The model with the geometric effects applied to its robot and the given extrinsics. Path
+/// effects (drift, path scale) do not change where the IGM sends the robot; they are left out.
+pub fn extended_model(
+    base: &PhaseModel,
+    extrinsics: Extrinsics,
+    effects: &[Effect],
+) -> Result<PhaseModel, EffectError> {
+    let robot = apply_all(effects, base.chain.description())?;
+    Ok(PhaseModel { chain: crate::model::kinematics::Chain::new(robot), extrinsics, ..base.clone() })
+}
+
+/// Run every validation motion twice on `bench`: planned with `base` (the nominal robot) and the
+/// calibrated extrinsics `without`, and planned with the extended model (`effects` on the robot,
+/// extrinsics `with`); both measured with the extended model.
+pub fn validate_with_effects(
+    bench: &mut dyn Bench,
+    base: &PhaseModel,
+    without: &Extrinsics,
+    with: &Extrinsics,
+    effects: &[Effect],
+) -> Result<Vec<EffectValidationRow>, EffectError> {
+    let extended = extended_model(base, *with, effects)?;
+    let plain = PhaseModel { extrinsics: *without, ..base.clone() };
+    Ok(ValidationMotion::ALL
+        .iter()
+        .map(|&m| {
+            let a = run_validation_planned(bench, &plain, without, &extended, m, [0.0; 6]);
+            let b = run_validation_planned(bench, &extended, with, &extended, m, [0.0; 6]);
+            let note = match (&a, &b) {
+                (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
+                _ => None,
+            };
+            let curve = |v: &[f64]| {
+                if v.len() <= CURVE_POINTS {
+                    v.to_vec()
+                } else {
+                    (0..CURVE_POINTS).map(|k| v[k * (v.len() - 1) / (CURVE_POINTS - 1)]).collect()
+                }
+            };
+            EffectValidationRow {
+                motion: m.name().to_string(),
+                without_effect_nm: a.as_ref().ok().map(|f| f.peak_to_peak_nm),
+                with_effect_nm: b.as_ref().ok().map(|f| f.peak_to_peak_nm),
+                note,
+                without_curve_nm: a.as_ref().map_or(vec![], |f| curve(&f.variation_nm)),
+                with_curve_nm: b.as_ref().map_or(vec![], |f| curve(&f.variation_nm)),
+            }
+        })
+        .collect())
+}
