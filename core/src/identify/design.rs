@@ -213,6 +213,14 @@ pub fn candidate_pool(robot: &RobotDescription, limits: &MotionLimits) -> Vec<Ca
                         start,
                         mv(JointTarget::default().with(joint, amplitude), &label),
                     ));
+                    // The same rotation read for its fringe phase (gap changes) only.
+                    let label = format!("rotation {name} -{amplitude} -> +{amplitude}° at {}", pose_text(&at));
+                    raw.push((
+                        label.clone(),
+                        CandidateKind::TiltScan,
+                        start,
+                        mv(JointTarget::default().with(joint, amplitude), &label),
+                    ));
                 }
             }
         }
