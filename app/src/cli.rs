@@ -40,6 +40,8 @@ pub enum Command {
     Fringes(FringesArgs),
     /// Measure, identify and validate end to end on a bench; write the session.
     Calibrate(crate::cli_calibrate::CalibrateArgs),
+    /// Choose motions that reach the required uncertainties in the least bench time; write the plan.
+    Design(crate::cli_design::DesignArgs),
     /// Find where model and data disagree on a calibration session, name the missing effect, add it.
     Diagnose(crate::cli_diagnose::DiagnoseArgs),
     /// Write a session's calibration report as one self-contained HTML file.
@@ -197,6 +199,7 @@ where
         Some(Command::Simulate(a)) => simulate(&a, out).map(|()| Outcome::Done),
         Some(Command::Fringes(a)) => fringes(&a, out).map(|()| Outcome::Done),
         Some(Command::Calibrate(a)) => crate::cli_calibrate::calibrate(&a, out).map(|()| Outcome::Done),
+        Some(Command::Design(a)) => crate::cli_design::run_design(&a, out).map(|()| Outcome::Done),
         Some(Command::Diagnose(a)) => crate::cli_diagnose::diagnose(&a, out).map(|()| Outcome::Done),
         Some(Command::Report(a)) => report(&a, out).map(|()| Outcome::Done),
         Some(Command::Emulate(a)) => crate::cli_emulate::emulate(&a, out).map(|()| Outcome::Done),
@@ -338,7 +341,8 @@ fn frames(a: &FramesArgs, out: &mut dyn Write) -> Result<(), CliError> {
     Ok(())
 }
 
-fn load_plan(name_or_path: &str) -> Result<Plan, CliError> {
+/// A plan file, or an embedded plan by name: strategy1, strategy2, joint-extras, optimised.
+pub(crate) fn load_plan(name_or_path: &str) -> Result<Plan, CliError> {
     Ok(match name_or_path {
         "strategy1" => Plan::from_ron_str(
             photorobot_core::plan::STRATEGY1_RON,
@@ -348,6 +352,8 @@ fn load_plan(name_or_path: &str) -> Result<Plan, CliError> {
             photorobot_core::plan::STRATEGY2_RON,
             std::path::Path::new("assets/plans/strategy2.ron"),
         )?,
+        "joint-extras" => Plan::joint_extras(),
+        "optimised" => Plan::optimised(),
         path => Plan::load(std::path::Path::new(path))?,
     })
 }

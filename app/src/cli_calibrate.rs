@@ -13,7 +13,7 @@ use crate::cli::CliError;
 use photorobot_core::bench::{BenchPreset, RunControl, VirtualBench};
 use photorobot_core::files::{save_ron, write_atomic};
 use photorobot_core::identify::calibration::{
-    plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
+    plan_durations, plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
 };
 use photorobot_core::import::{read_folder, ColumnMapping};
 use photorobot_core::measure::PhaseModel;
@@ -27,9 +27,9 @@ use std::sync::atomic::AtomicBool;
 /// Which identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ModeArg {
-    /// The paper's steps A, B, C on strategies 1 and 2 (about 13 min of bench time).
+    /// The paper's steps A, B, C on strategies 1 and 2 (10.9 min of bench time).
     Paper,
-    /// Every parameter from every measurement, with tilt scans and absolute gaps (about 13 min more).
+    /// Every parameter from every measurement, with tilt scans and absolute gaps (2.0 min more; or --plan).
     Joint,
 }
 
@@ -55,6 +55,11 @@ pub struct CalibrateArgs {
     /// Column mapping (RON) for traces from another acquisition system (default: our format).
     #[arg(long, value_name = "FILE", requires = "traces")]
     pub mapping: Option<PathBuf>,
+    /// Measure these plans instead of the mode's (repeatable, run in order): a plan file (RON) or
+    /// an embedded plan (strategy1, strategy2, joint-extras, optimised). Joint mode on
+    /// `--plan optimised` runs the experiment design's plan (`photorobot design`).
+    #[arg(long = "plan", value_name = "PLAN", conflicts_with_all = ["traces", "resume"])]
+    pub plans: Vec<String>,
     /// Continue the measurement autosaved in --out (after a crash) instead of starting anew.
     #[arg(long)]
     pub resume: bool,
@@ -143,9 +148,16 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
                     seed: Some(a.seed.unwrap_or(preset.seed)),
                 };
                 let mut s = Session::new(info, preset.robot_description()?);
-                s.plans = plans(mode);
+                s.plans = if a.plans.is_empty() {
+                    plans(mode)
+                } else {
+                    a.plans.iter().map(|p| crate::cli::load_plan(p)).collect::<Result<_, _>>()?
+                };
                 s
             };
+            // Each plan's bench time from the timing model, every plan from the start (q = 0).
+            let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
+                .map_err(|problem| CliError::Argument { argument: "--plan", problem })?;
             let cancel = AtomicBool::new(false);
             let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
             let recorded = record(&mut bench, &mut session, &a.out, &mut control)?;
@@ -153,6 +165,7 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
             let traces = session.load_traces(&a.out)?;
             let name = session.bench.name.clone();
             let mut report = report_from_traces(traces, recorded.duration_s, name, &nominal, mode).map_err(failed)?;
+            report.plan_durations = durations;
             report.validation = validation_rows(&mut bench, &nominal, &report.extrinsics);
             (session, report)
         }
@@ -189,6 +202,15 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
         r.observations,
         r.measurement_duration_s / 60.0
     )?;
+    for p in &r.plan_durations {
+        writeln!(
+            out,
+            "  plan {:<16} {:>7.1} s = {:>5.2} min of bench time",
+            p.name,
+            p.duration_s,
+            p.duration_s / 60.0
+        )?;
+    }
     writeln!(out, "solver: {} ({})", if r.converged { "converged" } else { "NOT CONVERGED" }, r.termination)?;
     writeln!(out, "\n{:<10} {:>14} {:<4} {:>12}  determined", "parameter", "value", "unit", "σ")?;
     for p in &r.parameters {

@@ -3,6 +3,7 @@
 
 pub mod cli;
 pub mod cli_calibrate;
+pub mod cli_design;
 pub mod cli_diagnose;
 pub mod cli_emulate;
 pub mod decimate;

@@ -26,6 +26,9 @@ pub const STRATEGY2_RON: &str = include_str!("../../assets/plans/strategy2.ron")
 /// The measurements the paper lacks (tilt scans, absolute gaps at several poses, rotations at
 /// other gaps), for the joint estimate.
 pub const JOINT_EXTRAS_RON: &str = include_str!("../../assets/plans/joint-extras.ron");
+/// The plan chosen by the experiment design ([`crate::identify::design`]) for the joint
+/// estimate on `table2-ideal` (its header says how it was generated).
+pub const OPTIMISED_RON: &str = include_str!("../../assets/plans/optimised.ron");
 
 /// Names of the six joint fields, in order, with their units (as in the trace CSV header).
 pub const JOINT_FIELDS: [&str; 6] = ["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"];
@@ -713,6 +716,12 @@ impl Plan {
     /// The extra measurements of the joint estimate, from the embedded asset.
     pub fn joint_extras() -> Self {
         Self::from_ron_str(JOINT_EXTRAS_RON, Path::new("assets/plans/joint-extras.ron"))
+            .expect("the embedded plan is valid (checked by tests)")
+    }
+
+    /// The experiment design's plan for the joint estimate, from the embedded asset.
+    pub fn optimised() -> Self {
+        Self::from_ron_str(OPTIMISED_RON, Path::new("assets/plans/optimised.ron"))
             .expect("the embedded plan is valid (checked by tests)")
     }
 

@@ -107,6 +107,10 @@ pub struct CalibrationReport {
     pub validation_predicted: bool,
     /// Bench time of the measurements (s).
     pub measurement_duration_s: f64,
+    /// Bench time of each plan run, in order, from the plans' timing model (empty for traces
+    /// recorded elsewhere).
+    #[serde(default)]
+    pub plan_durations: Vec<PlanDuration>,
     /// Number of observations used.
     pub observations: usize,
     /// Sentences for the user.
@@ -116,6 +120,34 @@ pub struct CalibrationReport {
     /// The recorded traces.
     #[serde(skip)]
     pub traces: Vec<Trace>,
+}
+
+/// The bench time of one plan of a calibration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlanDuration {
+    /// The plan's name.
+    pub name: String,
+    /// Its bench time (s), setup moves and settling included.
+    pub duration_s: f64,
+}
+
+/// The bench time of each plan run one after the other from `start_display` (µm, °), from the
+/// plan timing model ([`Plan::expand`]); a plan that does not fit gives its error.
+pub fn plan_durations(
+    plans: &[Plan],
+    robot: &crate::model::robot::RobotDescription,
+    limits: &crate::plan::MotionLimits,
+    start_display: [f64; 6],
+) -> Result<Vec<PlanDuration>, String> {
+    let mut at = start_display;
+    plans
+        .iter()
+        .map(|p| {
+            let segs = p.expand(robot, at, limits).map_err(|e| format!("plan {}: {e}", p.name))?;
+            at = segs.last().map_or(at, |s| s.to_display);
+            Ok(PlanDuration { name: p.name.clone(), duration_s: crate::plan::total_duration_s(&segs) })
+        })
+        .collect()
 }
 
 /// The plans a mode measures.
@@ -317,8 +349,11 @@ pub fn parameter_rows(e: &Extrinsics, report: &IdentifiabilityReport) -> Vec<Par
 
 /// Measure, identify, report and validate on a bench.
 pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Result<CalibrationReport, String> {
-    let (traces, duration) = measure(bench, &plans(mode))?;
+    let plans = plans(mode);
+    let durations = plan_durations(&plans, bench.robot(), bench.motion_limits(), bench.position_display())?;
+    let (traces, duration) = measure(bench, &plans)?;
     let mut report = report_from_traces(traces, duration, bench.name(), nominal, mode)?;
+    report.plan_durations = durations;
     report.validation = validation_rows(bench, nominal, &report.extrinsics);
     Ok(report)
 }
@@ -362,6 +397,7 @@ pub fn report_from_traces(
         validation: Vec::new(),
         validation_predicted: false,
         measurement_duration_s: duration_s,
+        plan_durations: Vec::new(),
         observations: obs.len(),
         warnings,
         extrinsics: est.extrinsics,

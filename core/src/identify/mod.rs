@@ -6,6 +6,7 @@
 //! gaps from sweeps, fringe amplitudes (reflected power) from tilt scans.
 
 pub mod calibration;
+pub mod design;
 pub mod joint;
 pub mod measurements;
 pub mod observability;
