@@ -1,4 +1,4 @@
-//! `photorobot design --bench <preset> [--max-minutes 10] [--margin 0.8] [--prior FILE] [--seed N] [--out plan.ron] [--json]`:
+//! `photorobot design --bench <preset> [--max-minutes 10] [--margin 0.6] [--prior FILE] [--seed N] [--out plan.ron] [--json]`:
 //! choose motions from the candidate pool that reach the required σ of the joint estimate in the
 //! least bench time, print them with their bench time and the predicted σ against the targets (and
 //! against the default joint plans), and write the plan. Owns only argument parsing and printing;
@@ -25,7 +25,7 @@ pub struct DesignArgs {
     #[arg(long, value_name = "MIN", default_value_t = 10.0)]
     pub max_minutes: f64,
     /// Aim at this fraction of each required σ (0 < margin ≤ 1).
-    #[arg(long, default_value_t = 0.8)]
+    #[arg(long, default_value_t = 0.6)]
     pub margin: f64,
     /// Extrinsics the model is linearised at (RON; default: the nominal design, assets/extrinsics/nominal.ron).
     #[arg(long, value_name = "FILE")]
