@@ -5,7 +5,7 @@
 //! them), run on the bench, and both measured with the extended model.
 
 use crate::bench::Bench;
-use crate::identify::calibration::CURVE_POINTS;
+use crate::identify::calibration::{thin, CURVE_POINTS};
 use crate::measure::PhaseModel;
 use crate::model::effects::{apply_all, Effect, EffectError};
 use crate::model::extrinsics::Extrinsics;
@@ -64,13 +64,7 @@ pub fn validate_with_effects(
                 (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
                 _ => None,
             };
-            let curve = |v: &[f64]| {
-                if v.len() <= CURVE_POINTS {
-                    v.to_vec()
-                } else {
-                    (0..CURVE_POINTS).map(|k| v[k * (v.len() - 1) / (CURVE_POINTS - 1)]).collect()
-                }
-            };
+            let curve = |v: &[f64]| thin(v, CURVE_POINTS);
             EffectValidationRow {
                 motion: m.name().to_string(),
                 without_effect_nm: a.as_ref().ok().map(|f| f.peak_to_peak_nm),

@@ -104,18 +104,22 @@ pub struct PiGcs {
 }
 
 impl PiGcs {
-    /// Connect, read `*IDN?` and the axes (`SAI?`), switch every axis to closed loop (`SVO`).
-    pub fn connect(name: &str, address: &str, timeout_s: f64) -> Result<Self, HwError> {
-        let link = Link::connect(name, address, timeout_s)?;
-        let mut pi = PiGcs {
+    /// A link to `address`, nothing asked yet.
+    fn open(name: &str, address: &str, timeout_s: f64) -> Result<Self, HwError> {
+        Ok(PiGcs {
             name: name.to_string(),
-            link,
+            link: Link::connect(name, address, timeout_s)?,
             axes: vec![],
             idn: String::new(),
             armed_axes: vec![],
             armed_inputs: 0,
             limits: vec![],
-        };
+        })
+    }
+
+    /// Connect, read `*IDN?` and the axes (`SAI?`), switch every axis to closed loop (`SVO`).
+    pub fn connect(name: &str, address: &str, timeout_s: f64) -> Result<Self, HwError> {
+        let mut pi = Self::open(name, address, timeout_s)?;
         pi.init()?;
         Ok(pi)
     }
@@ -124,16 +128,7 @@ impl PiGcs {
     /// nothing (no `SVO`): the connection panel's "Identify". A reply in another protocol (a SmarAct
     /// MCS answers `:E-1,1`) is refused as not a GCS controller.
     pub fn identify(name: &str, address: &str, timeout_s: f64) -> Result<(String, Vec<AxisInfo>), HwError> {
-        let link = Link::connect(name, address, timeout_s)?;
-        let mut pi = PiGcs {
-            name: name.to_string(),
-            link,
-            axes: vec![],
-            idn: String::new(),
-            armed_axes: vec![],
-            armed_inputs: 0,
-            limits: vec![],
-        };
+        let mut pi = Self::open(name, address, timeout_s)?;
         pi.read_identity()?;
         Ok((pi.idn, pi.axes))
     }

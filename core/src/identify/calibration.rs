@@ -73,7 +73,7 @@ pub struct ValidationRow {
 pub const CURVE_POINTS: usize = 400;
 
 /// At most `n` evenly spaced samples of `v` (the first and the last included).
-fn thin(v: &[f64], n: usize) -> Vec<f64> {
+pub(crate) fn thin(v: &[f64], n: usize) -> Vec<f64> {
     if v.len() <= n || n < 2 {
         return v.to_vec();
     }
