@@ -68,20 +68,73 @@ fn main() {
         let mut m2 = nominal.clone();
         m2.extrinsics = preset.truth;
         for (i, t) in traces.iter().enumerate() {
-            for (name, m) in [("nominal", &nominal), ("truth", &m2)] {
+            for (name, m) in [("truth", &m2)] {
                 match photorobot_core::measure::analyse(t, m) {
-                    Ok(photorobot_core::measure::Measurement::Motion(mm)) => println!(
-                        "{i:3} {name:8} {:50} dL {:10.2} nm σ {:.2} (hint {:10.2})",
-                        t.meta.label,
-                        mm.track.dl_nm.last().unwrap(),
-                        mm.track.sigma_total_nm,
-                        mm.hint_nm.last().unwrap()
-                    ),
+                    Ok(photorobot_core::measure::Measurement::Motion(mm)) => {
+                        let truth = m2.hint_nm(t, 1560.0).unwrap();
+                        let n = t.len();
+                        let errs: Vec<f64> = (1..=4)
+                            .map(|p| {
+                                let i = p * (n - 1) / 4;
+                                mm.track.dl_nm[i] - truth[i]
+                            })
+                            .collect();
+                        println!(
+                            "{i:3} {name:8} {:42} dL {:10.2} err {:6.2} {:6.2} {:6.2} {:6.2} σ {:.2} fit {:.2} harm {:.2} chi2 {:.2} noise {:.2e} h {:?}",
+                            t.meta.label,
+                            mm.track.dl_nm.last().unwrap(),
+                            errs[0], errs[1], errs[2], errs[3],
+                            mm.track.sigma_total_nm, mm.track.sigma_fit_nm, mm.track.sigma_harmonic_nm,
+                            mm.track.normalized_chi2, mm.track.noise_sigma, mm.track.harmonic
+                        )
+                    }
                     Ok(_) => {}
                     Err(e) => println!("{i:3} {name:8} {:50} ERROR {e}", t.meta.label),
                 }
             }
         }
+        return;
+    }
+    if std::env::var("TRUTH_RESID").is_ok() {
+        let mut m2 = nominal.clone();
+        m2.extrinsics = preset.truth;
+        let ex = photorobot_core::identify::measurements::observations_from_traces(&traces, &m2, &Default::default());
+        let obs = ex.observations;
+        let at_truth = joint::evaluate(&nominal, &obs, &preset.truth, &Default::default());
+        let mut by: std::collections::BTreeMap<String, (f64, usize)> = Default::default();
+        for (o, r) in obs.iter().zip(&at_truth.normalised_residuals) {
+            let k = format!("{} [{}]", o.label, o.unit());
+            let e = by.entry(k).or_default();
+            e.0 += r * r;
+            e.1 += 1;
+        }
+        for ((o, r), n) in obs.iter().zip(&at_truth.residuals).zip(&at_truth.normalised_residuals) {
+            if let ObservationKind::FringeAmplitude { at_display, amplitude_mw, .. } = o.kind {
+                if std::env::var("SHOW_AMP").is_ok() {
+                    println!(
+                        "{:40} q4 {:7.3} q5 {:7.3} amp {:.6} res {:+.3e} σ {:.2e} ({:+.1}σ)",
+                        o.label, at_display[3], at_display[4], amplitude_mw, r, o.sigma, n
+                    );
+                }
+            }
+        }
+        let mut kinds: std::collections::BTreeMap<&str, (f64, usize)> = Default::default();
+        for (o, r) in obs.iter().zip(&at_truth.normalised_residuals) {
+            let e = kinds.entry(o.unit()).or_default();
+            e.0 += r * r;
+            e.1 += 1;
+        }
+        for (k, (s, n)) in &by {
+            let r = (s / *n as f64).sqrt();
+            if r > 1.5 {
+                println!("{k:60} n {n:3} rms {r:.2}σ");
+            }
+        }
+        for (k, (s, n)) in &kinds {
+            println!("{k:4} n {n:4} rms {:.2}σ", (s / *n as f64).sqrt());
+        }
+        let n = at_truth.normalised_residuals.len() as f64;
+        println!("all: rms {:.2}σ", (at_truth.normalised_residuals.iter().map(|r| r * r).sum::<f64>() / n).sqrt());
         return;
     }
     let t1 = Instant::now();

@@ -1,0 +1,152 @@
+//! Debug: tracker error on exact multi-beam signals along a bench motion, vs beam count.
+use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
+use photorobot_core::fringes::{self, TrackConfig};
+use photorobot_core::measure::PhaseModel;
+use photorobot_core::model::optics::FabryPerot;
+use photorobot_core::plan::{JointTarget, Plan, Segment};
+use std::sync::atomic::AtomicBool;
+
+fn main() {
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    let mut m = PhaseModel::new(
+        preset.robot_description().unwrap(),
+        preset.truth,
+        preset.optics,
+        &preset.ambient,
+        preset.laser.wavelength_nm,
+    )
+    .unwrap();
+    m.extrinsics = preset.truth;
+    let args: Vec<f64> = std::env::args().skip(1).map(|a| a.parse().unwrap()).collect();
+    let q2 = args.first().copied().unwrap_or(150.0);
+    let mut p = preset.clone();
+    p.detector.white_noise_rel_fringe = 0.0;
+    let mut bench = VirtualBench::new(&p, Some(3)).unwrap();
+    let plan = Plan {
+        name: "t".into(),
+        description: String::new(),
+        segments: vec![
+            Segment::Move { to: JointTarget::all([-150.0, q2, 0.0, 0.0, 0.0, 0.0]), record: false, label: "s".into() },
+            Segment::Move { to: JointTarget::all([150.0, q2, 0.0, 0.0, 0.0, 0.0]), record: true, label: "Z".into() },
+        ],
+    };
+    let cancel = AtomicBool::new(false);
+    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+    let run = run_plan(&mut bench, &plan, &mut control);
+    let loaded;
+    let t = if let Ok(p) = std::env::var("TRACE_CSV") {
+        loaded = photorobot_core::trace::Trace::read_csv(std::path::Path::new(&p)).unwrap();
+        &loaded
+    } else {
+        &run.traces[0]
+    };
+    let truth = m.hint_nm(t, 1560.0).unwrap();
+    let n = t.len();
+    println!("n {n}, total dL {:.1} nm, fringes {:.2}", truth[n - 1], truth[n - 1] / 780.0 * 1.0003);
+    let cfg = TrackConfig {
+        per_sample_sigma: true,
+        envelope_walk_per_sqrt_fringe: 0.003,
+        phase_walk_rad_per_sqrt_fringe: 0.005,
+        ..TrackConfig::default()
+    };
+    let report = |name: &str, y: &[f64]| {
+        let tr = match fringes::track_phase(y, &truth, 1560.0, m.n_air, &cfg) {
+            Ok(t) => t,
+            Err(e) => {
+                println!("{name}: {e}");
+                return;
+            }
+        };
+        let errs: Vec<String> =
+            (0..=20).map(|k| format!("{:.2}", tr.dl_nm[k * (n - 1) / 20] - truth[k * (n - 1) / 20])).collect();
+        println!(
+            "{name}: h ({:.4},{:.4}) chi2 {:.3} scale {:.6} σ {:.2}\n   errs {}",
+            tr.harmonic.cos_rel,
+            tr.harmonic.sin_rel,
+            tr.normalized_chi2,
+            tr.hint_scale,
+            tr.sigma_total_nm,
+            errs.join(" ")
+        );
+    };
+    report("bench", &t.irradiance);
+    {
+        let kph = 4.0 * std::f64::consts::PI * m.n_air / 1560.0;
+        let mut rng: u64 = 12345;
+        let mut gauss = move || {
+            let mut u = || {
+                rng ^= rng << 13;
+                rng ^= rng >> 7;
+                rng ^= rng << 17;
+                (rng >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (a, b) = (u().max(1e-300), u());
+            (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
+        };
+        for (h2, h3, noise) in [
+            (0.0, 0.0, 0.0),
+            (0.0, 0.001, 0.0),
+            (0.0, 0.003, 0.0),
+            (0.028, 0.0, 0.0),
+            (0.028, 0.001, 0.0),
+            (0.0, 0.001, 1e-3),
+            (0.028, 0.001, 1e-3),
+            (0.028, 0.0, 1e-3),
+        ] {
+            let y: Vec<f64> = truth
+                .iter()
+                .map(|d| {
+                    let p = d * kph + 0.86;
+                    1.0 + p.cos() + h2 * (2.0 * p - 0.6).cos() + h3 * (3.0 * p + 2.5).cos() + noise * gauss()
+                })
+                .collect();
+            report(&format!("synthetic h2 {h2} h3 {h3} noise {noise}"), &y);
+        }
+    }
+    let bench_noise: f64 = std::env::var("BENCH_NOISE").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0) * 3f64.sqrt();
+    for beams in [1usize, 2, 3, 4] {
+        let mut o = preset.optics;
+        o.beams = beams;
+        let fp = FabryPerot::new(&o, 1560.0, m.n_air).unwrap();
+        let y: Vec<f64> = (0..n)
+            .map(|i| {
+                let q = m.chain.description().q_from_display(&t.joints_display(i));
+                let c = m.extrinsics.cavity(&m.chain.end_effector(&q)).unwrap();
+                fp.power(c.length_um, c.tilt_rad) + bench_noise * (((i as f64) * 12.9898).sin() * 43758.5453).fract()
+            })
+            .collect();
+        if beams == 4 {
+            let d: f64 = y.iter().zip(&t.irradiance).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            println!("max |model - bench| {d:.3e}");
+        }
+        report(&format!("beams {beams}"), &y);
+        // Fourier content over whole fringes, phase from the truth hint.
+        let kph = 4.0 * std::f64::consts::PI * m.n_air / 1560.0;
+        let phi: Vec<f64> = truth.iter().map(|d| d * kph).collect();
+        let nf = (phi[n - 1] - phi[0]).abs() / (2.0 * std::f64::consts::PI);
+        let mut end = n;
+        while (phi[end - 1] - phi[0]).abs() > nf.floor() * 2.0 * std::f64::consts::PI {
+            end -= 1;
+        }
+        let mut line = String::new();
+        let w: Vec<f64> = (0..end).map(|i| if i + 1 < end { (phi[i + 1] - phi[i]).abs() } else { 0.0 }).collect();
+        let ws: f64 = w.iter().sum();
+        let mut c1 = (0.0, 0.0);
+        for k in 1..=4 {
+            let (mut a, mut b) = (0.0, 0.0);
+            for i in 0..end {
+                a += w[i] * y[i] * (k as f64 * phi[i]).cos();
+                b += w[i] * y[i] * (k as f64 * phi[i]).sin();
+            }
+            a *= 2.0 / ws;
+            b *= 2.0 / ws;
+            if k == 1 {
+                c1 = (a, b);
+            }
+            let amp = (a * a + b * b).sqrt();
+            let rel = amp / (c1.0 * c1.0 + c1.1 * c1.1).sqrt();
+            line += &format!(" h{k}: {rel:.5} arg {:.4};", b.atan2(a));
+        }
+        println!("   fourier{line}");
+    }
+}
