@@ -45,8 +45,8 @@ fn main() {
     println!("n {n}, total dL {:.1} nm, fringes {:.2}", truth[n - 1], truth[n - 1] / 780.0 * 1.0003);
     let cfg = TrackConfig {
         per_sample_sigma: true,
-        envelope_walk_per_sqrt_fringe: 0.003,
-        phase_walk_rad_per_sqrt_fringe: 0.005,
+        envelope_walk_per_sqrt_fringe: std::env::var("EW").ok().and_then(|v| v.parse().ok()).unwrap_or(0.003),
+        phase_walk_rad_per_sqrt_fringe: std::env::var("PW").ok().and_then(|v| v.parse().ok()).unwrap_or(0.005),
         ..TrackConfig::default()
     };
     let report = |name: &str, y: &[f64]| {

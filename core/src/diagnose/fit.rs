@@ -199,6 +199,11 @@ impl Fit {
     pub fn rms(&self) -> f64 {
         rms(&self.residuals)
     }
+
+    /// χ²: the sum of the squared whitened residuals.
+    pub fn chi2(&self) -> f64 {
+        self.residuals.norm_squared()
+    }
 }
 
 /// RMS of a vector (0 for an empty one).

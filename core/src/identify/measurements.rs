@@ -13,13 +13,17 @@ pub struct ExtractOptions {
     pub points_per_motion: usize,
     /// Floor of the gap-change σ (nm): what the fringe analysis cannot see (stage noise, drift).
     pub sigma_floor_nm: f64,
+    /// Floor of the gap-change σ (nm) on motions that turn a revolute joint: the fringe
+    /// harmonics change along a rotation faster than the tracker's harmonic profile follows,
+    /// which leaves a few nm (2.2 nm rms on the virtual bench's rotations, `calib_debug`).
+    pub rotation_sigma_floor_nm: f64,
     /// Floor of the absolute-gap σ (µm): wavelength calibration and model limits.
     pub gap_sigma_floor_um: f64,
 }
 
 impl Default for ExtractOptions {
     fn default() -> Self {
-        Self { points_per_motion: 4, sigma_floor_nm: 1.0, gap_sigma_floor_um: 0.005 }
+        Self { points_per_motion: 4, sigma_floor_nm: 1.0, rotation_sigma_floor_nm: 2.5, gap_sigma_floor_um: 0.005 }
     }
 }
 
@@ -47,6 +51,16 @@ pub fn observations_from_trace(
         Measurement::Motion(m) => {
             let n = trace.len();
             let k = options.points_per_motion.max(1);
+            let turns = (3..6).any(|j| {
+                let c = trace.joint_column(j);
+                let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+                hi - lo > 0.01
+            });
+            let floor = if turns {
+                options.sigma_floor_nm.max(options.rotation_sigma_floor_nm)
+            } else {
+                options.sigma_floor_nm
+            };
             for p in 1..=k {
                 let i = (p * (n - 1)) / k;
                 let sigma = if i == n - 1 { m.track.sigma_total_nm } else { m.track.sigma_dl_nm[i] };
@@ -57,7 +71,7 @@ pub fn observations_from_trace(
                         to_display: trace.joints_display(i),
                         dl_nm: m.track.dl_nm[i],
                     },
-                    sigma: sigma.hypot(options.sigma_floor_nm),
+                    sigma: sigma.hypot(floor),
                     wavelength_nm,
                     time_s: [trace.t_s[0], trace.t_s[i]],
                 });
