@@ -602,11 +602,46 @@ impl Harmonic {
 struct HarmonicProfile {
     /// (path position nm, harmonic), sorted by position; empty = no distortion.
     knots: Vec<(f64, Harmonic)>,
+    /// (max, min) of f at each knot ([`Harmonic::extremes`]), interpolated like the knots.
+    extremes: Vec<(f64, f64)>,
 }
 
 impl HarmonicProfile {
+    fn new(knots: Vec<(f64, Harmonic)>) -> Self {
+        let extremes = knots.iter().map(|(_, h)| h.extremes()).collect();
+        Self { knots, extremes }
+    }
+
     fn constant(h: Harmonic) -> Self {
-        Self { knots: vec![(0.0, h)] }
+        Self::new(vec![(0.0, h)])
+    }
+
+    /// (max, min) of f at path position `s`: the knots' values interpolated linearly (exact
+    /// at the knots; between them the error is second order in the harmonics' change).
+    fn extremes_at(&self, s: f64, cursor: &mut usize) -> (f64, f64) {
+        let k = &self.knots;
+        let e = &self.extremes;
+        match k.len() {
+            0 => (1.0, -1.0),
+            1 => e[0],
+            m => {
+                if s <= k[0].0 {
+                    return e[0];
+                }
+                if s >= k[m - 1].0 {
+                    return e[m - 1];
+                }
+                if *cursor + 1 >= m || k[*cursor].0 > s {
+                    *cursor = 0;
+                }
+                while *cursor + 2 < m && k[*cursor + 1].0 <= s {
+                    *cursor += 1;
+                }
+                let i = *cursor;
+                let t = ((s - k[i].0) / (k[i + 1].0 - k[i].0)).clamp(0.0, 1.0);
+                (e[i].0 + t * (e[i + 1].0 - e[i].0), e[i].1 + t * (e[i + 1].1 - e[i].1))
+            }
+        }
     }
 
     /// The harmonic at path position `s`; `cursor` speeds up monotone queries.
@@ -896,7 +931,7 @@ impl Envelope<'_> {
             Envelope::Knots { upper, lower } => {
                 let (mut cu, mut cl, mut ch) = (0usize, 0usize, 0usize);
                 for &p in s {
-                    let (fmax, fmin) = harm.at(p, &mut ch).extremes();
+                    let (fmax, fmin) = harm.extremes_at(p, &mut ch);
                     let inv = 1.0 / (fmax - fmin);
                     let u = knot_value(upper, p, &mut cu, max_extrap);
                     let l = knot_value(lower, p, &mut cl, max_extrap);
@@ -1085,7 +1120,7 @@ fn harmonic_profile_sigma(fits: &[(f64, WindowFit)]) -> f64 {
             for i in 1..m - 1 {
                 let (s0, s1, s) = (fits[i - 1].0, fits[i + 1].0, fits[i].0);
                 let t = if s1 > s0 { ((s - s0) / (s1 - s0)).clamp(0.0, 1.0) } else { 0.5 };
-                let p = HarmonicProfile { knots: vec![(0.0, fits[i - 1].1.harm), (1.0, fits[i + 1].1.harm)] };
+                let p = HarmonicProfile::new(vec![(0.0, fits[i - 1].1.harm), (1.0, fits[i + 1].1.harm)]);
                 let pred = p.at(t, &mut 0);
                 // the prediction error has the variance of the window and of its interpolation
                 sq += dist(&fits[i].1.harm, &pred).powi(2) / 1.5;
@@ -1985,8 +2020,8 @@ fn run_tracker(
                 }
             }
             wins.push(win_e);
-            // about 64 k samples over all windows
-            let max_pts = (65_536 / wins.len()).clamp(1024, 4096);
+            // about 16 k samples over all windows (at least 256 a window)
+            let max_pts = (16_384 / wins.len()).clamp(256, 4096);
             let none = HarmonicProfile::default();
             let fits: Vec<(f64, WindowFit)> = wins
                 .iter()
@@ -2005,7 +2040,7 @@ fn run_tracker(
                 warnings.push("no window covers enough phase to measure the fringe harmonic: assumed zero".to_string());
                 (HarmonicProfile::default(), 0.01)
             } else {
-                let profile = HarmonicProfile { knots: fits.iter().map(|(c, f)| (*c, f.harm)).collect() };
+                let profile = HarmonicProfile::new(fits.iter().map(|(c, f)| (*c, f.harm)).collect());
                 (profile, harmonic_profile_sigma(&fits))
             }
         }
