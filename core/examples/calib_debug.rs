@@ -50,7 +50,8 @@ fn main() {
             let n = t.len();
             let from: f64 = std::env::var("FROM").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
             for k in 0..=40 {
-                let i = ((from + (1.0 - from) * k as f64 / 40.0) * (n - 1) as f64) as usize;
+                let to: f64 = std::env::var("TO").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0);
+                let i = ((from + (to - from) * k as f64 / 40.0) * (n - 1) as f64) as usize;
                 println!(
                     "{i:6} t {:.3} I {:.5} dl {:10.2} truth {:10.2} err {:7.2} σ {:.2}",
                     t.t_s[i],

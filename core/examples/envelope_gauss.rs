@@ -21,12 +21,12 @@ fn main() {
             .map(|&d| {
                 let p = d / total;
                 let b = 0.0047 * (-((p - centre) / w).powi(2)).exp();
-                0.036 + b * (kappa * d + 0.7).cos() + noise.sample(&mut rng)
+                0.036 + b * (kappa * d + std::env::var("PH0").map_or(0.7, |v| v.parse().unwrap())).cos() + noise.sample(&mut rng)
             })
             .collect();
         let cfg = TrackConfig {
-            envelope_walk_per_sqrt_fringe: 0.003,
-            phase_walk_rad_per_sqrt_fringe: 0.005,
+            envelope_walk_per_sqrt_fringe: std::env::var("EW").map_or(0.003, |v| v.parse().unwrap()),
+            phase_walk_rad_per_sqrt_fringe: std::env::var("PW").map_or(0.005, |v| v.parse().unwrap()),
             ..TrackConfig::default()
         };
         match track_phase(&y, &dl, wl, n_air, &cfg) {
@@ -34,6 +34,14 @@ fn main() {
                 let errs: Vec<String> =
                     (0..=20).map(|k| format!("{:.2}", tr.dl_nm[k * (n - 1) / 20] - dl[k * (n - 1) / 20])).collect();
                 println!("Gaussian width {w} of the path: error (nm) every 5 %: {}", errs.join(" "));
+                if std::env::var("ENDS").is_ok() {
+                    let idx = |k: usize| k;
+                    let start: Vec<String> = (0..=16).map(|k| format!("{:.2}", tr.dl_nm[idx(k * 250)] - dl[idx(k * 250)])).collect();
+                    let end: Vec<String> = (0..=16).map(|k| format!("{:.2}", tr.dl_nm[n - 1 - (16 - k) * 250] - dl[n - 1 - (16 - k) * 250])).collect();
+                    println!("  first 4000 samples every 250: {}", start.join(" "));
+                    println!("  last 4000 samples every 250: {}", end.join(" "));
+                    println!("  warnings {:?} chi2 {:.3} iters {}", tr.warnings, tr.normalized_chi2, tr.iterations);
+                }
             }
             Err(e) => println!("Gaussian width {w}: {e}"),
         }

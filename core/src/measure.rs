@@ -2,16 +2,17 @@
 //! Owns the choice of analysis for a trace and the phase convention shared with the identifier.
 //!
 //! Phase convention: every length measured from fringes is *phase-equivalent*:
-//! `Δφ·λ/(4π·n_air)`, with φ the model's fringe phase ([`FabryPerot::fringe_phase_rad`]),
+//! `Δφ·λ/(4π·n_air)`, with φ the phase of the fringe's fundamental
+//! ([`FabryPerot::fundamental_phase_rad`]: the first beam's phase pulled by the higher beams),
 //! which includes the tilt path term (the fringes follow the perpendicular fiber-to-lamella
 //! distance, `L·cos γ`) and the Gouy phase. The identifier predicts the same quantity from the
 //! same model, so bench and fit cannot disagree on conventions.
 
-use crate::fringes::{self, CountDirection, FringeCount, HysteresisConfig, PhaseTrack, TrackConfig};
+use crate::fringes::{self, CountDirection, FringeCount, Harmonic, HysteresisConfig, PhaseTrack, TrackConfig};
 use crate::model::air::{air_index_ciddor, AmbientConditions};
 use crate::model::extrinsics::Extrinsics;
 use crate::model::kinematics::Chain;
-use crate::model::optics::{FabryPerot, OpticalParams};
+use crate::model::optics::{FabryPerot, FringeExpansion, OpticalParams};
 use crate::model::robot::RobotDescription;
 use crate::sweep::{self, GapEstimate, SweepConfig, SweepFit};
 use crate::trace::Trace;
@@ -81,7 +82,7 @@ impl PhaseModel {
         let wte = self.chain.end_effector(&q);
         match self.extrinsics.cavity(&wte) {
             Ok(c) => {
-                fp.fringe_phase_rad(c.length_um.abs(), c.tilt_rad) * fp.wavelength_nm() / (4.0 * PI * fp.medium_index())
+                fp.fundamental_phase_rad(c.length_um.abs(), c.tilt_rad) * fp.wavelength_nm() / (4.0 * PI * fp.medium_index())
             }
             Err(_) => f64::NAN,
         }
@@ -102,6 +103,57 @@ impl PhaseModel {
             out.push(g - g0);
         }
         Ok(out)
+    }
+
+    /// The fringe's shape at every sample of a trace (`FabryPerot::fringe_shape` at the
+    /// model's gap and tilt): harmonics relative to the fundamental, offset and amplitude
+    /// (relative to the input power). On rotations the tilt phase turns the multi-beam
+    /// harmonics against the fundamental and the tilt coupling changes the amplitude by up
+    /// to 50 % per fringe; the model knows both at every joint position.
+    pub fn fringe_shape(&self, trace: &Trace, wavelength_nm: f64) -> Result<FringeShapeTrace, String> {
+        let fp = FabryPerot::new(&self.optics, wavelength_nm, self.n_air).map_err(|e| e.to_string())?;
+        let mut ex = FringeExpansion::default();
+        let n = trace.len();
+        let mut out = FringeShapeTrace {
+            harmonics: Vec::with_capacity(n),
+            offset: Vec::with_capacity(n),
+            amplitude: Vec::with_capacity(n),
+        };
+        for i in 0..n {
+            let q = self.chain.description().q_from_display(&trace.joints_display(i));
+            let c = self
+                .extrinsics
+                .cavity(&self.chain.end_effector(&q))
+                .map_err(|_| format!("sample {i}: the beam misses the lamella at these joints"))?;
+            let s = fp.fringe_shape(c.length_um.abs(), c.tilt_rad, &mut ex);
+            out.harmonics.push(Harmonic {
+                cos_rel: s.second.re,
+                sin_rel: -s.second.im,
+                cos3_rel: s.third.re,
+                sin3_rel: -s.third.im,
+            });
+            out.offset.push(s.offset);
+            out.amplitude.push(s.fundamental.max(f64::MIN_POSITIVE));
+        }
+        Ok(out)
+    }
+}
+
+/// The optics model's fringe along a trace ([`PhaseModel::fringe_shape`]).
+#[derive(Debug, Clone, Default)]
+pub struct FringeShapeTrace {
+    /// Harmonics relative to the fundamental, per sample.
+    pub harmonics: Vec<Harmonic>,
+    /// Fringe offset / input power, per sample.
+    pub offset: Vec<f64>,
+    /// Fundamental's amplitude / input power, per sample.
+    pub amplitude: Vec<f64>,
+}
+
+impl FringeShapeTrace {
+    /// The view the phase tracker takes.
+    pub fn as_model(&self) -> fringes::FringeModel<'_> {
+        fringes::FringeModel { harmonics: &self.harmonics, offset: &self.offset, amplitude: &self.amplitude }
     }
 }
 
@@ -179,8 +231,14 @@ pub fn analyse(trace: &Trace, model: &PhaseModel) -> Result<Measurement, Measure
         phase_walk_rad_per_sqrt_fringe: 0.005,
         ..TrackConfig::default()
     };
-    let track = fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
-        .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
+    // The fringe's shape from the same model: harmonics that turn against the fundamental
+    // and an amplitude that changes by up to 50 % per fringe on rotations (table2-ideal,
+    // tracked dL against the truth: rotations 2.3 → 0.84 nm rms, tilt scans 9.6 → 1.7 nm).
+    let shape =
+        model.fringe_shape(trace, wavelength_nm).map_err(|problem| MeasureError::Trace { label: label.clone(), problem })?;
+    let track =
+        fringes::track_phase_shaped(&trace.irradiance, &hint, &shape.as_model(), wavelength_nm, model.n_air, &track_cfg)
+            .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
     let count = fringes::count_extrema(
         &trace.irradiance,
         CountDirection::Hint(&hint),

@@ -180,7 +180,7 @@ pub fn predict_with_path(
     };
     let phase_gap_nm = |q: &[f64; 6], t_s: f64| match cavity(q) {
         Some(c) => {
-            fp.fringe_phase_rad(optical_gap_um(c.length_um, t_s), c.tilt_rad) * fp.wavelength_nm()
+            fp.fundamental_phase_rad(optical_gap_um(c.length_um, t_s), c.tilt_rad) * fp.wavelength_nm()
                 / (4.0 * std::f64::consts::PI * fp.medium_index())
         }
         None => f64::NAN,

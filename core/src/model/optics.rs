@@ -620,6 +620,82 @@ impl FabryPerot {
     }
 }
 
+/// The shape of the multi-beam fringe at one gap and tilt, relative to its fundamental:
+/// `P = P0 + P1·[cos φ + Re(h2·e^{2iφ}) + Re(h3·e^{3iφ})] + ...`, φ the fundamental's phase.
+///
+/// With P = |Σ_m D_m·u^m|², D_m = B_m·w^(e_m) ([`FringeExpansion`]), the harmonic k of the
+/// power is 2·Re(G_k·u^k), G_k = Σ_n D_{n+k}·conj(D_n): φ = Φ - arg G1 and
+/// h_k = |G_k|/|G_1|·exp(i·(k·arg G_1 - arg G_k)). On a rotation the tilt phase ψ moves
+/// beam m by e_m·ψ, so the 2nd harmonic turns by -2ψ against the fundamental (as fast as
+/// the fringes themselves when the motion is all tilt): a harmonic that is a fixed function
+/// of φ cannot describe it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FringeShape {
+    /// φ - [`FabryPerot::fringe_phase_rad`], wrapped to (-π, π]: how far the higher beams pull
+    /// the fundamental away from the first beam's phase, rad.
+    pub pulling_rad: f64,
+    /// P0 / input power (G0 = Σ|D_m|², dimensionless).
+    pub offset: f64,
+    /// P1 / input power (2|G1|, dimensionless).
+    pub fundamental: f64,
+    /// h2.
+    pub second: Complex<f64>,
+    /// h3.
+    pub third: Complex<f64>,
+}
+
+impl FabryPerot {
+    /// Unwrapped phase of the fringe's fundamental, rad: [`FabryPerot::fringe_phase_rad`] plus
+    /// the pulling of the higher beams ([`FringeShape::pulling_rad`]). This is what a phase
+    /// tracker measures; over a ±4° rotation at 900 µm the pulling moves by up to 0.9 nm of
+    /// gap (LiNbO3).
+    pub fn fundamental_phase_rad(&self, gap_um: f64, tilt_rad: f64) -> f64 {
+        let mut ex = FringeExpansion::default();
+        self.fringe_phase_rad(gap_um, tilt_rad) + self.fringe_shape(gap_um, tilt_rad, &mut ex).pulling_rad
+    }
+
+    /// The fringe's shape at gap `gap_um` and tilt `tilt_rad` ([`FringeShape`]); `scratch`
+    /// is reused between calls.
+    pub fn fringe_shape(&self, gap_um: f64, tilt_rad: f64, scratch: &mut FringeExpansion) -> FringeShape {
+        let t = tilt_rad * tilt_rad;
+        self.expansion(gap_um, t, scratch);
+        let (phi, psi) = self.expansion_phases_rad(gap_um, t);
+        let (ws, wc) = sin_cos(psi);
+        let w = Complex::new(wc, ws);
+        let zero = Complex::new(0.0, 0.0);
+        let mut g = [zero; 4];
+        let mut g0 = 0.0;
+        let mut d_prev: Vec<Complex<f64>> = Vec::with_capacity(scratch.coefficients.len());
+        for (m, b) in scratch.coefficients.iter().enumerate() {
+            let d = b * w.powi(tilt_phase_order(m) as i32);
+            g0 += d.norm_sqr();
+            for (k, gk) in g.iter_mut().enumerate().skip(1) {
+                if m >= k {
+                    *gk += d * d_prev[m - k].conj();
+                }
+            }
+            d_prev.push(d);
+        }
+        let a1 = g[1].arg();
+        let rel = |k: usize| {
+            if g[1].norm() > 0.0 {
+                let chi = k as f64 * a1 - g[k].arg();
+                Complex::from_polar(g[k].norm() / g[1].norm(), chi)
+            } else {
+                zero
+            }
+        };
+        let pulling = phi - a1 - self.fringe_phase_rad(gap_um, tilt_rad);
+        FringeShape {
+            pulling_rad: pulling - 2.0 * PI * ((pulling + PI) / (2.0 * PI)).floor(),
+            offset: g0,
+            fundamental: 2.0 * g[1].norm(),
+            second: rel(2),
+            third: rel(3),
+        }
+    }
+}
+
 /// Reflected power, mW, at one gap, tilt, vacuum wavelength and medium index (builds a
 /// [`FabryPerot`]; in loops, build it once and call [`FabryPerot::power`]).
 pub fn reflected_power(
@@ -712,6 +788,74 @@ mod tests {
             })
             .sum();
         bin.arg()
+    }
+
+    /// Oracle for [`FabryPerot::fringe_shape`]: the power of the expansion at fixed B_m and w,
+    /// sampled over one period of u, projected on its harmonics by brute force.
+    #[test]
+    fn fringe_shape_matches_the_harmonics_of_the_power() {
+        let linbo3 = OpticalParams { lamella_reflectance: 0.142, beams: 4, ..OpticalParams::default() };
+        for params in [linbo3, glass()] {
+            let fp = bench(&params);
+            let mut ex = FringeExpansion::default();
+            for (gap, tilt) in [(900.0, 0.0), (900.0, 0.05), (100.0, 0.03), (70.0, 0.0), (450.0, 0.08)] {
+                let shape = fp.fringe_shape(gap, tilt, &mut ex);
+                let (phi, psi) = fp.expansion_phases_rad(gap, tilt * tilt);
+                let w = Complex::new(psi.cos(), psi.sin());
+                let n = 64;
+                let mut c = [Complex::new(0.0, 0.0); 4];
+                for j in 0..n {
+                    let big_phi = 2.0 * PI * j as f64 / n as f64;
+                    let p = ex.field(Complex::new(big_phi.cos(), -big_phi.sin()), w).norm_sqr();
+                    for (k, ck) in c.iter_mut().enumerate() {
+                        // coefficient of e^{-ikΦ}: 2·G_k for k ≥ 1
+                        *ck += p * Complex::new(0.0, k as f64 * big_phi).exp() / n as f64;
+                    }
+                }
+                // fundamental phase φ = Φ - arg G1, relative to the first beam's phase
+                let pulling = wrap(phi - c[1].arg() - fp.fringe_phase_rad(gap, tilt));
+                assert!((pulling - shape.pulling_rad).abs() < 1e-9, "pulling {pulling} vs {}", shape.pulling_rad);
+                assert!((2.0 * c[1].norm() - shape.fundamental).abs() < 1e-12);
+                assert!((c[0].re - shape.offset).abs() < 1e-12);
+                for (k, h) in [(2, shape.second), (3, shape.third)] {
+                    let expect = Complex::from_polar(c[k].norm() / c[1].norm(), k as f64 * c[1].arg() - c[k].arg());
+                    assert!((expect - h).norm() < 1e-9 * (1.0 + h.norm()), "h{k} {h} vs {expect} at {gap} µm, {tilt} rad");
+                }
+            }
+        }
+    }
+
+    /// The shape rebuilds the real power over one fringe: P0 + P1·f(φ) with φ the first beam's
+    /// phase plus the pulling (what the tracker sees), within the 4th-harmonic and the slow
+    /// change of B_m over one fringe.
+    #[test]
+    fn fringe_shape_rebuilds_the_power_over_one_fringe() {
+        let params = OpticalParams { lamella_reflectance: 0.142, beams: 4, ..OpticalParams::default() };
+        let fp = bench(&params);
+        let mut ex = FringeExpansion::default();
+        for (gap, tilt) in [(900.0, 0.02), (900.0, 0.07), (300.0, 0.04)] {
+            let s = fp.fringe_shape(gap, tilt, &mut ex);
+            let period = fp.fringe_period_um();
+            let n = 200;
+            let (mut worst, mut p0) = (0f64, 0.0);
+            let model: Vec<(f64, f64)> = (0..n)
+                .map(|j| {
+                    let g = gap + period * j as f64 / n as f64;
+                    let phi = fp.fringe_phase_rad(g, tilt) + s.pulling_rad;
+                    let f = phi.cos()
+                        + (s.second * Complex::new(0.0, 2.0 * phi).exp()).re
+                        + (s.third * Complex::new(0.0, 3.0 * phi).exp()).re;
+                    (fp.power(g, tilt) / fp.input_power_mw(), f)
+                })
+                .collect();
+            for &(p, f) in &model {
+                p0 += (p - s.fundamental * f) / n as f64;
+            }
+            for &(p, f) in &model {
+                worst = worst.max((p - p0 - s.fundamental * f).abs());
+            }
+            assert!(worst < 2e-3 * s.fundamental, "misfit {worst:e} of {:e} at {gap} µm, {tilt} rad", s.fundamental);
+        }
     }
 
     // ---- Gaussian-beam numbers of SPEC §5 -------------------------------------------------
