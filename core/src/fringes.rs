@@ -1,9 +1,13 @@
 //! Fringe analysis: turns a single-photodiode Fabry-Perot trace into the cavity-length change dL (nm) with its uncertainty.
 //! Owns extremum counting (the paper's λ/4 method), motion-hint-guided sub-fringe phase tracking, a small two-beam test signal and the sign of dL from two wavelength sweeps.
 //!
-//! Signal model used here (a local two-beam model, independent of `model::optics`):
-//! `I = A + B·(cos φ + h_c·cos 2φ + h_s·sin 2φ) + noise`, with the fringe phase
+//! Signal model used here (a local model, independent of `model::optics`):
+//! `I = A + B·f(φ) + noise`, `f(φ) = cos φ + 2nd and 3rd harmonics`, with the fringe phase
 //! `φ = 4π·n_air·gap/λ - arctan(gap/z_R) + const`. A and B drift slowly with the motion.
+//! The harmonics are estimated along the path, or, when the caller has a model of the fringe
+//! ([`FringeModel`], e.g. `model::optics` along the recorded joints), taken from it per sample
+//! with the envelope's shape: on rotations the multi-beam harmonics turn with the tilt phase
+//! and the amplitude changes by up to 50 % per fringe, which only a model can follow.
 //!
 //! Conventions: lengths in nm (names carry units); the tracked phase increases when the
 //! motion hint increases, so `dl_nm` is reported in the hint's sign convention.
@@ -888,13 +892,15 @@ pub struct PhaseTrack {
     /// noise model, nm.
     pub sigma_fit_nm: f64,
     /// Harmonic part of `sigma_total_nm`: cyclic error allowed by the uncertainty of the
-    /// second-harmonic estimate at both ends, nm.
+    /// second-harmonic estimate at both ends, nm (zero with a fringe model, whose harmonics
+    /// are taken as exact).
     pub sigma_harmonic_nm: f64,
     /// Ratio of true phase rate to hint phase rate (fitted; 1/(1 + hint scale error)).
     pub hint_scale: f64,
     /// Standard uncertainty of `hint_scale`.
     pub hint_scale_sigma: f64,
-    /// Harmonic distortion used by the tracker (estimated or given).
+    /// Harmonic distortion used by the tracker (estimated or given; with a fringe model, the
+    /// model's harmonics averaged over the trace).
     pub harmonic: Harmonic,
     /// White-noise σ of the intensity used as weight (estimated), intensity units.
     pub noise_sigma: f64,
@@ -2706,7 +2712,21 @@ fn run_tracker(
         sigma_harmonic_nm,
         hint_scale: g0 * (1.0 + st.gamma),
         hint_scale_sigma: g0 * (inflate / schur.max(f64::MIN_POSITIVE)).sqrt(),
-        harmonic: harm.mean(),
+        harmonic: match shape {
+            // the model's harmonics, averaged over the trace (they turn on rotations)
+            Some(sh) => {
+                let stride = (n / 1024).max(1);
+                let m = n.div_ceil(stride) as f64;
+                let sum = |f: fn(&Harmonic) -> f64| sh.iter().step_by(stride).map(f).sum::<f64>() / m;
+                Harmonic {
+                    cos_rel: sum(|h| h.cos_rel),
+                    sin_rel: sum(|h| h.sin_rel),
+                    cos3_rel: sum(|h| h.cos3_rel),
+                    sin3_rel: sum(|h| h.sin3_rel),
+                }
+            }
+            None => harm.mean(),
+        },
         noise_sigma: r_meas.sqrt(),
         normalized_chi2: chi2,
         extrema_used: counted,
