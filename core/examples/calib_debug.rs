@@ -70,8 +70,9 @@ fn main() {
         let mut m2 = nominal.clone();
         m2.extrinsics = preset.truth;
         for (i, t) in traces.iter().enumerate() {
+            let hint_model = if std::env::var("HINT_NOMINAL").is_ok() { &nominal } else { &m2 };
             for (name, m) in [("truth", &m2)] {
-                match photorobot_core::measure::analyse(t, m) {
+                match photorobot_core::measure::analyse(t, hint_model) {
                     Ok(photorobot_core::measure::Measurement::Motion(mm)) => {
                         let truth = m2.hint_nm(t, 1560.0).unwrap();
                         let n = t.len();

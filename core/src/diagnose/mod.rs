@@ -753,36 +753,17 @@ impl Diagnosis {
                 return Ok(());
             }
         }
-        // Among candidates the data cannot tell apart with nearly equal evidence (linearised
-        // score within 10 % of the best), the one whose full nonlinear refit fits best is named;
-        // refits within one χ² unit of each other are a tie, broken by the one that needs the
-        // least of its typical size. The others stay in the ambiguity set. (The linearised
-        // scores of a q4 zero offset and a q4 pivot along Z_w are equal on the calibration
-        // motions; naming the wrong one left structure that spurious scale errors then took.)
+        // Among candidates the data cannot tell apart with nearly equal evidence, the one that
+        // needs the least of its typical size is named (the others stay in the ambiguity set).
         let plausible = |k: usize| (self.scores[k].estimate / self.candidates[k].typical).abs();
         let f_best = self.scores[best].score;
-        let contenders: Vec<usize> = std::iter::once(best)
+        let best = std::iter::once(best)
             .chain(
                 ambiguous_idx
                     .iter()
                     .copied()
                     .filter(|&k| self.scores[k].significant && self.scores[k].score >= 0.9 * f_best),
             )
-            .collect();
-        let costs: Vec<f64> = contenders
-            .iter()
-            .map(|&k| {
-                let mut start = f.state.clone();
-                start.effects.push((self.candidates[k].clone(), self.scores[k].estimate));
-                self.refit(&start).map_or(f64::INFINITY, |nf| nf.chi2())
-            })
-            .collect();
-        let c_min = costs.iter().copied().fold(f64::INFINITY, f64::min);
-        let best = contenders
-            .iter()
-            .zip(&costs)
-            .filter(|(_, &c)| c <= c_min + 1.0 || !c_min.is_finite())
-            .map(|(&k, _)| k)
             .min_by(|&a, &b| plausible(a).total_cmp(&plausible(b)))
             .unwrap_or(best);
         ambiguous_idx = scoring::ambiguity_set(best, &self.projected);

@@ -6,8 +6,10 @@
 //! whitened signature, s⊥ = (I − U·Uᵀ)·s (U spans J's determined columns):
 //! - absorbed share: 1 − |s⊥|²/|s|², what the current parameters would soak up;
 //! - estimate â = s⊥·r/|s⊥|², σ(â) = 1/|s⊥| (scaled by the residual rms when above 1);
-//! - score T = (s⊥·r)²/|s⊥|², the drop of the residual sum of squares; F = T/σ̂² with σ̂² the
-//!   residual variance after the candidate is added (an F(1, ν) test, robust to a misstated σ);
+//! - score T = (s⊥·r)²/|s⊥|², the drop of the residual sum of squares; F = T/max(σ̂², 1) with σ̂²
+//!   the whitened residual variance after the candidate is added (an F(1, ν) test, robust to a
+//!   σ stated too small; a σ stated too large, as the floors are, does not make structure
+//!   below the noise significant);
 //! - ΔBIC = n·ln(RSS/(RSS − T)) − ln n, positive when the candidate is worth its parameter.
 //!
 //! A candidate is significant when F exceeds the Bonferroni threshold for the family-wise
@@ -170,7 +172,9 @@ pub fn score(
             let visible = ns2 > 1e-12 * s2.max(1e-300) && ns2 > 1e-18;
             let (estimate, t) = if visible { (sp.dot(r) / ns2, sp.dot(r).powi(2) / ns2) } else { (0.0, 0.0) };
             let resid_var = ((rss - t) / dof).max(1e-300);
-            let f = t / resid_var;
+            // The stated σ is the noise floor: a residual variance below it (σ floors above
+            // what the tracker reaches) does not make sub-noise structure significant.
+            let f = t / resid_var.max(1.0);
             let delta_bic = if rss > 0.0 && rss > t { n * (rss / (rss - t)).ln() - n.ln() } else { 0.0 };
             let sigma = if visible { resid_var.sqrt().max(1.0) / ns2.sqrt() } else { f64::INFINITY };
             projected.push(sp);
