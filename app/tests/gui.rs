@@ -422,6 +422,21 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     assert_eq!(record.model_effects, h.state().state.diagnosis_effects);
     assert!(!record.model_effects.is_empty());
     assert_eq!(record.extrinsics, Some(result.extrinsics));
+    // New forgets the diagnosis; opening the saved session and saving it elsewhere keeps its record.
+    h.state_mut().request(photorobot_app::gui::Pending::New);
+    h.run_steps(2);
+    assert!(h.state().state.diagnosis.is_none() && h.state().state.diagnosis_validation.is_none());
+    h.get_by_label_contains("no recorded trace yet");
+    h.state_mut().request(photorobot_app::gui::Pending::Open(saved.clone()));
+    h.run_steps(2);
+    assert!(h.state().state.diagnosis.is_none(), "a session's record is not a result to draw");
+    let again = tmp.path().join("again");
+    h.state_mut().state.dialogs =
+        Box::new(ScriptedDialogs { folders: vec![Some(again.clone())], ..Default::default() });
+    h.state_mut().save(true);
+    wait_until(&mut h, "the second save", Duration::from_secs(60), |w| w.state.saving == 0);
+    let kept = photorobot_core::session::Session::load(&again).expect("loads").diagnosis.expect("the record is kept");
+    assert_eq!(kept.validation, rows);
     eprintln!("total {:.1} s", t0.elapsed().as_secs_f64());
 }
 

@@ -247,7 +247,7 @@ fn effect_validation(ui: &mut egui::Ui, s: &AppState) {
 }
 
 /// Without over with (how many times smaller the variation is with the effect), when both ran.
-pub fn improvement(r: &EffectValidationRow) -> Option<f64> {
+fn improvement(r: &EffectValidationRow) -> Option<f64> {
     match (r.without_effect_nm, r.with_effect_nm) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
