@@ -2,6 +2,9 @@
 //! shows by accessible labels. With PHOTOROBOT_SCREENSHOTS=1 every view is also written to
 //! screenshots/ (rendered on Mesa llvmpipe): `PHOTOROBOT_SCREENSHOTS=1 cargo test -p photorobot --test gui`.
 
+mod common;
+
+use common::*;
 use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
 use photorobot_app::dialogs::ScriptedDialogs;
@@ -10,50 +13,8 @@ use photorobot_app::state::{Settings, StepState};
 use photorobot_app::worker::EffectValidation;
 use std::time::{Duration, Instant};
 
-const SIZE: egui::Vec2 = egui::vec2(1400.0, 900.0);
-
 fn workbench(settings: Settings, dialogs: ScriptedDialogs) -> Workbench {
     Workbench::new(settings, Box::new(dialogs), Box::new(|| {})).expect("the embedded virtual bench starts")
-}
-
-fn harness(app: Workbench) -> Harness<'static, Workbench> {
-    Harness::builder().with_size(SIZE).wgpu().build_ui_state(|ui, app: &mut Workbench| app.show(ui), app)
-}
-
-/// Step the UI (the worker runs in its own thread) until `done` holds, or fail after `timeout`.
-fn wait_until(h: &mut Harness<'_, Workbench>, what: &str, timeout: Duration, done: impl Fn(&Workbench) -> bool) {
-    let start = Instant::now();
-    loop {
-        h.run_steps(1);
-        if done(h.state()) {
-            h.run_steps(2);
-            return;
-        }
-        assert!(
-            start.elapsed() < timeout,
-            "timed out after {timeout:?} waiting for {what}; status: {}",
-            h.state().state.status
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-fn open(h: &mut Harness<'_, Workbench>, tab: Tab) {
-    h.get_by_label(tab.title()).click();
-    h.run_steps(3);
-    assert_eq!(h.state().tab, tab);
-}
-
-fn screenshot(h: &mut Harness<'_, Workbench>, name: &str) {
-    let image = h.render().expect("the headless renderer (Mesa llvmpipe) renders the window");
-    assert_eq!((image.width(), image.height()), (SIZE.x as u32, SIZE.y as u32));
-    let distinct: std::collections::HashSet<[u8; 4]> = image.pixels().map(|p| p.0).collect();
-    assert!(distinct.len() > 20, "the rendered frame of {name} looks blank");
-    if std::env::var_os("PHOTOROBOT_SCREENSHOTS").is_some() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../screenshots");
-        std::fs::create_dir_all(&dir).unwrap();
-        image.save(dir.join(format!("{name}.png"))).unwrap();
-    }
 }
 
 #[test]
@@ -313,11 +274,7 @@ fn diagnosis_view_runs_the_workflow_step_by_step() {
     screenshot(&mut h, "diagnosis-workflow");
     // Saved with the session.
     let saved = tmp.path().join("saved");
-    h.state_mut().state.dialogs =
-        Box::new(ScriptedDialogs { folders: vec![Some(saved.clone())], ..Default::default() });
-    h.state_mut().save(true);
-    wait_until(&mut h, "the save", Duration::from_secs(60), |w| w.state.saving == 0);
-    let session = photorobot_core::session::Session::load(&saved).expect("the saved session loads");
+    let session = save_as_and_load(&mut h, &saved);
     let record = session.diagnosis.expect("the diagnosis is in the session");
     assert!(record.verdict.contains(&format!("{:.2} nm before", result.residual_rms_before_nm)), "{}", record.verdict);
     assert_eq!(record.effects.len(), result.effects.len() + result.partial.len());
@@ -412,11 +369,7 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     screenshot(&mut h, "diagnosis-validation");
     // Saved with the session, as `photorobot diagnose` saves it.
     let saved = tmp.path().join("saved");
-    h.state_mut().state.dialogs =
-        Box::new(ScriptedDialogs { folders: vec![Some(saved.clone())], ..Default::default() });
-    h.state_mut().save(true);
-    wait_until(&mut h, "the save", Duration::from_secs(60), |w| w.state.saving == 0);
-    let session = photorobot_core::session::Session::load(&saved).expect("the saved session loads");
+    let session = save_as_and_load(&mut h, &saved);
     let record = session.diagnosis.expect("the diagnosis is in the session");
     assert_eq!(record.validation, rows);
     assert_eq!(record.model_effects, h.state().state.diagnosis_effects);
@@ -476,23 +429,6 @@ fn cancelling_a_step_keeps_what_was_recorded_and_imports_go_through_the_dialog()
     assert_eq!(h.state().state.imported.len(), 1);
     h.get_by_label_contains("import refused: ");
     h.get_by_label_contains("bad.csv");
-}
-
-/// eframe storage in memory.
-#[derive(Default)]
-struct MemoryStorage(std::collections::HashMap<String, String>);
-
-impl eframe::Storage for MemoryStorage {
-    fn get_string(&self, key: &str) -> Option<String> {
-        self.0.get(key).cloned()
-    }
-    fn set_string(&mut self, key: &str, value: String) {
-        self.0.insert(key.to_string(), value);
-    }
-    fn remove_string(&mut self, key: &str) {
-        self.0.remove(key);
-    }
-    fn flush(&mut self) {}
 }
 
 #[test]
