@@ -569,7 +569,7 @@ fn create_dir(dir: &Path) -> Result<(), FileError> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 impl DiagnosisRecord {
     /// The session's record of a diagnosis result: the named effects (then the partial ones),
