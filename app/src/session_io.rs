@@ -53,13 +53,11 @@ fn diagnosis_record(
     s: &AppState,
     d: &photorobot_core::diagnose::DiagnosisResult,
 ) -> photorobot_core::session::DiagnosisRecord {
-    let mut record = photorobot_core::session::DiagnosisRecord::from_result(d);
-    record.model_effects = s.diagnosis_effects.clone();
-    record.extrinsics = Some(d.extrinsics);
-    if let Some(crate::worker::EffectValidation::Ran { rows, .. }) = &s.diagnosis_validation {
-        record.validation = rows.clone();
-    }
-    record
+    let rows = match &s.diagnosis_validation {
+        Some(crate::worker::EffectValidation::Ran { rows, .. }) => rows.as_slice(),
+        _ => &[],
+    };
+    photorobot_core::session::DiagnosisRecord::with_model(d, &s.diagnosis_effects, rows)
 }
 
 impl Snapshot {

@@ -605,4 +605,20 @@ impl DiagnosisRecord {
         }
         Self { effects, verdict, ..Default::default() }
     }
+
+    /// [`DiagnosisRecord::from_result`] with the extended model (the library `effects` of the
+    /// final model and the refitted extrinsics) and its validation without and with them: what
+    /// `photorobot diagnose` and the GUI save.
+    pub fn with_model(
+        r: &crate::diagnose::DiagnosisResult,
+        effects: &[crate::model::effects::Effect],
+        validation: &[crate::diagnose::validation::EffectValidationRow],
+    ) -> Self {
+        Self {
+            model_effects: effects.to_vec(),
+            extrinsics: Some(r.extrinsics),
+            validation: validation.to_vec(),
+            ..Self::from_result(r)
+        }
+    }
 }
