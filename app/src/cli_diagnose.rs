@@ -181,11 +181,7 @@ fn save_record(
         return Ok(());
     }
     let mut session = Session::load(dir)?;
-    let mut record = DiagnosisRecord::from_result(result);
-    record.model_effects = effects.to_vec();
-    record.extrinsics = Some(result.extrinsics);
-    record.validation = validation.to_vec();
-    session.diagnosis = Some(record);
+    session.diagnosis = Some(DiagnosisRecord::with_model(result, effects, validation));
     session.save(dir)?;
     Ok(())
 }

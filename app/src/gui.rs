@@ -274,6 +274,7 @@ impl Workbench {
                 self.state.imported.clear();
                 self.state.report = None;
                 self.state.validation = None;
+                self.state.clear_diagnosis();
                 self.state.analyses.clear();
                 self.state.extrinsics = self.state.worker.nominal.extrinsics;
                 self.state.session_dir = None;

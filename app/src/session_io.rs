@@ -40,11 +40,24 @@ pub fn snapshot(s: &AppState) -> Snapshot {
         imported: s.imported.clone(),
         calibration: s.report.as_deref().cloned(),
         diagnosis: match &s.diagnosis {
-            Some(Ok(d)) => Some(photorobot_core::session::DiagnosisRecord::from_result(d)),
-            _ => None,
+            Some(Ok(d)) => Some(diagnosis_record(s, d)),
+            _ => s.loaded_diagnosis.clone(),
         },
         notes: s.notes.clone(),
     }
+}
+
+/// The diagnosis as the session keeps it, as `photorobot diagnose` writes it: the result, the
+/// extended model (effects and refitted extrinsics) and the validation without and with it.
+fn diagnosis_record(
+    s: &AppState,
+    d: &photorobot_core::diagnose::DiagnosisResult,
+) -> photorobot_core::session::DiagnosisRecord {
+    let rows = match &s.diagnosis_validation {
+        Some(crate::worker::EffectValidation::Ran { rows, .. }) => rows.as_slice(),
+        _ => &[],
+    };
+    photorobot_core::session::DiagnosisRecord::with_model(d, &s.diagnosis_effects, rows)
 }
 
 impl Snapshot {
@@ -137,6 +150,10 @@ pub fn apply(s: &mut AppState, loaded: Loaded, dir: &Path) {
     s.notes = loaded.session.notes;
     s.analyses.clear();
     s.validation = None;
+    // The session's diagnosis record is kept for the next save, not shown (it is a summary,
+    // not a result the view can draw).
+    s.clear_diagnosis();
+    s.loaded_diagnosis = loaded.session.diagnosis;
     s.session_dir = Some(dir.to_path_buf());
     s.dirty = false;
     remember(s, dir);

@@ -4,7 +4,7 @@
 
 use crate::decimate::Decimator;
 use crate::dialogs::Dialogs;
-use crate::worker::{Command, Event, Pace, ValidationPair, Worker};
+use crate::worker::{Command, EffectValidation, Event, Pace, ValidationPair, Worker};
 use photorobot_core::alignment::SignalQuality;
 use photorobot_core::identify::calibration::{CalibrationReport, Mode};
 use photorobot_core::measure::Measurement;
@@ -285,6 +285,14 @@ pub struct AppState {
     pub diagnosis_steps: Vec<(String, String)>,
     /// The diagnosis result, or why it failed.
     pub diagnosis: Option<Result<Box<photorobot_core::diagnose::DiagnosisResult>, String>>,
+    /// Whether the diagnosis started from identified extrinsics (else from the design ones).
+    pub diagnosis_from_calibration: bool,
+    /// The library effects the diagnosis added (its extended model; empty when none).
+    pub diagnosis_effects: Vec<photorobot_core::model::effects::Effect>,
+    /// The validation motions planned without and with those effects (`None` until it ran).
+    pub diagnosis_validation: Option<EffectValidation>,
+    /// The diagnosis record of an opened session, kept so that saving it again keeps it.
+    pub loaded_diagnosis: Option<photorobot_core::session::DiagnosisRecord>,
     /// Selected frame-tree node.
     pub selected_frame: Option<usize>,
     /// The robot view's camera.
@@ -331,6 +339,10 @@ impl AppState {
             validation: None,
             diagnosis_steps: vec![],
             diagnosis: None,
+            diagnosis_from_calibration: false,
+            diagnosis_effects: vec![],
+            diagnosis_validation: None,
+            loaded_diagnosis: None,
             selected_frame: None,
             camera: Default::default(),
             imported: vec![],
@@ -395,9 +407,19 @@ impl AppState {
     /// Start the diagnosis on every recorded trace from the identified extrinsics.
     pub fn diagnose(&mut self) {
         let traces: Vec<Trace> = self.steps.iter().flat_map(|s| s.traces.iter().cloned()).collect();
+        self.clear_diagnosis();
+        self.diagnosis_from_calibration = self.extrinsics != self.worker.nominal.extrinsics;
+        self.worker.send(Command::Diagnose { traces, extrinsics: self.extrinsics });
+    }
+
+    /// Forget the diagnosis (a new run, a new or opened session).
+    pub fn clear_diagnosis(&mut self) {
         self.diagnosis_steps.clear();
         self.diagnosis = None;
-        self.worker.send(Command::Diagnose { traces, extrinsics: self.extrinsics });
+        self.diagnosis_effects.clear();
+        self.diagnosis_validation = None;
+        self.diagnosis_from_calibration = false;
+        self.loaded_diagnosis = None;
     }
 
     /// Apply every pending event of the worker and of the saves.
@@ -484,6 +506,14 @@ impl AppState {
                     Err(e) => format!("diagnosis failed: {e}"),
                 };
                 self.diagnosis = Some(r);
+                self.dirty = true;
+            }
+            Event::EffectsValidated { effects, validation } => {
+                if let EffectValidation::Ran { rows, .. } = &validation {
+                    self.status = format!("validation with and without the added effects: {} motions", rows.len());
+                }
+                self.diagnosis_effects = effects;
+                self.diagnosis_validation = Some(validation);
                 self.dirty = true;
             }
             Event::Analysed { index, result } => {

@@ -7,9 +7,11 @@
 
 use photorobot_core::bench::{run_plan, Bench, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::diagnose::motions::BenchRunner;
+use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
 use photorobot_core::diagnose::{Diagnosis, DiagnosisResult};
 use photorobot_core::identify::calibration::{report_from_traces, CalibrationReport, Mode};
 use photorobot_core::measure::{self, Measurement, PhaseModel};
+use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
 use photorobot_core::trace::Trace;
@@ -94,6 +96,25 @@ pub struct ValidationPair {
     pub after: Result<ValidationFigure, String>,
 }
 
+/// The validation motions after a diagnosis, planned without and with the effects it added.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EffectValidation {
+    /// The diagnosis added no effect: there is no extended model to validate.
+    NoEffect,
+    /// Run on the bench (its name); one row per validation motion.
+    Ran {
+        /// The bench the motions ran on.
+        bench: String,
+        /// Peak-to-peak cavity variation without and with the effects, per motion.
+        rows: Vec<EffectValidationRow>,
+    },
+    /// The extended model could not be built or the bench refused the motions.
+    Failed(String),
+}
+
+/// The worker's [`Event::Busy`] text while it runs the validation motions after a diagnosis.
+pub const BUSY_EFFECT_VALIDATION: &str = "validating with and without the added effects";
+
 /// What the worker reports.
 #[derive(Debug)]
 pub enum Event {
@@ -148,6 +169,14 @@ pub enum Event {
     DiagnosisStep(String, String),
     /// The diagnosis finished (or failed).
     Diagnosed(Result<Box<DiagnosisResult>, String>),
+    /// After a diagnosis that finished: the effects it added (its extended model, empty when
+    /// none) and the validation motions planned without and with them.
+    EffectsValidated {
+        /// The library effects of the final model (named, or added and kept as partial).
+        effects: Vec<Effect>,
+        /// The validation.
+        validation: EffectValidation,
+    },
     /// The worker started (`Some(what)`) or finished (`None`) a job.
     Busy(Option<String>),
     /// The stage controllers' view of every joint axis (a bench on controllers only).
@@ -339,9 +368,26 @@ impl Thread {
                 }
                 Command::Diagnose { traces, extrinsics } => {
                     self.send(Event::Busy(Some("diagnosing".into())));
-                    let result = self.diagnose(&traces, extrinsics);
+                    let outcome = self.diagnose(&traces, extrinsics);
                     self.send(Event::Position(self.bench.position_display()));
-                    self.send(Event::Diagnosed(result.map(Box::new)));
+                    match outcome {
+                        Ok((result, effects)) => {
+                            let with = result.extrinsics;
+                            self.send(Event::Diagnosed(Ok(Box::new(result))));
+                            // As `photorobot diagnose` does: the validation motions planned with
+                            // the calibrated model and with the extended one, on this bench.
+                            let validation = if effects.is_empty() {
+                                EffectValidation::NoEffect
+                            } else {
+                                self.send(Event::Busy(Some(BUSY_EFFECT_VALIDATION.into())));
+                                let v = self.validate_with_effects(&extrinsics, &with, &effects);
+                                self.send(Event::Position(self.bench.position_display()));
+                                v
+                            };
+                            self.send(Event::EffectsValidated { effects, validation });
+                        }
+                        Err(e) => self.send(Event::Diagnosed(Err(e))),
+                    }
                     self.send(Event::Busy(None));
                 }
                 Command::Analyse { index, trace, extrinsics } => {
@@ -353,8 +399,25 @@ impl Thread {
         }
     }
 
-    /// The diagnosis, step by step (each step reported), discriminating motions on this bench.
-    fn diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics) -> Result<DiagnosisResult, String> {
+    /// The validation motions planned with the nominal robot and the calibrated extrinsics
+    /// `without`, and with the extended model (`effects` on the robot, extrinsics `with`), run on
+    /// this bench.
+    fn validate_with_effects(
+        &mut self,
+        without: &Extrinsics,
+        with: &Extrinsics,
+        effects: &[Effect],
+    ) -> EffectValidation {
+        let base = PhaseModel { extrinsics: *without, ..self.nominal.clone() };
+        match validate_with_effects(self.bench.as_mut(), &base, without, with, effects) {
+            Ok(rows) => EffectValidation::Ran { bench: self.bench.name(), rows },
+            Err(e) => EffectValidation::Failed(format!("extended model: {e}")),
+        }
+    }
+
+    /// The diagnosis, step by step (each step reported), discriminating motions on this bench;
+    /// the result and the library effects of its final model.
+    fn diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics) -> Result<(DiagnosisResult, Vec<Effect>), String> {
         let (mut d, skipped) = Diagnosis::from_traces(&self.nominal, traces, extrinsics).map_err(|e| e.to_string())?;
         if !skipped.is_empty() {
             let _ = self.tx.send(Event::DiagnosisStep(
@@ -369,7 +432,9 @@ impl Thread {
             let _ = tx.send(Event::DiagnosisStep(step.title().to_string(), step.summary()));
             (self.notify)();
         }
-        d.result().cloned().ok_or_else(|| "the diagnosis ended without a result".into())
+        let effects = d.state().map(|s| s.library_effects()).unwrap_or_default();
+        let result = d.result().cloned().ok_or("the diagnosis ended without a result")?;
+        Ok((result, effects))
     }
 
     /// One live dither half-cycle along the beam (q2), at real time: a staircase of small recorded

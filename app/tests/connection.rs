@@ -4,72 +4,15 @@
 //! PHOTOROBOT_SCREENSHOTS=1 the view is written to screenshots/connection.png (Mesa llvmpipe):
 //! `PHOTOROBOT_SCREENSHOTS=1 cargo test -p photorobot --test connection`.
 
+mod common;
+
+use common::*;
 use egui_kittest::kittest::Queryable;
-use egui_kittest::Harness;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::{App, Tab, Workbench};
 use photorobot_app::state::Settings;
 use photorobot_core::hardware::emulator::{Fault, FaultSpec};
-use std::time::{Duration, Instant};
-
-const SIZE: egui::Vec2 = egui::vec2(1400.0, 900.0);
-
-fn harness(app: Workbench) -> Harness<'static, Workbench> {
-    Harness::builder().with_size(SIZE).wgpu().build_ui_state(|ui, app: &mut Workbench| app.show(ui), app)
-}
-
-/// Step the UI (network I/O runs on other threads) until `done` holds, or fail after `timeout`.
-fn wait_until(h: &mut Harness<'_, Workbench>, what: &str, timeout: Duration, done: impl Fn(&Workbench) -> bool) {
-    let start = Instant::now();
-    loop {
-        h.run_steps(1);
-        if done(h.state()) {
-            h.run_steps(2);
-            return;
-        }
-        assert!(
-            start.elapsed() < timeout,
-            "timed out after {timeout:?} waiting for {what}; panel message: {:?}; status: {}",
-            h.state().connection.message,
-            h.state().state.status
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-fn open(h: &mut Harness<'_, Workbench>, tab: Tab) {
-    h.get_by_label(tab.title()).click();
-    h.run_steps(3);
-    assert_eq!(h.state().tab, tab);
-}
-
-fn screenshot(h: &mut Harness<'_, Workbench>, name: &str) {
-    let image = h.render().expect("the headless renderer (Mesa llvmpipe) renders the window");
-    let distinct: std::collections::HashSet<[u8; 4]> = image.pixels().map(|p| p.0).collect();
-    assert!(distinct.len() > 20, "the rendered frame of {name} looks blank");
-    if std::env::var_os("PHOTOROBOT_SCREENSHOTS").is_some() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../screenshots");
-        std::fs::create_dir_all(&dir).unwrap();
-        image.save(dir.join(format!("{name}.png"))).unwrap();
-    }
-}
-
-/// eframe storage in memory.
-#[derive(Default)]
-struct MemoryStorage(std::collections::HashMap<String, String>);
-
-impl eframe::Storage for MemoryStorage {
-    fn get_string(&self, key: &str) -> Option<String> {
-        self.0.get(key).cloned()
-    }
-    fn set_string(&mut self, key: &str, value: String) {
-        self.0.insert(key.to_string(), value);
-    }
-    fn remove_string(&mut self, key: &str) {
-        self.0.remove(key);
-    }
-    fn flush(&mut self) {}
-}
+use std::time::Duration;
 
 fn identified(w: &Workbench, i: usize) -> bool {
     w.connection.identities.get(i).is_some_and(|r| r.is_some())

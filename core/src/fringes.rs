@@ -3003,14 +3003,8 @@ mod tests {
         make_trace(&q, &|t| -a * (t - 5.0).powi(2), &drift, noise, phase, seed)
     }
 
-    /// Stop-and-reverse: +4 µm, stop, -2.5 µm. `turn_phase`: fringe phase at the turn.
-    fn reversal(noise: f64, turn_phase: f64, seed: u64) -> Trace {
-        let mut q = pause(0.0, 100);
-        q.extend(move_segment(0.0, 4000.0, 20.0, 40));
-        q.extend(pause(4000.0, 100));
-        q.extend(move_segment(4000.0, 1500.0, 20.0, 40));
-        q.extend(pause(1500.0, 100));
-        // choose φ₀ so that φ(4000 nm) = turn_phase
+    /// Fringe phase (rad) at dL = `dl_nm` of the test signals before their phase offset.
+    fn bare_phase_rad(dl_nm: f64) -> f64 {
         let probe = TwoBeamSignal {
             wavelength_nm: WL,
             n_air: N_AIR,
@@ -3021,7 +3015,18 @@ mod tests {
             harmonic_phase_rad: 0.0,
             noise_sigma: 0.0,
         };
-        let phase = turn_phase - probe.phase_rad(4000.0);
+        probe.phase_rad(dl_nm)
+    }
+
+    /// Stop-and-reverse: +4 µm, stop, -2.5 µm. `turn_phase`: fringe phase at the turn.
+    fn reversal(noise: f64, turn_phase: f64, seed: u64) -> Trace {
+        let mut q = pause(0.0, 100);
+        q.extend(move_segment(0.0, 4000.0, 20.0, 40));
+        q.extend(pause(4000.0, 100));
+        q.extend(move_segment(4000.0, 1500.0, 20.0, 40));
+        q.extend(pause(1500.0, 100));
+        // choose φ₀ so that φ(4000 nm) = turn_phase
+        let phase = turn_phase - bare_phase_rad(4000.0);
         make_trace(&q, &|x| x, &mild(), noise, phase, seed)
     }
 
@@ -3188,18 +3193,8 @@ mod tests {
         let mut q = pause(0.0, pause_first);
         q.extend(move_segment(0.0, 20_000.0, 25.0, 40));
         q.extend(pause(20_000.0, 100));
-        let probe = TwoBeamSignal {
-            wavelength_nm: WL,
-            n_air: N_AIR,
-            gap_start_nm: GAP0,
-            rayleigh_range_nm: Some(ZR),
-            phase_offset_rad: 0.0,
-            harmonic_rel: 0.0,
-            harmonic_phase_rad: 0.0,
-            noise_sigma: 0.0,
-        };
         // the harmonic (2 %, phase 0.6) moves the extremum of the fringe by < 0.02 rad
-        make_trace(&q, &|x| x, &mild(), 1e-3, start_phase - probe.phase_rad(0.0), seed)
+        make_trace(&q, &|x| x, &mild(), 1e-3, start_phase - bare_phase_rad(0.0), seed)
     }
 
     /// Start-phase error: dL is relative to the first sample, so an error ε in the phase

@@ -1,11 +1,20 @@
 //! Diagnosis: where the residual of the identification lives (RMS per equation, the largest
 //! residuals), and the discrepancy workflow (`photorobot_core::diagnose`) run step by step in the
 //! worker: baseline, candidates scored, discriminating motions run on the bench, effects named
-//! and added, the verdict with the residual before and after.
+//! and added, the verdict with the residual before and after; then the validation motions planned
+//! without and with the effects it added (`photorobot_core::diagnose::validation`), run on the bench.
 
 use crate::state::AppState;
 use crate::views::results::equation_of;
+use crate::worker::{EffectValidation, BUSY_EFFECT_VALIDATION};
 use egui::RichText;
+use egui_plot::{Bar, BarChart, GridMark, Legend, Plot, PlotPoint, Text};
+use photorobot_core::diagnose::validation::EffectValidationRow;
+
+/// Colour of the figures planned with the calibrated model (as the validation view's "before").
+const WITHOUT_COLOR: egui::Color32 = egui::Color32::from_rgb(230, 90, 70);
+/// Colour of the figures planned with the extended model (as the validation view's "after").
+const WITH_COLOR: egui::Color32 = egui::Color32::from_rgb(70, 190, 100);
 
 /// Draw the diagnosis view.
 pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
@@ -21,8 +30,11 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
                 r.residual_rms_sigma, r.observations
             ));
         }
-        None => {
+        None if s.extrinsics == s.worker.nominal.extrinsics => {
             ui.label("not identified yet: the diagnosis starts from the design extrinsics and refits them");
+        }
+        None => {
+            ui.label("not identified in this session: the diagnosis starts from the extrinsics in use and refits them");
         }
     }
     if s.steps.iter().all(|st| st.traces.is_empty()) {
@@ -46,6 +58,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
     });
     egui::ScrollArea::vertical().id_salt("diagnosis").show(ui, |ui| {
         workflow(ui, s);
+        effect_validation(ui, s);
         ui.separator();
         residuals(ui, s);
     });
@@ -158,6 +171,150 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
             }
         }
     }
+}
+
+/// The names of the effects the diagnosis added (named, then partial), joined.
+fn added_effects(s: &AppState) -> Option<String> {
+    let Some(Ok(d)) = &s.diagnosis else { return None };
+    let names: Vec<&str> = d.effects.iter().chain(&d.partial).map(|e| e.name.as_str()).collect();
+    (!names.is_empty()).then(|| drawable(&names.join(" + ")))
+}
+
+/// A validation motion's name without where it runs (for the chart's axis).
+fn short_motion(name: &str) -> &str {
+    [" through ", " in the "].iter().fold(name, |n, sep| n.split(sep).next().unwrap_or(n))
+}
+
+/// The validation motions planned without and with the effects the diagnosis added: a table and
+/// a bar chart of the peak-to-peak cavity variation.
+fn effect_validation(ui: &mut egui::Ui, s: &AppState) {
+    if !matches!(s.diagnosis, Some(Ok(_))) {
+        return;
+    }
+    ui.add_space(8.0);
+    ui.label(RichText::new("Validation with and without the added effects").size(16.0).strong());
+    let without_name =
+        if s.diagnosis_from_calibration { "calibrated model" } else { "design extrinsics (not calibrated)" };
+    let with_name = format!("with {}", added_effects(s).unwrap_or_else(|| "the effects".into()));
+    let rows = match &s.diagnosis_validation {
+        None if s.busy.as_deref() == Some(BUSY_EFFECT_VALIDATION) => {
+            ui.horizontal(|ui| {
+                ui.spinner();
+                ui.label("running the 4 validation motions planned without, then with the added effects…");
+            });
+            return;
+        }
+        None => return,
+        Some(EffectValidation::NoEffect) => {
+            ui.label("no effect was added: there is no extended model to validate (the validation motions are those of the Validation tab)");
+            return;
+        }
+        Some(EffectValidation::Failed(e)) => {
+            ui.colored_label(ui.visuals().error_fg_color, format!("validation with the effects failed: {e}"));
+            return;
+        }
+        Some(EffectValidation::Ran { bench, rows }) => {
+            ui.label(format!(
+                "The validation motions (which must leave the gap unchanged) planned through the inverse model twice: \
+                 with the {without_name} and {with_name} (extrinsics refitted with it), run on {bench}, and \
+                 measured with the extended model. Figure of merit: FP cavity variation, peak to peak."
+            ));
+            rows
+        }
+    };
+    let nm = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.1}"));
+    egui::Grid::new("effect validation").striped(true).show(ui, |ui| {
+        for h in ["motion", "without the effect (nm)", "with the effect (nm)", "improvement (×)"] {
+            ui.strong(h);
+        }
+        ui.end_row();
+        for r in rows {
+            ui.label(drawable(&r.motion));
+            ui.monospace(nm(r.without_effect_nm));
+            ui.monospace(nm(r.with_effect_nm));
+            ui.monospace(improvement(r).map_or("–".into(), |f| format!("{f:.1}×")));
+            ui.end_row();
+        }
+    });
+    for n in rows.iter().filter_map(|r| r.note.as_ref()) {
+        ui.colored_label(ui.visuals().warn_fg_color, drawable(n));
+    }
+    bar_chart(ui, rows, without_name, &with_name);
+    ui.label(format!(
+        "bars: the {without_name} (left) and the model {with_name} (right), per validation motion; the \
+         smaller, the better the model plans motions that must keep the gap"
+    ));
+}
+
+/// Without over with (how many times smaller the variation is with the effect), when both ran.
+fn improvement(r: &EffectValidationRow) -> Option<f64> {
+    match (r.without_effect_nm, r.with_effect_nm) {
+        (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+        _ => None,
+    }
+}
+
+fn bar_chart(ui: &mut egui::Ui, rows: &[EffectValidationRow], without_name: &str, with_name: &str) {
+    const WIDTH: f64 = 0.35;
+    let series = |name: &str, offset: f64, color: egui::Color32, get: fn(&EffectValidationRow) -> Option<f64>| {
+        let bars = rows
+            .iter()
+            .enumerate()
+            .filter_map(|(k, r)| get(r).map(|v| Bar::new(k as f64 + offset, v).width(WIDTH).name(drawable(&r.motion))))
+            .collect();
+        BarChart::new(name, bars).color(color)
+    };
+    let labels: Vec<String> = rows.iter().map(|r| drawable(short_motion(&r.motion))).collect();
+    let top = rows.iter().flat_map(|r| [r.without_effect_nm, r.with_effect_nm]).flatten().fold(0.0, f64::max);
+    Plot::new("effect validation chart")
+        .height(260.0)
+        .legend(Legend::default().position(egui_plot::Corner::RightTop))
+        .x_axis_label("validation motion")
+        .y_axis_label("FP cavity variation, peak to peak (nm)")
+        .x_grid_spacer(move |input| {
+            let n = rows.len();
+            (0..n)
+                .map(|k| k as f64)
+                .filter(|x| input.bounds.0 <= *x && *x <= input.bounds.1)
+                .map(|value| GridMark { value, step_size: 1.0 })
+                .collect()
+        })
+        .x_axis_formatter(move |mark, _| {
+            let k = mark.value.round();
+            if (mark.value - k).abs() < 1e-6 && k >= 0.0 {
+                labels.get(k as usize).cloned().unwrap_or_default()
+            } else {
+                String::new()
+            }
+        })
+        .include_x(-0.6)
+        .include_x(rows.len() as f64 - 0.4)
+        .include_y(0.0)
+        .include_y(top * 1.15)
+        .y_axis_min_width(56.0)
+        .allow_drag(false)
+        .allow_zoom(false)
+        .allow_scroll(false)
+        .show(ui, |pl| {
+            pl.bar_chart(series(without_name, -WIDTH / 2.0, WITHOUT_COLOR, |r| r.without_effect_nm));
+            pl.bar_chart(series(with_name, WIDTH / 2.0, WITH_COLOR, |r| r.with_effect_nm));
+            // The figures over the bars, so the small ones read too.
+            for (k, r) in rows.iter().enumerate() {
+                for (offset, v) in [(-WIDTH / 2.0, r.without_effect_nm), (WIDTH / 2.0, r.with_effect_nm)] {
+                    if let Some(v) = v {
+                        pl.text(
+                            Text::new(
+                                format!("figure {k} {offset}"),
+                                PlotPoint::new(k as f64 + offset, v),
+                                format!("{v:.1} nm"),
+                            )
+                            .name("")
+                            .anchor(egui::Align2::CENTER_BOTTOM),
+                        );
+                    }
+                }
+            }
+        });
 }
 
 /// Text from the core with the arrows the UI font lacks written out.

@@ -206,21 +206,17 @@ pub fn candidate_pool(robot: &RobotDescription, limits: &MotionLimits) -> Vec<Ca
                     let mut start = joints(q1, q2, q3, 0.0, 0.0, 0.0);
                     start[joint] = -amplitude;
                     let at = joints(q1, q2, q3, 0.0, 0.0, 0.0);
-                    let label = format!("tilt scan {name} -{amplitude} -> +{amplitude}° at {}", pose_text(&at));
-                    raw.push((
-                        label.clone(),
-                        CandidateKind::TiltScan,
-                        start,
-                        mv(JointTarget::default().with(joint, amplitude), &label),
-                    ));
-                    // The same rotation read for its fringe phase (gap changes) only.
-                    let label = format!("rotation {name} -{amplitude} -> +{amplitude}° at {}", pose_text(&at));
-                    raw.push((
-                        label.clone(),
-                        CandidateKind::TiltScan,
-                        start,
-                        mv(JointTarget::default().with(joint, amplitude), &label),
-                    ));
+                    // The tilt scan, and the same rotation read for its fringe phase (gap
+                    // changes) only.
+                    for kind in ["tilt scan", "rotation"] {
+                        let label = format!("{kind} {name} -{amplitude} -> +{amplitude}° at {}", pose_text(&at));
+                        raw.push((
+                            label.clone(),
+                            CandidateKind::TiltScan,
+                            start,
+                            mv(JointTarget::default().with(joint, amplitude), &label),
+                        ));
+                    }
                 }
             }
         }

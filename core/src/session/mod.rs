@@ -569,7 +569,7 @@ fn create_dir(dir: &Path) -> Result<(), FileError> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 impl DiagnosisRecord {
     /// The session's record of a diagnosis result: the named effects (then the partial ones),
@@ -604,5 +604,21 @@ impl DiagnosisRecord {
             verdict.push_str(&format!("; worst: {} {} at {:.1} σ", g.by, g.key, g.rms_sigma));
         }
         Self { effects, verdict, ..Default::default() }
+    }
+
+    /// [`DiagnosisRecord::from_result`] with the extended model (the library `effects` of the
+    /// final model and the refitted extrinsics) and its validation without and with them: what
+    /// `photorobot diagnose` and the GUI save.
+    pub fn with_model(
+        r: &crate::diagnose::DiagnosisResult,
+        effects: &[crate::model::effects::Effect],
+        validation: &[crate::diagnose::validation::EffectValidationRow],
+    ) -> Self {
+        Self {
+            model_effects: effects.to_vec(),
+            extrinsics: Some(r.extrinsics),
+            validation: validation.to_vec(),
+            ..Self::from_result(r)
+        }
     }
 }

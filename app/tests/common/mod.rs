@@ -1,0 +1,87 @@
+//! Shared kittest helpers of the GUI test binaries (`gui.rs`, `connection.rs`): the headless
+//! harness, waiting on the worker, tab switching, screenshots, in-memory eframe storage and a
+//! save through the scripted folder dialog.
+#![allow(dead_code)] // each test binary uses its own subset
+
+use egui_kittest::kittest::Queryable;
+use egui_kittest::Harness;
+use photorobot_app::dialogs::ScriptedDialogs;
+use photorobot_app::gui::{Tab, Workbench};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Window size of every test and screenshot.
+pub const SIZE: egui::Vec2 = egui::vec2(1400.0, 900.0);
+
+/// The workbench in a headless harness rendered with wgpu (Mesa llvmpipe).
+pub fn harness(app: Workbench) -> Harness<'static, Workbench> {
+    Harness::builder().with_size(SIZE).wgpu().build_ui_state(|ui, app: &mut Workbench| app.show(ui), app)
+}
+
+/// Step the UI (the worker and network I/O run on other threads) until `done` holds, or fail
+/// after `timeout` with the status line and the connection panel's message.
+pub fn wait_until(h: &mut Harness<'_, Workbench>, what: &str, timeout: Duration, done: impl Fn(&Workbench) -> bool) {
+    let start = Instant::now();
+    loop {
+        h.run_steps(1);
+        if done(h.state()) {
+            h.run_steps(2);
+            return;
+        }
+        assert!(
+            start.elapsed() < timeout,
+            "timed out after {timeout:?} waiting for {what}; status: {}; connection panel: {:?}",
+            h.state().state.status,
+            h.state().connection.message
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Click a tab and check it is shown.
+pub fn open(h: &mut Harness<'_, Workbench>, tab: Tab) {
+    h.get_by_label(tab.title()).click();
+    h.run_steps(3);
+    assert_eq!(h.state().tab, tab);
+}
+
+/// Render the window, check it is not blank, and with PHOTOROBOT_SCREENSHOTS set write it to
+/// `screenshots/<name>.png`.
+pub fn screenshot(h: &mut Harness<'_, Workbench>, name: &str) {
+    let image = h.render().expect("the headless renderer (Mesa llvmpipe) renders the window");
+    assert_eq!((image.width(), image.height()), (SIZE.x as u32, SIZE.y as u32));
+    let distinct: std::collections::HashSet<[u8; 4]> = image.pixels().map(|p| p.0).collect();
+    assert!(distinct.len() > 20, "the rendered frame of {name} looks blank");
+    if std::env::var_os("PHOTOROBOT_SCREENSHOTS").is_some() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../screenshots");
+        std::fs::create_dir_all(&dir).unwrap();
+        image.save(dir.join(format!("{name}.png"))).unwrap();
+    }
+}
+
+/// Save the session as `folder` through the scripted folder dialog, wait for the save and load
+/// it back from disk.
+pub fn save_as_and_load(h: &mut Harness<'_, Workbench>, folder: &Path) -> photorobot_core::session::Session {
+    h.state_mut().state.dialogs =
+        Box::new(ScriptedDialogs { folders: vec![Some(folder.to_path_buf())], ..Default::default() });
+    h.state_mut().save(true);
+    wait_until(h, "the save", Duration::from_secs(60), |w| w.state.saving == 0);
+    photorobot_core::session::Session::load(folder).expect("the saved session loads")
+}
+
+/// eframe storage in memory.
+#[derive(Default)]
+pub struct MemoryStorage(pub std::collections::HashMap<String, String>);
+
+impl eframe::Storage for MemoryStorage {
+    fn get_string(&self, key: &str) -> Option<String> {
+        self.0.get(key).cloned()
+    }
+    fn set_string(&mut self, key: &str, value: String) {
+        self.0.insert(key.to_string(), value);
+    }
+    fn remove_string(&mut self, key: &str) {
+        self.0.remove(key);
+    }
+    fn flush(&mut self) {}
+}
