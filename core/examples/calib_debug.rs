@@ -70,9 +70,11 @@ fn main() {
         let mut m2 = nominal.clone();
         m2.extrinsics = preset.truth;
         for (i, t) in traces.iter().enumerate() {
-            let hint_model = if std::env::var("HINT_NOMINAL").is_ok() { &nominal } else { &m2 };
-            for (name, m) in [("truth", &m2)] {
-                match photorobot_core::measure::analyse(t, hint_model) {
+            // HINT_NOMINAL=1: analyse with the design extrinsics (hint and model wrong), compare
+            // with the truth all the same.
+            let (name, m) = if std::env::var("HINT_NOMINAL").is_ok() { ("nominal", &nominal) } else { ("truth", &m2) };
+            {
+                match photorobot_core::measure::analyse(t, m) {
                     Ok(photorobot_core::measure::Measurement::Motion(mm)) => {
                         let truth = m2.hint_nm(t, 1560.0).unwrap();
                         let n = t.len();

@@ -21,7 +21,9 @@ fn main() {
             .map(|&d| {
                 let p = d / total;
                 let b = 0.0047 * (-((p - centre) / w).powi(2)).exp();
-                0.036 + b * (kappa * d + std::env::var("PH0").map_or(0.7, |v| v.parse().unwrap())).cos() + noise.sample(&mut rng)
+                0.036
+                    + b * (kappa * d + std::env::var("PH0").map_or(0.7, |v| v.parse().unwrap())).cos()
+                    + noise.sample(&mut rng)
             })
             .collect();
         let cfg = TrackConfig {
@@ -36,8 +38,11 @@ fn main() {
                 println!("Gaussian width {w} of the path: error (nm) every 5 %: {}", errs.join(" "));
                 if std::env::var("ENDS").is_ok() {
                     let idx = |k: usize| k;
-                    let start: Vec<String> = (0..=16).map(|k| format!("{:.2}", tr.dl_nm[idx(k * 250)] - dl[idx(k * 250)])).collect();
-                    let end: Vec<String> = (0..=16).map(|k| format!("{:.2}", tr.dl_nm[n - 1 - (16 - k) * 250] - dl[n - 1 - (16 - k) * 250])).collect();
+                    let start: Vec<String> =
+                        (0..=16).map(|k| format!("{:.2}", tr.dl_nm[idx(k * 250)] - dl[idx(k * 250)])).collect();
+                    let end: Vec<String> = (0..=16)
+                        .map(|k| format!("{:.2}", tr.dl_nm[n - 1 - (16 - k) * 250] - dl[n - 1 - (16 - k) * 250]))
+                        .collect();
                     println!("  first 4000 samples every 250: {}", start.join(" "));
                     println!("  last 4000 samples every 250: {}", end.join(" "));
                     println!("  warnings {:?} chi2 {:.3} iters {}", tr.warnings, tr.normalized_chi2, tr.iterations);

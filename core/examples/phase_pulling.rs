@@ -28,7 +28,13 @@ fn main() {
             // P ≈ A + B·cos(φ_model + e): projection gives e
             let e = im.atan2(re);
             let amp = 2.0 * (re * re + im * im).sqrt() / n as f64;
-            println!("  θ {:.3} rad: fundamental phase - model {:+.4} rad = {:+.3} nm, amplitude {:.3e}", theta, -e, -e / (2.0 * k) * 1e3, amp);
+            println!(
+                "  θ {:.3} rad: fundamental phase - model {:+.4} rad = {:+.3} nm, amplitude {:.3e}",
+                theta,
+                -e,
+                -e / (2.0 * k) * 1e3,
+                amp
+            );
         }
     }
 }

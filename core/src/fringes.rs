@@ -1502,7 +1502,7 @@ fn fit_offset_gain(pts: &[(f64, f64, f64)]) -> Option<(f64, f64)> {
         sxy += x * y;
     }
     let det = sww * sxx - swx * swx;
-    if !(det > 1e-12 * sww * sxx) {
+    if det.is_nan() || det <= 1e-12 * sww * sxx {
         return None;
     }
     let o = (sxx * swy - swx * sxy) / det;
@@ -1886,7 +1886,16 @@ impl PhaseTracker {
 
     /// Track one trace (see [`track_phase`]); the result stays valid until the next call.
     pub fn track(&mut self, intensity: &[f64], hint_dl_nm: &[f64]) -> Result<&PhaseTrack, FringeError> {
-        run_tracker(&mut self.ws, &mut self.out, intensity, hint_dl_nm, None, self.wavelength_nm, self.n_air, &self.cfg)?;
+        run_tracker(
+            &mut self.ws,
+            &mut self.out,
+            intensity,
+            hint_dl_nm,
+            None,
+            self.wavelength_nm,
+            self.n_air,
+            &self.cfg,
+        )?;
         Ok(&self.out)
     }
 
@@ -1973,6 +1982,7 @@ pub fn track_phase_shaped(
     Ok(tracker.into_result())
 }
 
+#[allow(clippy::too_many_arguments)] // the tracker's inputs, all sample-aligned or settings
 fn run_tracker(
     ws: &mut Workspace,
     out: &mut PhaseTrack,
@@ -2456,8 +2466,7 @@ fn run_tracker(
         dm.ca.extend(env_ca.iter().step_by(dec));
     }
     let shape_view = shape.map(|harm| ShapeView { harm, r: &env_r, ca: &env_ca });
-    let samples =
-        Samples { y: intensity, hint: hint_dl_nm, c: &cgrid, seg_first: &grid.seg_first, shape: shape_view };
+    let samples = Samples { y: intensity, hint: hint_dl_nm, c: &cgrid, seg_first: &grid.seg_first, shape: shape_view };
     if dec > 1 {
         let dm = &mut ws.decimated;
         dm.seg_first.extend(grid.seg_first.iter().map(|&k| k.div_ceil(dec)));
@@ -2568,9 +2577,8 @@ fn run_tracker(
             // error near an extremum goes as the square root of the envelope error), the
             // model's shape with these o and g does.
             model_refit = true;
-            let pts: Vec<(f64, f64, f64)> = (0..jn - 1)
-                .flat_map(|j| [(1.0, knot_model[j].0, st.a[j]), (0.0, knot_model[j].1, st.b[j])])
-                .collect();
+            let pts: Vec<(f64, f64, f64)> =
+                (0..jn - 1).flat_map(|j| [(1.0, knot_model[j].0, st.a[j]), (0.0, knot_model[j].1, st.b[j])]).collect();
             if let Some((o, g)) = fit_offset_gain(&pts) {
                 for (x, &(p0, p1)) in x0.iter_mut().zip(&knot_model) {
                     x[1] = o + g * p0;

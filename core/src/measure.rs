@@ -82,7 +82,8 @@ impl PhaseModel {
         let wte = self.chain.end_effector(&q);
         match self.extrinsics.cavity(&wte) {
             Ok(c) => {
-                fp.fundamental_phase_rad(c.length_um.abs(), c.tilt_rad) * fp.wavelength_nm() / (4.0 * PI * fp.medium_index())
+                fp.fundamental_phase_rad(c.length_um.abs(), c.tilt_rad) * fp.wavelength_nm()
+                    / (4.0 * PI * fp.medium_index())
             }
             Err(_) => f64::NAN,
         }

@@ -819,7 +819,10 @@ mod tests {
                 assert!((c[0].re - shape.offset).abs() < 1e-12);
                 for (k, h) in [(2, shape.second), (3, shape.third)] {
                     let expect = Complex::from_polar(c[k].norm() / c[1].norm(), k as f64 * c[1].arg() - c[k].arg());
-                    assert!((expect - h).norm() < 1e-9 * (1.0 + h.norm()), "h{k} {h} vs {expect} at {gap} µm, {tilt} rad");
+                    assert!(
+                        (expect - h).norm() < 1e-9 * (1.0 + h.norm()),
+                        "h{k} {h} vs {expect} at {gap} µm, {tilt} rad"
+                    );
                 }
             }
         }
