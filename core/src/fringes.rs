@@ -3268,16 +3268,8 @@ mod tests {
     /// amplitude. Returns (truth dL nm, intensity, hint).
     fn multi_beam_move(gap_change_um: f64, tilt_deg: (f64, f64), samples: usize, noise_rel: f64, seed: u64) -> Trace {
         use crate::model::optics::{FabryPerot, OpticalParams};
-        let params = OpticalParams {
-            mode_field_radius_um: 5.2,
-            fiber_index: 1.4682,
-            lamella_reflectance: 0.142,
-            cleave_angle_deg: 0.0,
-            back_face: None,
-            gouy_phase: true,
-            beams: 4,
-            input_power_mw: 1.0,
-        };
+        // the virtual bench's optics: LiNbO3 lamella, 4 beams, Gouy phase
+        let params = OpticalParams::default();
         let fp = FabryPerot::new(&params, WL, N_AIR).unwrap();
         let ramp = samples / 20;
         let mut prog = pause(0.0, 200);
@@ -3353,16 +3345,8 @@ mod tests {
     #[test]
     fn shaped_tracking_follows_a_rotation_within_1nm() {
         use crate::model::optics::{FabryPerot, FringeExpansion, OpticalParams};
-        let params = OpticalParams {
-            mode_field_radius_um: 5.2,
-            fiber_index: 1.4682,
-            lamella_reflectance: 0.142,
-            cleave_angle_deg: 0.0,
-            back_face: None,
-            gouy_phase: true,
-            beams: 4,
-            input_power_mw: 1.0,
-        };
+        // the virtual bench's optics: LiNbO3 lamella, 4 beams, Gouy phase
+        let params = OpticalParams::default();
         let fp = FabryPerot::new(&params, WL, N_AIR).unwrap();
         let n = 40_000;
         let ramp = n / 20;
