@@ -562,6 +562,12 @@ impl Harmonic {
         Self { cos_rel, sin_rel, cos3_rel: 0.0, sin3_rel: 0.0 }
     }
 
+    /// From the phasors of `f(φ) = cos φ + Re(h2·e^{2iφ}) + Re(h3·e^{3iφ})` (the convention
+    /// of `model::optics::FringeShape`).
+    pub fn from_phasors(h2: nalgebra::Complex<f64>, h3: nalgebra::Complex<f64>) -> Self {
+        Self { cos_rel: h2.re, sin_rel: -h2.im, cos3_rel: h3.re, sin3_rel: -h3.im }
+    }
+
     #[inline(always)]
     fn f_and_slope(&self, s: f64, c: f64) -> (f64, f64) {
         let c2 = 2.0 * c * c - 1.0;
@@ -2746,6 +2752,8 @@ fn run_tracker(
     ws.a = st.a;
     ws.b = st.b;
     ws.seg_harm = seg_harm;
+    ws.env_r = env_r;
+    ws.env_ca = env_ca;
     Ok(())
 }
 
@@ -3366,12 +3374,7 @@ mod tests {
             truth.push((fp.fundamental_phase_rad(g, t) - phi0) / kappa);
             let sh = fp.fringe_shape(g, t, &mut ex);
             y.push(fp.power(g, t) + noise.sample(&mut rng));
-            harmonics.push(Harmonic {
-                cos_rel: sh.second.re,
-                sin_rel: -sh.second.im,
-                cos3_rel: sh.third.re,
-                sin3_rel: -sh.third.im,
-            });
+            harmonics.push(Harmonic::from_phasors(sh.second, sh.third));
             offset.push(sh.offset);
             amplitude.push(sh.fundamental);
         }

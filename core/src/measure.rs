@@ -78,15 +78,20 @@ impl PhaseModel {
     /// The phase-equivalent gap (nm) at joints `q_display` (µm, °) and vacuum wavelength
     /// `wavelength_nm`: `φ·λ/(4π·n)`.
     pub fn phase_gap_nm(&self, fp: &FabryPerot, q_display: &[f64; 6]) -> f64 {
-        let q = self.chain.description().q_from_display(q_display);
-        let wte = self.chain.end_effector(&q);
-        match self.extrinsics.cavity(&wte) {
-            Ok(c) => {
-                fp.fundamental_phase_rad(c.length_um.abs(), c.tilt_rad) * fp.wavelength_nm()
-                    / (4.0 * PI * fp.medium_index())
+        match self.gap_and_tilt(q_display) {
+            Some((gap_um, tilt_rad)) => {
+                fp.fundamental_phase_rad(gap_um, tilt_rad) * fp.wavelength_nm() / (4.0 * PI * fp.medium_index())
             }
-            Err(_) => f64::NAN,
+            None => f64::NAN,
         }
+    }
+
+    /// |L| (µm) and the tilt (rad) of the cavity at joints `q_display` (µm, °); None when the
+    /// beam misses the lamella.
+    fn gap_and_tilt(&self, q_display: &[f64; 6]) -> Option<(f64, f64)> {
+        let q = self.chain.description().q_from_display(q_display);
+        let c = self.extrinsics.cavity(&self.chain.end_effector(&q)).ok()?;
+        Some((c.length_um.abs(), c.tilt_rad))
     }
 
     /// The motion hint of a trace: predicted phase-equivalent gap change (nm) per sample,
@@ -121,18 +126,11 @@ impl PhaseModel {
             amplitude: Vec::with_capacity(n),
         };
         for i in 0..n {
-            let q = self.chain.description().q_from_display(&trace.joints_display(i));
-            let c = self
-                .extrinsics
-                .cavity(&self.chain.end_effector(&q))
-                .map_err(|_| format!("sample {i}: the beam misses the lamella at these joints"))?;
-            let s = fp.fringe_shape(c.length_um.abs(), c.tilt_rad, &mut ex);
-            out.harmonics.push(Harmonic {
-                cos_rel: s.second.re,
-                sin_rel: -s.second.im,
-                cos3_rel: s.third.re,
-                sin3_rel: -s.third.im,
-            });
+            let (gap_um, tilt_rad) = self
+                .gap_and_tilt(&trace.joints_display(i))
+                .ok_or_else(|| format!("sample {i}: the beam misses the lamella at these joints"))?;
+            let s = fp.fringe_shape(gap_um, tilt_rad, &mut ex);
+            out.harmonics.push(Harmonic::from_phasors(s.second, s.third));
             out.offset.push(s.offset);
             out.amplitude.push(s.fundamental.max(f64::MIN_POSITIVE));
         }

@@ -649,9 +649,14 @@ impl FabryPerot {
     /// the pulling of the higher beams ([`FringeShape::pulling_rad`]). This is what a phase
     /// tracker measures; over a ±4° rotation at 900 µm the pulling moves by up to 0.9 nm of
     /// gap (LiNbO3).
+    /// It runs per sample (motion hints) and per prediction (identifier): the expansion's
+    /// buffers are kept per thread.
     pub fn fundamental_phase_rad(&self, gap_um: f64, tilt_rad: f64) -> f64 {
-        let mut ex = FringeExpansion::default();
-        self.fringe_phase_rad(gap_um, tilt_rad) + self.fringe_shape(gap_um, tilt_rad, &mut ex).pulling_rad
+        thread_local! {
+            static SCRATCH: std::cell::RefCell<FringeExpansion> = std::cell::RefCell::new(FringeExpansion::default());
+        }
+        let pulling = SCRATCH.with(|ex| self.fringe_shape(gap_um, tilt_rad, &mut ex.borrow_mut()).pulling_rad);
+        self.fringe_phase_rad(gap_um, tilt_rad) + pulling
     }
 
     /// The fringe's shape at gap `gap_um` and tilt `tilt_rad` ([`FringeShape`]); `scratch`
@@ -665,16 +670,15 @@ impl FabryPerot {
         let zero = Complex::new(0.0, 0.0);
         let mut g = [zero; 4];
         let mut g0 = 0.0;
-        let mut d_prev: Vec<Complex<f64>> = Vec::with_capacity(scratch.coefficients.len());
+        // prev[k - 1] = D_{m-k}: the three beams before m (zero before the first)
+        let mut prev = [zero; 3];
         for (m, b) in scratch.coefficients.iter().enumerate() {
             let d = b * w.powi(tilt_phase_order(m) as i32);
             g0 += d.norm_sqr();
-            for (k, gk) in g.iter_mut().enumerate().skip(1) {
-                if m >= k {
-                    *gk += d * d_prev[m - k].conj();
-                }
+            for (gk, p) in g[1..].iter_mut().zip(&prev) {
+                *gk += d * p.conj();
             }
-            d_prev.push(d);
+            prev = [d, prev[0], prev[1]];
         }
         let a1 = g[1].arg();
         let rel = |k: usize| {
