@@ -42,7 +42,14 @@ fn observations(model: &PhaseModel, truth: &Extrinsics) -> Vec<Observation> {
                 }
                 _ => continue,
             };
-            let mut o = Observation { label: s.label.clone(), kind, sigma, wavelength_nm: 1560.0, time_s: [0.0; 2] };
+            let mut o = Observation {
+                label: s.label.clone(),
+                kind,
+                sigma,
+                wavelength_nm: 1560.0,
+                time_s: [0.0; 2],
+                approach: Default::default(),
+            };
             let v = predict(model, &fp, truth, &o, 1.0) + sigma * gauss();
             match &mut o.kind {
                 ObservationKind::GapChange { dl_nm, .. } => *dl_nm = v,

@@ -87,6 +87,31 @@ pub struct VirtualBench {
     wavelength_nm: f64,
     /// Evaluate every sample on the exact path.
     exact: bool,
+    /// Where each stage sits in its play (hidden reversal errors).
+    play: PlayState,
+}
+
+/// The stages' play (a hidden reversal error): each stage sits `offset` from its command
+/// (display units), within ± half its play, dragged by the command like a backlash: after a
+/// move longer than the play the stage lags the command by half of it.
+#[derive(Debug, Clone, Copy, Default)]
+struct PlayState {
+    offset: [f64; 6],
+    command: [f64; 6],
+}
+
+impl PlayState {
+    /// Follow the command to `q` (a straight move), for stages of play `width`.
+    #[inline]
+    fn follow(&mut self, q: &[f64; 6], width: &[f64; 6]) {
+        for j in 0..6 {
+            if width[j] != 0.0 {
+                let half = 0.5 * width[j].abs();
+                self.offset[j] = (self.offset[j] - (q[j] - self.command[j])).clamp(-half, half);
+            }
+            self.command[j] = q[j];
+        }
+    }
 }
 
 /// The hidden part.
@@ -99,6 +124,8 @@ struct Truth {
     laser_wavelength_nm: f64,
     fp: FabryPerot,
     path_effects: Vec<Effect>,
+    /// Play of each stage (display units; hidden reversal errors).
+    play_width: [f64; 6],
     /// The path effects compiled: gap = scale·|L| + offset(t).
     gap_map: GapMap,
     joint_is_revolute: [bool; 6],
@@ -363,7 +390,9 @@ impl VirtualBench {
             .map_err(|e| BenchError::Config(format!("bench {}: {e}", preset.name)))?;
         let n_air = air_index_ciddor(preset.laser.wavelength_nm, &preset.ambient)
             .map_err(|e| BenchError::Config(format!("bench {}: ambient: {e}", preset.name)))?;
-        let fp = FabryPerot::new(&preset.optics, preset.laser.wavelength_nm, n_air)
+        // The truth's optics: the preset's with the hidden optical effects (Gouy phase, back face).
+        let optics = effects::apply_optics(&preset.effects, &preset.optics);
+        let fp = FabryPerot::new(&optics, preset.laser.wavelength_nm, n_air)
             .map_err(|e| BenchError::Config(format!("bench {}: optics: {e}", preset.name)))?;
         let chain = Chain::new(truth_robot);
         let wte0 = chain.end_effector(&[0.0; 6]);
@@ -384,12 +413,7 @@ impl VirtualBench {
             .flat_map(|i| [Draw { slot: i, sigma: stage_sigma[i] }, Draw { slot: 6 + i, sigma: encoder_sigma[i] }])
             .filter(|d| d.sigma != 0.0)
             .collect();
-        let path_effects: Vec<Effect> = preset
-            .effects
-            .iter()
-            .filter(|e| matches!(e, Effect::ThermalDrift { .. } | Effect::PathScale { .. }))
-            .cloned()
-            .collect();
+        let path_effects: Vec<Effect> = preset.effects.iter().filter(|e| e.is_path()).cloned().collect();
         let geometry = preset.truth.geometry();
         let white_sigma_mw = d.white_noise_rel_fringe * fringe0.amplitude_mw;
         let truth = Truth {
@@ -397,11 +421,12 @@ impl VirtualBench {
             n_t_in_ee: geometry.n_t_in_ee(),
             geometry,
             extrinsics: preset.truth,
-            optics: preset.optics,
+            optics,
             n_air,
             laser_wavelength_nm: preset.laser.wavelength_nm,
             fp,
             gap_map: GapMap::new(&path_effects),
+            play_width: effects::reversal_play(&preset.effects, &robot),
             path_effects,
             joint_is_revolute,
             white_sigma_mw,
@@ -428,6 +453,7 @@ impl VirtualBench {
             q_display: [0.0; 6],
             wavelength_nm: preset.laser.wavelength_nm,
             exact: false,
+            play: PlayState::default(),
         })
     }
 
@@ -478,6 +504,7 @@ impl VirtualBench {
     ) -> Result<(), BenchError> {
         let tr = &self.truth;
         let rng = &mut self.rng;
+        let play = &mut self.play;
         let zig = ziggurat_tables();
         let dt = tr.sample_period_s;
         let laser = tr.laser_wavelength_nm;
@@ -520,7 +547,9 @@ impl VirtualBench {
                 Some(f) => f.power_block(&mut block, n),
                 None => {
                     for j in 0..n {
-                        let real: [f64; 6] = std::array::from_fn(|i| block.q[j][i] + block.noise[j][i]);
+                        play.follow(&block.q[j], &tr.play_width);
+                        let real: [f64; 6] =
+                            std::array::from_fn(|i| block.q[j][i] + play.offset[i] + block.noise[j][i]);
                         let wavelength = block.wavelength[j];
                         let p = if wavelength == laser {
                             Ok(tr.power_exact(t0 + block.t[j], &real, &tr.fp))
@@ -642,6 +671,10 @@ impl Truth {
         let mut gap_um = l_um.abs();
         for e in &self.path_effects {
             gap_um += e.gap_change_nm(t_s, gap_um) * 1e-3;
+        }
+        let phase_rad = 2.0 * std::f64::consts::PI * gap_um / fp.fringe_period_um();
+        for e in &self.path_effects {
+            gap_um += e.cyclic_error_nm(phase_rad) * 1e-3;
         }
         fp.power(gap_um, tilt)
     }
@@ -1277,7 +1310,12 @@ impl Bench for VirtualBench {
         let mut trace = record.then(|| Trace::with_capacity(meta, n));
         let t0 = self.clock_s;
         let chunk = (0.05 / dt).max(1.0) as usize; // report progress every 50 ms of bench time
-        let mut fast = match (record, self.exact) {
+                                                   // A cyclic error of the phase (a hidden fringe nonlinearity) and the stages' play (hidden
+                                                   // reversal errors) are applied on the exact path only.
+        let exact = self.exact
+            || self.truth.play_width.iter().any(|w| *w != 0.0)
+            || self.truth.path_effects.iter().any(|e| matches!(e, Effect::FringeNonlinearity { .. }));
+        let mut fast = match (record, exact) {
             (true, false) => FastSegment::new(&self.truth, segment, t0, n)?,
             _ => None,
         };
@@ -1291,6 +1329,8 @@ impl Bench for VirtualBench {
             }
             let t = (end - 1) as f64 * dt;
             self.q_display = segment.position_at(t);
+            // Unrecorded moves drag the stages through their play too.
+            self.play.follow(&self.q_display, &self.truth.play_width);
             self.wavelength_nm = segment.wavelength_at(t).unwrap_or(laser);
             if control.cancelled() {
                 self.clock_s = t0 + t;
@@ -1448,6 +1488,51 @@ mod tests {
         assert!((3..=5).contains(&crossings), "{crossings} crossings");
     }
 
+    /// Hidden optical effects are the optics they describe: a bench hiding "no Gouy phase" and a
+    /// back face gives the power of a bench whose optics have them; a hidden cyclic error moves
+    /// the gap by a·cos φ, as a drift of that much at the same instant does.
+    #[test]
+    fn hidden_optical_and_cyclic_effects_act_on_the_signal() {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let back = crate::model::optics::BackFace { reflectance: 0.04, inverted: true, ..Default::default() };
+        let mut hidden = preset.clone();
+        hidden.effects = vec![
+            Effect::GouyPhase { scale_error: -1.0 },
+            Effect::LamellaBackFace {
+                amplitude_reflectance: -0.2,
+                thickness_um: back.thickness_um,
+                phase_index: back.phase_index,
+                group_index: back.group_index,
+            },
+        ];
+        let mut explicit = preset.clone();
+        explicit.optics.gouy_phase = false;
+        explicit.optics.back_face = Some(back);
+        let (a, b) = (VirtualBench::new(&hidden, None).unwrap(), VirtualBench::new(&explicit, None).unwrap());
+        let plain = VirtualBench::new(&preset, None).unwrap();
+        let chain = Chain::new(preset.robot_description().unwrap());
+        for q in [[0.0; 6], [30.0, -40.0, 120.0, 2.0, -3.0, 10.0], [-150.0, 150.0, 0.0, -4.0, 4.0, -45.0]] {
+            let (pa, pb) =
+                (a.reflected_power_mw(3.0, &q, 1560.0).unwrap(), b.reflected_power_mw(3.0, &q, 1560.0).unwrap());
+            assert!((pa - pb).abs() < 1e-12, "{q:?}: {pa} vs {pb}");
+            let p0 = plain.reflected_power_mw(3.0, &q, 1560.0).unwrap();
+            assert!((pa - p0).abs() > 1e-4 * p0, "{q:?}: the effects change nothing");
+
+            // The cyclic error against a drift of the same size at t = 2 s.
+            let (t_s, amplitude_nm) = (2.0, 3.0);
+            let q_rad: Vec<f64> = (0..6).map(|i| if i >= 3 { q[i].to_radians() } else { q[i] }).collect();
+            let gap_um = preset.truth.cavity(&chain.end_effector(&q_rad)).unwrap().length_um.abs();
+            let phase = 2.0 * std::f64::consts::PI * gap_um / plain.truth.fp.fringe_period_um();
+            let mut cyclic = preset.clone();
+            cyclic.effects = vec![Effect::FringeNonlinearity { in_phase_nm: amplitude_nm, quadrature_nm: 0.0 }];
+            let mut drift = preset.clone();
+            drift.effects = vec![Effect::ThermalDrift { nm_per_s: amplitude_nm * phase.cos() / t_s, nm_per_s2: 0.0 }];
+            let pc = VirtualBench::new(&cyclic, None).unwrap().reflected_power_mw(t_s, &q, 1560.0).unwrap();
+            let pd = VirtualBench::new(&drift, None).unwrap().reflected_power_mw(t_s, &q, 1560.0).unwrap();
+            assert!((pc - pd).abs() < 1e-12, "{q:?}: {pc} vs {pd}");
+        }
+    }
+
     #[test]
     fn cancelling_keeps_the_samples_recorded_so_far() {
         let mut b = VirtualBench::from_preset_name("table2-ideal", None).unwrap();
@@ -1574,8 +1659,9 @@ mod tests {
             Segment::Sweep { from_nm: 1555.0, to_nm: 1557.0, rate_nm_per_s: 2.0, label: "sweep".into() },
         ]);
         type Change = fn(&mut OpticalParams);
-        let cases: [(&str, Change); 5] = [
+        let cases: [(&str, Change); 6] = [
             ("no reflection", |o| o.lamella_reflectance = 0.0),
+            ("half the Gouy phase", |o| o.gouy_scale_error = -0.5),
             ("one beam", |o| o.beams = 1),
             ("back face", |o| o.back_face = Some(crate::model::optics::BackFace::default())),
             ("silicon, 40 beams", |o| {

@@ -6,6 +6,7 @@
 //! single number with one unit.
 
 use crate::model::effects::Effect;
+use crate::model::optics::BackFace;
 use crate::model::robot::{JointType, RobotDescription};
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +27,16 @@ pub enum CandidateKind {
     PivotOffset(String, usize),
     /// [`Effect::AxisTilt`] of a joint toward the link x (0) or y (1) axis (mrad).
     AxisTilt(String, usize),
+    /// [`Effect::ReversalError`] of a joint: its play (µm or °).
+    ReversalError(String),
+    /// [`Effect::GouyPhase`]: fractional error of the Gouy phase (dimensionless).
+    GouyPhase,
+    /// [`Effect::LamellaBackFace`] of the nominal lamella ([`BackFace::default`]: 500 µm of
+    /// LiNbO3): signed amplitude reflectance √R of the back face (dimensionless), the
+    /// parameter the field is linear in.
+    BackFaceAmplitude,
+    /// [`Effect::FringeNonlinearity`], the cos φ (0) or sin φ (1) term (nm).
+    FringeNonlinearity(usize),
 }
 
 /// One scalar candidate effect.
@@ -64,20 +75,31 @@ impl Candidate {
                 tilt_mrad[*k] = value;
                 Effect::AxisTilt { joint: j.clone(), tilt_mrad }
             }
+            CandidateKind::ReversalError(j) => Effect::ReversalError { joint: j.clone(), step: value },
+            CandidateKind::GouyPhase => Effect::GouyPhase { scale_error: value },
+            CandidateKind::BackFaceAmplitude => {
+                let b = BackFace::default();
+                Effect::LamellaBackFace {
+                    amplitude_reflectance: value,
+                    thickness_um: b.thickness_um,
+                    phase_index: b.phase_index,
+                    group_index: b.group_index,
+                }
+            }
+            CandidateKind::FringeNonlinearity(k) => {
+                let (in_phase_nm, quadrature_nm) = if *k == 0 { (value, 0.0) } else { (0.0, value) };
+                Effect::FringeNonlinearity { in_phase_nm, quadrature_nm }
+            }
         }
-    }
-
-    /// True for effects on the optical path (drift, scale), which act on the gap and not on the robot.
-    pub fn is_path(&self) -> bool {
-        matches!(self.kind, CandidateKind::PathScale | CandidateKind::DriftRate | CandidateKind::DriftAcceleration)
     }
 }
 
 /// Every scalar candidate of the effect library for a robot: path scale, drift rate and
-/// acceleration, scale errors of the prismatic joints, zero offsets of the revolute joints
-/// (a prismatic zero offset is a translation of the whole tool: always an extrinsic change),
-/// pivot offsets of the revolute joints along each world axis, and axis tilts of every joint.
-/// Sizes from SPEC section 9.
+/// acceleration, Gouy phase, lamella back face, fringe nonlinearity (cos and sin terms), scale
+/// errors of the prismatic joints, reversal errors of every joint, zero offsets of the revolute
+/// joints (a prismatic zero offset is a translation of the whole tool: always an extrinsic
+/// change), pivot offsets of the revolute joints along each world axis, and axis tilts of every
+/// joint. Sizes from SPEC section 9.
 pub fn library(robot: &RobotDescription) -> Vec<Candidate> {
     let c = |name: String, unit: &str, typical: f64, step: f64, kind| Candidate {
         name,
@@ -90,14 +112,31 @@ pub fn library(robot: &RobotDescription) -> Vec<Candidate> {
         c("optical path scale".into(), "ppm", 268.0, 10.0, CandidateKind::PathScale),
         c("thermal drift rate".into(), "nm/s", 0.5, 0.05, CandidateKind::DriftRate),
         c("thermal drift acceleration".into(), "nm/s²", 5e-4, 5e-5, CandidateKind::DriftAcceleration),
+        // The Gouy phase as a switch: ±1 turns it off or on; fractions are a wrong z_R.
+        c("Gouy phase scale error".into(), "fraction", 1.0, 0.05, CandidateKind::GouyPhase),
+        // √R = 0.2: R = 4 %, a glass lamella's back face or a LiNbO3 one with a poor AR coating.
+        // (An uncoated LiNbO3 back face, √R = 0.377, moves the calibration so far that the
+        // refit from its extrinsics stops in a local minimum: model such a lamella from the start.)
+        c("lamella back face amplitude reflectance".into(), "√R", 0.2, 0.01, CandidateKind::BackFaceAmplitude),
+        c("fringe nonlinearity cos φ".into(), "nm", 2.0, 0.1, CandidateKind::FringeNonlinearity(0)),
+        c("fringe nonlinearity sin φ".into(), "nm", 2.0, 0.1, CandidateKind::FringeNonlinearity(1)),
     ];
     for l in &robot.links {
         let j = l.name.clone();
         match l.joint {
             JointType::Prismatic => {
-                out.push(c(format!("joint scale error {j}"), "ppm", 800.0, 10.0, CandidateKind::JointScale(j.clone())))
+                out.push(c(format!("joint scale error {j}"), "ppm", 800.0, 10.0, CandidateKind::JointScale(j.clone())));
+                out.push(c(format!("reversal error {j}"), "µm", 1.0, 0.02, CandidateKind::ReversalError(j.clone())));
             }
             JointType::Revolute => {
+                // µrad-level (SPEC section 9): 20 µrad.
+                out.push(c(
+                    format!("reversal error {j}"),
+                    "°",
+                    20e-6f64.to_degrees(),
+                    1e-6f64.to_degrees(),
+                    CandidateKind::ReversalError(j.clone()),
+                ));
                 out.push(c(
                     format!("joint zero offset {j}"),
                     "°",
@@ -136,14 +175,18 @@ mod tests {
     #[test]
     fn every_library_variant_is_a_candidate_and_neutral_at_zero() {
         let cands = library(&RobotDescription::femto_6dof());
-        // 3 path + 3 scales + 3 zero offsets + 9 pivot coordinates + 12 tilts.
-        assert_eq!(cands.len(), 30);
+        // 3 path + 4 optical and cyclic + 3 scales + 6 reversal errors + 3 zero offsets + 9 pivot
+        // coordinates + 12 tilts.
+        assert_eq!(cands.len(), 40);
         for c in &cands {
             let e = c.effect(0.0);
             let r =
                 crate::model::effects::apply_all(std::slice::from_ref(&e), &RobotDescription::femto_6dof()).unwrap();
             assert_eq!(r, RobotDescription::femto_6dof(), "{} not neutral at zero", c.name);
             assert_eq!(e.gap_change_nm(100.0, 900.0), 0.0);
+            assert_eq!(e.cyclic_error_nm(0.7), 0.0);
+            let optics = crate::model::optics::OpticalParams::default();
+            assert_eq!(crate::model::effects::apply_optics(std::slice::from_ref(&e), &optics), optics);
         }
         let names: Vec<&str> = cands.iter().map(|c| c.effect(1.0).name()).collect();
         for n in [
@@ -153,6 +196,10 @@ mod tests {
             "joint zero offset",
             "pivot offset",
             "axis tilt",
+            "reversal error",
+            "Gouy phase",
+            "lamella back face",
+            "fringe nonlinearity",
         ] {
             assert!(names.contains(&n), "{n} missing");
         }

@@ -9,7 +9,7 @@
 use crate::diagnose::candidates::Candidate;
 use crate::identify::{parameter_scale, predict_with_path, Observation, ObservationKind, N_EXTRINSICS};
 use crate::measure::PhaseModel;
-use crate::model::effects::{apply_all, Effect, EffectError};
+use crate::model::effects::{apply_all, apply_optics, Effect, EffectError};
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::kinematics::Chain;
 use crate::model::optics::FabryPerot;
@@ -93,11 +93,24 @@ impl Predictor {
     ) -> Result<Vec<f64>, EffectError> {
         let robot = apply_all(effects, self.base.chain.description())?;
         let model = PhaseModel { chain: Chain::new(robot), extrinsics: *e, ..self.base.clone() };
-        let path: Vec<Effect> = effects
-            .iter()
-            .filter(|e| matches!(e, Effect::ThermalDrift { .. } | Effect::PathScale { .. }))
-            .cloned()
-            .collect();
+        let path: Vec<Effect> = effects.iter().filter(|e| e.is_path()).cloned().collect();
+        // Optical effects: the optics models rebuilt with them (cheap next to the predictions).
+        let optical: Vec<(f64, FabryPerot)>;
+        let fps = if effects.iter().any(Effect::is_optical) {
+            let params = apply_optics(effects, &self.base.optics);
+            optical = self
+                .fps
+                .iter()
+                .map(|(w, _)| {
+                    FabryPerot::new(&params, *w, self.base.n_air)
+                        .map(|fp| (*w, fp))
+                        .map_err(|e| EffectError::Optics(e.to_string()))
+                })
+                .collect::<Result<_, _>>()?;
+            &optical
+        } else {
+            &self.fps
+        };
         Ok(obs
             .iter()
             .map(|o| {
@@ -105,7 +118,7 @@ impl Predictor {
                     ObservationKind::FringeAmplitude { group, .. } => gains.get(group).copied().unwrap_or(1.0),
                     _ => 1.0,
                 };
-                match self.fps.iter().find(|(w, _)| *w == o.wavelength_nm) {
+                match fps.iter().find(|(w, _)| *w == o.wavelength_nm) {
                     Some((_, fp)) => predict_with_path(&model, fp, e, o, gain, &path),
                     None => f64::NAN,
                 }
@@ -297,7 +310,12 @@ pub fn fit(
         let mut scale = 1.0;
         for _ in 0..6 {
             let xn = &x + &dx * scale;
-            let rn = p.whitened_residuals(&layout.unpack(&template, &xn), obs)?;
+            // A step that takes an effect out of its accepted range (a back-face reflectance
+            // above 1) is refused like one that raises the cost.
+            let Ok(rn) = p.whitened_residuals(&layout.unpack(&template, &xn), obs) else {
+                scale *= 0.5;
+                continue;
+            };
             let cn = rn.norm_squared();
             if cn.is_finite() && cn <= cost {
                 let gain = cost - cn;

@@ -74,22 +74,36 @@ pub fn duration_s(m: &DesignedMotion) -> f64 {
 }
 
 /// Observation templates of motions run from bench time `start_s` (values zero, σ the template
-/// σ, times estimated by [`duration_s`]).
+/// σ, times estimated by [`duration_s`]). Approach directions: the bench starts at q = 0 with
+/// none known, and each motion starts with a move from where the last one ended.
 pub fn templates(motions: &[DesignedMotion], start_s: f64) -> Vec<Observation> {
     let mut t = start_s;
     let mut out = Vec::new();
+    let mut approach = [0i8; 6];
+    let mut at = [0.0; 6];
+    let go = |approach: &mut [i8; 6], from: &[f64; 6], to: &[f64; 6]| {
+        for j in 0..6 {
+            if to[j] != from[j] {
+                approach[j] = if to[j] > from[j] { 1 } else { -1 };
+            }
+        }
+    };
     for m in motions {
         let d = duration_s(m);
         let t0 = t + 1.0;
-        let obs = |kind, sigma, time_s| Observation {
+        let obs = |kind, sigma, time_s, approach| Observation {
             label: m.label.clone(),
             kind,
             sigma,
             wavelength_nm: TEMPLATE_WAVELENGTH_NM,
             time_s,
+            approach,
         };
         match &m.kind {
             MotionKind::Move { from_display, to_display } => {
+                go(&mut approach, &at, from_display);
+                let from_approach = approach;
+                go(&mut approach, from_display, to_display);
                 for k in 1..=4 {
                     let f = k as f64 / 4.0;
                     let to: [f64; 6] = std::array::from_fn(|j| from_display[j] + f * (to_display[j] - from_display[j]));
@@ -97,19 +111,31 @@ pub fn templates(motions: &[DesignedMotion], start_s: f64) -> Vec<Observation> {
                         ObservationKind::GapChange { from_display: *from_display, to_display: to, dl_nm: 0.0 },
                         TEMPLATE_SIGMA_NM,
                         [t0, t0 + f * (d - 1.0)],
+                        [from_approach, approach],
                     ));
                 }
+                at = *to_display;
             }
-            MotionKind::Dwell { at_display, duration_s } => out.push(obs(
-                ObservationKind::GapChange { from_display: *at_display, to_display: *at_display, dl_nm: 0.0 },
-                TEMPLATE_SIGMA_NM,
-                [t0, t0 + duration_s],
-            )),
-            MotionKind::Sweep { at_display } => out.push(obs(
-                ObservationKind::AbsoluteGap { at_display: *at_display, gap_um: 0.0 },
-                TEMPLATE_SIGMA_GAP_UM,
-                [t0, t0 + SWEEP_S],
-            )),
+            MotionKind::Dwell { at_display, duration_s } => {
+                go(&mut approach, &at, at_display);
+                out.push(obs(
+                    ObservationKind::GapChange { from_display: *at_display, to_display: *at_display, dl_nm: 0.0 },
+                    TEMPLATE_SIGMA_NM,
+                    [t0, t0 + duration_s],
+                    [approach; 2],
+                ));
+                at = *at_display;
+            }
+            MotionKind::Sweep { at_display } => {
+                go(&mut approach, &at, at_display);
+                out.push(obs(
+                    ObservationKind::AbsoluteGap { at_display: *at_display, gap_um: 0.0 },
+                    TEMPLATE_SIGMA_GAP_UM,
+                    [t0, t0 + SWEEP_S],
+                    [approach; 2],
+                ));
+                at = *at_display;
+            }
         }
         t += d;
     }
@@ -348,6 +374,7 @@ pub fn paper_calibration() -> Vec<Observation> {
                 sigma: 1.0,
                 wavelength_nm: TEMPLATE_WAVELENGTH_NM,
                 time_s: [end + k as f64; 2],
+                approach: Default::default(),
             });
         }
     }

@@ -99,6 +99,7 @@ mod tests {
                 sigma: 1.0,
                 wavelength_nm: 1560.0,
                 time_s: [t, t + 1.0],
+                approach: Default::default(),
             }
         };
         let obs = vec![mk("a", 2, 100.0, 0.0), mk("a", 2, 100.0, 1.0), mk("b", 3, -4.0, 10.0), mk("b", 3, -4.0, 11.0)];

@@ -13,7 +13,10 @@
 //! - ΔBIC = n·ln(RSS/(RSS − T)) − ln n, positive when the candidate is worth its parameter.
 //!
 //! A candidate is significant when F exceeds the Bonferroni threshold for the family-wise
-//! false-alarm rate [`FAMILY_FALSE_ALARM`] over all candidates and ΔBIC > 0.
+//! false-alarm rate [`FAMILY_FALSE_ALARM`] over all candidates, ΔBIC > 0, and its estimate is
+//! plausible: at most [`PLAUSIBLE_TYPICAL_MULTIPLE`] times its typical size. A residual that a
+//! candidate explains only at a thousand times any real bench's size (a stage scale error of
+//! −1e6 ppm from uncalibrated extrinsics) is structure the candidate does not explain.
 
 use crate::diagnose::candidates::Candidate;
 use crate::diagnose::fit::{ModelState, Predictor, RANK_TOLERANCE};
@@ -24,6 +27,10 @@ use serde::{Deserialize, Serialize};
 
 /// Family-wise false-alarm probability of naming any candidate on data with no missing effect.
 pub const FAMILY_FALSE_ALARM: f64 = 0.01;
+
+/// Largest plausible estimate of a candidate, in multiples of its typical size (SPEC section 9's
+/// sizes are typical, the largest are a few times those).
+pub const PLAUSIBLE_TYPICAL_MULTIPLE: f64 = 20.0;
 
 /// Cosine between two candidates' projected signatures above which they cannot be told apart.
 pub const AMBIGUITY_COSINE: f64 = 0.95;
@@ -110,8 +117,15 @@ pub struct CandidateScore {
     pub absorbed_share: f64,
     /// Expected score at the candidate's typical size, |s⊥|²·typical² (≥ 25 is a clear detection).
     pub detectability_at_typical: f64,
-    /// Significant at the family-wise threshold.
+    /// The estimate is within [`PLAUSIBLE_TYPICAL_MULTIPLE`] typical sizes.
+    #[serde(default = "plausible_default")]
+    pub plausible: bool,
+    /// Significant at the family-wise threshold, and plausible.
     pub significant: bool,
+}
+
+fn plausible_default() -> bool {
+    true
 }
 
 /// Standard normal upper-tail probability Q(z), from the complementary error function
@@ -187,7 +201,11 @@ pub fn score(
                 delta_bic,
                 absorbed_share,
                 detectability_at_typical: ns2 * c.typical * c.typical,
-                significant: visible && f > threshold && delta_bic > 0.0,
+                plausible: estimate.abs() <= PLAUSIBLE_TYPICAL_MULTIPLE * c.typical.abs(),
+                significant: visible
+                    && f > threshold
+                    && delta_bic > 0.0
+                    && estimate.abs() <= PLAUSIBLE_TYPICAL_MULTIPLE * c.typical.abs(),
             }
         })
         .collect();

@@ -4,7 +4,7 @@ use super::motions::{paper_calibration, SimulatedBench};
 use super::*;
 use crate::model::air::AmbientConditions;
 use crate::model::effects::Effect;
-use crate::model::optics::OpticalParams;
+use crate::model::optics::{BackFace, OpticalParams};
 use crate::model::robot::RobotDescription;
 
 fn base() -> PhaseModel {
@@ -46,6 +46,12 @@ fn name_of(e: &Effect) -> String {
         }
         Effect::ThermalDrift { .. } => "thermal drift rate".into(),
         Effect::PathScale { .. } => "optical path scale".into(),
+        Effect::ReversalError { joint, .. } => format!("reversal error {joint}"),
+        Effect::GouyPhase { .. } => "Gouy phase scale error".into(),
+        Effect::LamellaBackFace { .. } => "lamella back face amplitude reflectance".into(),
+        Effect::FringeNonlinearity { in_phase_nm, .. } => {
+            format!("fringe nonlinearity {}", if *in_phase_nm != 0.0 { "cos φ" } else { "sin φ" })
+        }
     }
 }
 
@@ -56,6 +62,10 @@ fn size_of(e: &Effect) -> f64 {
         Effect::JointScale { ppm, .. } | Effect::PathScale { ppm } => *ppm,
         Effect::AxisTilt { tilt_mrad, .. } => tilt_mrad[0] + tilt_mrad[1],
         Effect::ThermalDrift { nm_per_s, .. } => *nm_per_s,
+        Effect::ReversalError { step, .. } => *step,
+        Effect::GouyPhase { scale_error } => *scale_error,
+        Effect::LamellaBackFace { amplitude_reflectance, .. } => *amplitude_reflectance,
+        Effect::FringeNonlinearity { in_phase_nm, quadrature_nm } => in_phase_nm + quadrature_nm,
     }
 }
 
@@ -69,7 +79,24 @@ fn typical_effects() -> Vec<Effect> {
         Effect::AxisTilt { joint: "q3".into(), tilt_mrad: [0.0, 0.6] },
         Effect::ThermalDrift { nm_per_s: 0.5, nm_per_s2: 0.0 },
         Effect::PathScale { ppm: 268.0 },
+        Effect::ReversalError { joint: "q3".into(), step: 1.0 },
+        Effect::ReversalError { joint: "q5".into(), step: 20e-6f64.to_degrees() },
+        Effect::GouyPhase { scale_error: -1.0 },
+        back_face(0.2),
+        Effect::FringeNonlinearity { in_phase_nm: 2.0, quadrature_nm: 0.0 },
+        Effect::FringeNonlinearity { in_phase_nm: 0.0, quadrature_nm: -2.0 },
     ]
+}
+
+/// The nominal lamella's back face ([`BackFace::default`]) with amplitude reflectance `a`.
+fn back_face(a: f64) -> Effect {
+    let b = BackFace::default();
+    Effect::LamellaBackFace {
+        amplitude_reflectance: a,
+        thickness_um: b.thickness_um,
+        phase_index: b.phase_index,
+        group_index: b.group_index,
+    }
 }
 
 /// The named effect for a hidden one: the same candidate, or (for effects exactly equivalent

@@ -275,7 +275,14 @@ mod tests {
         let fp = FabryPerot::new(&m.optics, 1560.0, m.n_air).unwrap();
         let mut out = Vec::new();
         let mut push = |kind: ObservationKind, sigma: f64| {
-            let mut o = Observation { label: "s".into(), kind, sigma, wavelength_nm: 1560.0, time_s: [0.0; 2] };
+            let mut o = Observation {
+                label: "s".into(),
+                kind,
+                sigma,
+                wavelength_nm: 1560.0,
+                time_s: [0.0; 2],
+                approach: Default::default(),
+            };
             let v = predict(&m, &fp, truth, &o, 2.0);
             match &mut o.kind {
                 ObservationKind::GapChange { dl_nm, .. } => *dl_nm = v,

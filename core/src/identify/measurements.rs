@@ -47,6 +47,7 @@ pub fn observations_from_trace(
                 sigma: s.gap.sigma_um.hypot(options.gap_sigma_floor_um),
                 wavelength_nm: trace.wavelength_nm[trace.len() / 2],
                 time_s: [trace.t_s[0], trace.t_s[trace.len() - 1]],
+                approach: Default::default(),
             });
         }
         Measurement::Motion(m) => {
@@ -75,6 +76,7 @@ pub fn observations_from_trace(
                     sigma: sigma.hypot(floor),
                     wavelength_nm,
                     time_s: [trace.t_s[0], trace.t_s[i]],
+                    approach: Default::default(),
                 });
             }
             if label.starts_with("tilt scan") {
@@ -119,6 +121,7 @@ fn amplitudes(trace: &Trace, dl_nm: &[f64], half_fringe_nm: f64, group: usize, w
                 sigma: sigma.max(1e-12) * std::f64::consts::FRAC_1_SQRT_2 * 2.0,
                 wavelength_nm,
                 time_s: [trace.t_s[mid]; 2],
+                approach: Default::default(),
             }
         })
         .collect()
@@ -134,6 +137,57 @@ pub struct Extracted {
     pub skipped: Vec<(String, String)>,
 }
 
+/// Smallest joint motion that sets an approach direction (µm for q1-q3, ° for q4-q6): above
+/// encoder noise (nm, µrad), below any real motion.
+const APPROACH_MIN_MOVE: [f64; 6] = [0.05, 0.05, 0.05, 5e-4, 5e-4, 5e-4];
+
+/// The direction each joint last moved in, carried from trace to trace (recorded in order;
+/// between two traces the stages move from one's last pose to the next one's first).
+#[derive(Debug, Clone, Copy, Default)]
+struct Approach {
+    state: [i8; 6],
+    last_pose: Option<[f64; 6]>,
+}
+
+impl Approach {
+    /// The directions at the start of `trace` (after the move to its first pose); the state
+    /// becomes the directions at its end.
+    fn enter(&mut self, trace: &Trace) -> [i8; 6] {
+        if trace.is_empty() {
+            return self.state;
+        }
+        let first = trace.joints_display(0);
+        if let Some(last) = self.last_pose {
+            for j in 0..6 {
+                if (first[j] - last[j]).abs() > APPROACH_MIN_MOVE[j] {
+                    self.state[j] = if first[j] > last[j] { 1 } else { -1 };
+                }
+            }
+        }
+        let start = self.state;
+        self.state = approach_at(trace, trace.len() - 1, &start);
+        self.last_pose = Some(trace.joints_display(trace.len() - 1));
+        start
+    }
+}
+
+/// The direction each joint last moved in before sample `i` of `trace`: the sign of its
+/// reading at `i` minus the latest earlier reading more than [`APPROACH_MIN_MOVE`] away, or
+/// `start` when it has not moved that much since the trace began.
+fn approach_at(trace: &Trace, i: usize, start: &[i8; 6]) -> [i8; 6] {
+    std::array::from_fn(|j| {
+        let c = trace.joint_column(j);
+        let qi = c[i];
+        c[..i].iter().rev().find(|&&q| (qi - q).abs() > APPROACH_MIN_MOVE[j]).map_or(start[j], |&q| {
+            if qi > q {
+                1
+            } else {
+                -1
+            }
+        })
+    })
+}
+
 /// Observations from many traces; a trace whose analysis fails is listed in
 /// [`Extracted::skipped`] and the others are still used.
 pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &ExtractOptions) -> Extracted {
@@ -144,7 +198,10 @@ pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &
         traces.par_iter().map(|t| observations_from_trace(t, model, options, 0)).collect();
     let mut out = Extracted::default();
     let mut group = 0;
+    let mut approach = Approach::default();
     for (t, r) in traces.iter().zip(results) {
+        // Every trace moves the stages, analysed or not.
+        let start = approach.enter(t);
         let mut obs = match r {
             Ok(o) => o,
             Err(e) => {
@@ -152,6 +209,14 @@ pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &
                 continue;
             }
         };
+        for o in &mut obs {
+            let at = |time_s: f64| t.t_s.partition_point(|&x| x < time_s).min(t.len() - 1);
+            o.approach = match o.kind {
+                ObservationKind::GapChange { .. } => [start, approach_at(t, at(o.time_s[1]), &start)],
+                ObservationKind::AbsoluteGap { .. } => [start; 2],
+                ObservationKind::FringeAmplitude { .. } => [approach_at(t, at(o.time_s[0]), &start); 2],
+            };
+        }
         let mut has_amplitudes = false;
         for o in &mut obs {
             if let ObservationKind::FringeAmplitude { group: g, .. } = &mut o.kind {

@@ -78,6 +78,10 @@ pub struct Observation {
     /// pose measurement's start and end): what time-dependent effects (drift) act on.
     #[serde(default)]
     pub time_s: [f64; 2],
+    /// The direction each joint q1..q6 last moved in before the start pose and before the end
+    /// pose (+1, −1; 0 when unknown or never moved): what a reversal error acts on.
+    #[serde(default)]
+    pub approach: [[i8; 6]; 2],
 }
 
 impl Observation {
@@ -156,8 +160,10 @@ pub fn predict(model: &PhaseModel, fp: &FabryPerot, e: &Extrinsics, obs: &Observ
 }
 
 /// [`predict`] with path effects (drift, path scale: [`Effect::gap_change_nm`]) acting on the
-/// gap at the observation's times, in the order given, as the virtual bench applies them.
-/// Geometric effects act through `model.chain` (see [`crate::model::effects::apply_all`]).
+/// gap at the observation's times, in the order given, as the virtual bench applies them, and
+/// cyclic errors ([`Effect::cyclic_error_nm`]) on the phase-equivalent gaps.
+/// Geometric effects act through `model.chain` (see [`crate::model::effects::apply_all`]),
+/// optical ones through `fp` (see [`crate::model::effects::apply_optics`]).
 pub fn predict_with_path(
     model: &PhaseModel,
     fp: &FabryPerot,
@@ -174,24 +180,39 @@ pub fn predict_with_path(
         gap_um
     };
     let t_mid = 0.5 * (obs.time_s[0] + obs.time_s[1]);
+    let play = crate::model::effects::reversal_play(path, model.chain.description());
+    let reversal = play.iter().any(|p| *p != 0.0);
+    // The end poses' real joints: the reading moved by any reversal error (start, end).
+    let real = |q: &[f64; 6], end: usize| {
+        if reversal {
+            crate::model::effects::real_joints(q, &obs.approach[end], &play)
+        } else {
+            *q
+        }
+    };
     let cavity = |q: &[f64; 6]| {
         let q = model.chain.description().q_from_display(q);
         e.cavity(&model.chain.end_effector(&q)).ok()
     };
     let phase_gap_nm = |q: &[f64; 6], t_s: f64| match cavity(q) {
         Some(c) => {
-            fp.fundamental_phase_rad(optical_gap_um(c.length_um, t_s), c.tilt_rad) * fp.wavelength_nm()
-                / (4.0 * std::f64::consts::PI * fp.medium_index())
+            let gap_um = optical_gap_um(c.length_um, t_s);
+            let mut nm = fp.fundamental_phase_rad(gap_um, c.tilt_rad) * fp.wavelength_nm()
+                / (4.0 * std::f64::consts::PI * fp.medium_index());
+            for p in path {
+                nm += p.cyclic_error_nm(2.0 * std::f64::consts::PI * gap_um / fp.fringe_period_um());
+            }
+            nm
         }
         None => f64::NAN,
     };
     match &obs.kind {
         ObservationKind::GapChange { from_display, to_display, .. } => {
-            phase_gap_nm(to_display, obs.time_s[1]) - phase_gap_nm(from_display, obs.time_s[0])
+            phase_gap_nm(&real(to_display, 1), obs.time_s[1]) - phase_gap_nm(&real(from_display, 0), obs.time_s[0])
         }
-        ObservationKind::AbsoluteGap { at_display, .. } => cavity(at_display)
+        ObservationKind::AbsoluteGap { at_display, .. } => cavity(&real(at_display, 1))
             .map_or(f64::NAN, |c| optical_gap_um(c.length_um, t_mid) * (1.0 - c.tilt_rad * c.tilt_rad / 2.0)),
-        ObservationKind::FringeAmplitude { at_display, .. } => cavity(at_display)
+        ObservationKind::FringeAmplitude { at_display, .. } => cavity(&real(at_display, 1))
             .map_or(f64::NAN, |c| gain * half_peak_to_peak_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)),
     }
 }

@@ -238,6 +238,7 @@ mod tests {
                 sigma: 2.0,
                 wavelength_nm: 1560.0,
                 time_s: [0.0; 2],
+                approach: Default::default(),
             })
             .collect()
     }

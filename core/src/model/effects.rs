@@ -1,11 +1,12 @@
 //! The effect library: named, parametrised extensions of the bench model, neutral at zero.
 //! Owns how each effect acts on the forward model; the virtual bench hides effects and the diagnosis fits them with this same code.
 //!
-//! An effect acts in one of three places: on the robot's intrinsic geometry (through
+//! An effect acts in one of four places: on the robot's intrinsic geometry (through
 //! [`crate::model::robot::JointErrors`]), on the cavity length over time (drift, index scale),
-//! or on the signal. The diagnosis workflow extends this list; bench files name effects by
+//! on the optics (Gouy phase, lamella back face), or on the measured phase (cyclic error). The diagnosis workflow extends this list; bench files name effects by
 //! these variants, with units in every field name.
 
+use crate::model::optics::{BackFace, OpticalParams};
 use crate::model::robot::RobotDescription;
 use serde::{Deserialize, Serialize};
 
@@ -56,6 +57,45 @@ pub enum Effect {
         /// Tilt toward the link x and y axes (mrad).
         tilt_mrad: [f64; 2],
     },
+    /// Reversal error of a stick-slip stage: the stage lags its reading by half `step` in the
+    /// direction it last moved (a play of `step` between the sensor and the platform), so a pose
+    /// approached from opposite sides differs by `step`.
+    ReversalError {
+        /// Joint name.
+        joint: String,
+        /// Width of the play, in the joint's display unit (µm or °).
+        step: f64,
+    },
+    /// The beam's Gouy phase differs from the model's: each returning beam's Gouy phase is
+    /// scaled by (1 + `scale_error`) when the model has one (−1: the beam has none), or by
+    /// `scale_error` when the model has none (+1: the switch the model left off).
+    GouyPhase {
+        /// Fractional error of the Gouy phase (dimensionless).
+        scale_error: f64,
+    },
+    /// The lamella's back face reflects: a second cavity behind the first, `thickness_um`
+    /// deeper at the lamella's index.
+    LamellaBackFace {
+        /// Amplitude reflectance of the back face seen from inside the lamella (dimensionless,
+        /// √R; negative for a π phase shift on reflection, as from a high-index coating).
+        amplitude_reflectance: f64,
+        /// Lamella thickness (µm).
+        thickness_um: f64,
+        /// Phase index of the lamella at the laser wavelength (dimensionless).
+        phase_index: f64,
+        /// Group index of the lamella (dimensionless).
+        group_index: f64,
+    },
+    /// A cyclic error of the measured phase, periodic over one fringe: the gap reads
+    /// `in_phase_nm·cos φ + quadrature_nm·sin φ` more than it is, φ = 4π·n·gap/λ. What a fringe
+    /// analysis that assumes a pure cosine leaves when the fringe carries a 2nd harmonic (the
+    /// paper's counting, dL imported from another system).
+    FringeNonlinearity {
+        /// Amplitude of the cos φ term (nm).
+        in_phase_nm: f64,
+        /// Amplitude of the sin φ term (nm).
+        quadrature_nm: f64,
+    },
 }
 
 /// Why an effect cannot be applied.
@@ -71,6 +111,9 @@ pub enum EffectError {
         /// The joints the robot has.
         known: String,
     },
+    /// An optical effect takes the optics out of their accepted range.
+    #[error("optical effects: {0}")]
+    Optics(String),
 }
 
 impl Effect {
@@ -83,6 +126,10 @@ impl Effect {
             Effect::JointZeroOffset { .. } => "joint zero offset",
             Effect::PivotOffset { .. } => "pivot offset",
             Effect::AxisTilt { .. } => "axis tilt",
+            Effect::ReversalError { .. } => "reversal error",
+            Effect::GouyPhase { .. } => "Gouy phase",
+            Effect::LamellaBackFace { .. } => "lamella back face",
+            Effect::FringeNonlinearity { .. } => "fringe nonlinearity",
         }
     }
 
@@ -97,6 +144,18 @@ impl Effect {
             Effect::JointZeroOffset { .. } => "a stage's zero is not where the model puts it",
             Effect::PivotOffset { .. } => "a goniometer's rotation axis misses the common rotation centre",
             Effect::AxisTilt { .. } => "a stage's axis is not along its nominal direction",
+            Effect::ReversalError { .. } => {
+                "a stage stops short of its reading by half its play, on the side it came from: poses depend on the approach"
+            }
+            Effect::GouyPhase { .. } => {
+                "the beam's Gouy phase is not the model's: the fringe phase departs from 2k·L near the Rayleigh range"
+            }
+            Effect::LamellaBackFace { .. } => {
+                "the lamella's back face reflects: a second cavity pulls the fringe phase and amplitude with tilt and gap"
+            }
+            Effect::FringeNonlinearity { .. } => {
+                "the fringe analysis reads the phase with a cyclic error of one fringe's period (unmodelled harmonics)"
+            }
         }
     }
 
@@ -139,9 +198,68 @@ impl Effect {
                     robot.links[i].errors.axis_offset_um[k] += local[k];
                 }
             }
-            Effect::ThermalDrift { .. } | Effect::PathScale { .. } => {}
+            Effect::ReversalError { joint, .. } => {
+                index(joint)?;
+            }
+            Effect::ThermalDrift { .. }
+            | Effect::PathScale { .. }
+            | Effect::GouyPhase { .. }
+            | Effect::LamellaBackFace { .. }
+            | Effect::FringeNonlinearity { .. } => {}
         }
         Ok(())
+    }
+
+    /// Apply the optical part of the effect to the optical parameters (Gouy phase, back face).
+    pub fn apply_to_optics(&self, optics: &mut OpticalParams) {
+        match self {
+            Effect::GouyPhase { scale_error } => optics.gouy_scale_error += scale_error,
+            Effect::LamellaBackFace { amplitude_reflectance, thickness_um, phase_index, group_index }
+                if *amplitude_reflectance != 0.0 =>
+            {
+                optics.back_face = Some(BackFace {
+                    thickness_um: *thickness_um,
+                    phase_index: *phase_index,
+                    group_index: *group_index,
+                    reference_wavelength_nm: optics.back_face.map_or(1560.0, |b| b.reference_wavelength_nm),
+                    reflectance: amplitude_reflectance * amplitude_reflectance,
+                    inverted: *amplitude_reflectance < 0.0,
+                });
+            }
+            _ => {}
+        }
+    }
+
+    /// True for the effects that act on each observation's own conditions (time, gap, fringe
+    /// phase, approach directions) rather than on the model: drift, path scale, cyclic error
+    /// ([`Effect::gap_change_nm`], [`Effect::cyclic_error_nm`]) and reversal errors
+    /// ([`reversal_play`]).
+    pub fn is_path(&self) -> bool {
+        matches!(
+            self,
+            Effect::ThermalDrift { .. }
+                | Effect::PathScale { .. }
+                | Effect::FringeNonlinearity { .. }
+                | Effect::ReversalError { .. }
+        )
+    }
+
+    /// True for the effects that act on the optical parameters ([`Effect::apply_to_optics`]).
+    pub fn is_optical(&self) -> bool {
+        matches!(self, Effect::GouyPhase { .. } | Effect::LamellaBackFace { .. })
+    }
+
+    /// Cyclic error (nm) the effect adds to the phase-equivalent gap at fringe phase
+    /// `phase_rad` = 4π·n·gap/λ.
+    #[inline]
+    pub fn cyclic_error_nm(&self, phase_rad: f64) -> f64 {
+        match self {
+            Effect::FringeNonlinearity { in_phase_nm, quadrature_nm } => {
+                let (s, c) = phase_rad.sin_cos();
+                in_phase_nm * c + quadrature_nm * s
+            }
+            _ => 0.0,
+        }
     }
 
     /// Change of the optical gap (nm) at time `t_s` caused by the effect, for a geometric gap
@@ -154,6 +272,36 @@ impl Effect {
             _ => 0.0,
         }
     }
+}
+
+/// The play of each joint of `robot` (display units, µm or °) from the reversal errors of a
+/// list; joints the robot does not have are ignored ([`Effect::apply_to_robot`] refuses them).
+pub fn reversal_play(effects: &[Effect], robot: &RobotDescription) -> [f64; 6] {
+    let mut play = [0.0; 6];
+    for e in effects {
+        if let Effect::ReversalError { joint, step } = e {
+            if let Some(i) = robot.links.iter().position(|l| &l.name == joint).filter(|&i| i < 6) {
+                play[i] += step;
+            }
+        }
+    }
+    play
+}
+
+/// A pose's real joints from its reading (display units) and the directions each joint last
+/// moved in: the stage lags by half its play.
+#[inline]
+pub fn real_joints(display: &[f64; 6], approach: &[i8; 6], play: &[f64; 6]) -> [f64; 6] {
+    std::array::from_fn(|j| display[j] - 0.5 * f64::from(approach[j]) * play[j])
+}
+
+/// Apply the optical effects of a list to optical parameters.
+pub fn apply_optics(effects: &[Effect], optics: &OpticalParams) -> OpticalParams {
+    let mut o = *optics;
+    for e in effects {
+        e.apply_to_optics(&mut o);
+    }
+    o
 }
 
 /// Apply a list of effects to a robot description.
@@ -199,5 +347,37 @@ mod tests {
         assert_relative_eq!(d.gap_change_nm(10.0, 900.0), 1.0 + 0.1, epsilon = 1e-12);
         let s = Effect::PathScale { ppm: 268.0 };
         assert_relative_eq!(s.gap_change_nm(0.0, 300.0), 80.4, epsilon = 1e-9);
+    }
+
+    #[test]
+    fn optical_effects_set_the_optics_and_the_cyclic_error_is_one_fringe_periodic() {
+        let base = OpticalParams::default();
+        let o = apply_optics(&[Effect::GouyPhase { scale_error: -1.0 }], &base);
+        assert_eq!(o.gouy_scale_error, -1.0);
+        let e = Effect::LamellaBackFace {
+            amplitude_reflectance: -0.2,
+            thickness_um: 300.0,
+            phase_index: 1.5,
+            group_index: 1.52,
+        };
+        let b = apply_optics(&[e], &base).back_face.unwrap();
+        assert_relative_eq!(b.reflectance, 0.04, epsilon = 1e-15);
+        assert!(b.inverted && b.thickness_um == 300.0 && b.phase_index == 1.5 && b.group_index == 1.52);
+        assert!(e_is_neither_path_nor_geometric(&Effect::GouyPhase { scale_error: 0.3 }));
+        let c = Effect::FringeNonlinearity { in_phase_nm: 2.0, quadrature_nm: -1.0 };
+        assert!(c.is_path() && !c.is_optical());
+        for phi in [0.0, 0.4, 2.0, -3.0] {
+            assert_relative_eq!(c.cyclic_error_nm(phi), 2.0 * phi.cos() - phi.sin(), epsilon = 1e-12);
+            assert_relative_eq!(
+                c.cyclic_error_nm(phi + 2.0 * std::f64::consts::PI),
+                c.cyclic_error_nm(phi),
+                epsilon = 1e-12
+            );
+        }
+    }
+
+    fn e_is_neither_path_nor_geometric(e: &Effect) -> bool {
+        let robot = RobotDescription::femto_6dof();
+        e.is_optical() && !e.is_path() && apply_all(std::slice::from_ref(e), &robot).unwrap() == robot
     }
 }

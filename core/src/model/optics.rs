@@ -91,6 +91,9 @@ pub struct BackFace {
     pub reference_wavelength_nm: f64,
     /// Power reflectance of the back face seen from inside the lamella (dimensionless).
     pub reflectance: f64,
+    /// The back face reflects with a π phase shift (a coating of higher index than the
+    /// lamella); false for an uncoated face to air.
+    pub inverted: bool,
 }
 
 impl Default for BackFace {
@@ -101,6 +104,7 @@ impl Default for BackFace {
             group_index: 2.2634,
             reference_wavelength_nm: 1560.0,
             reflectance: 0.142,
+            inverted: false,
         }
     }
 }
@@ -127,6 +131,11 @@ pub struct OpticalParams {
     pub back_face: Option<BackFace>,
     /// Include the Gouy phase arctan(m·|L|/z_R) of each returning beam.
     pub gouy_phase: bool,
+    /// Error of the Gouy phase, as a fraction of it (dimensionless, 0 for a Gaussian beam):
+    /// each beam's Gouy phase is scaled by `gouy_phase as 0/1 + gouy_scale_error`. The effect
+    /// library's "Gouy phase" sets it (−1 removes a Gouy phase the model has, +1 adds one it
+    /// lacks); a bench never needs it otherwise.
+    pub gouy_scale_error: f64,
     /// Number of cavity round trips summed (≥ 1; 1 gives the two-beam model).
     pub beams: usize,
     /// Power launched into the fiber towards the cavity, mW. Reflected powers are returned
@@ -143,6 +152,7 @@ impl Default for OpticalParams {
             cleave_angle_deg: 0.0,
             back_face: None,
             gouy_phase: true,
+            gouy_scale_error: 0.0,
             beams: 4,
             input_power_mw: 1.0,
         }
@@ -183,6 +193,7 @@ impl OpticalParams {
         check("cleave_angle_deg", self.cleave_angle_deg, -20.0, 20.0, "°")?;
         check("beams", self.beams as f64, 1.0, 10_000.0, "")?;
         check("input_power_mw", self.input_power_mw, 0.0, 1e6, "mW")?;
+        check("gouy_scale_error", self.gouy_scale_error, -10.0, 10.0, "")?;
         if let Some(b) = &self.back_face {
             check("back_face.thickness_um", b.thickness_um, 0.0, 1e6, "µm")?;
             check("back_face.phase_index", b.phase_index, 1.0, 5.0, "")?;
@@ -306,7 +317,8 @@ pub struct FabryPerot {
     front: Cavity,
     back: Option<Cavity>,
     beams: u32,
-    gouy_phase: bool,
+    /// Scale of the Gouy phase: 1 with it, 0 without, anything else with a Gouy-phase error.
+    gouy_scale: f64,
     input_power_mw: f64,
 }
 
@@ -328,7 +340,7 @@ impl FabryPerot {
             let k_ref = 2.0 * PI / (b.reference_wavelength_nm * 1e-3);
             let kn_t = k_ref * b.phase_index + b.group_index * (k0 - k_ref);
             Cavity {
-                r: (1.0 - r2 * r2) * b.reflectance.sqrt(),
+                r: (1.0 - r2 * r2) * b.reflectance.sqrt() * if b.inverted { -1.0 } else { 1.0 },
                 extra_reduced_um: b.thickness_um * medium_index / b.phase_index,
                 extra_phase_rad: 2.0 * kn_t * b.thickness_um,
                 extra_phase_per_k_um: 2.0 * b.group_index * b.thickness_um / medium_index,
@@ -347,7 +359,7 @@ impl FabryPerot {
             front: Cavity { r: r2, extra_reduced_um: 0.0, extra_phase_rad: 0.0, extra_phase_per_k_um: 0.0 },
             back,
             beams: params.beams as u32,
-            gouy_phase: params.gouy_phase,
+            gouy_scale: f64::from(u8::from(params.gouy_phase)) + params.gouy_scale_error,
             input_power_mw: params.input_power_mw,
         })
     }
@@ -409,7 +421,7 @@ impl FabryPerot {
     /// both near |L| ≈ 70 µm, square lamella.
     pub fn fringe_phase_rad(&self, gap_um: f64, tilt_rad: f64) -> f64 {
         let gap = gap_um.abs();
-        let gouy = if self.gouy_phase { (gap / self.rayleigh_um).atan() } else { 0.0 };
+        let gouy = if self.gouy_scale != 0.0 { self.gouy_scale * (gap / self.rayleigh_um).atan() } else { 0.0 };
         2.0 * self.k_per_um * gap - gouy - self.k_per_um * tilt_rad * tilt_rad * gap + PI
     }
 
@@ -458,7 +470,13 @@ impl FabryPerot {
         for m in 1..=self.beams {
             let x = f64::from(m) * ell;
             let inv = 1.0 / (1.0 + x * x);
-            let c_m = if self.gouy_phase { Complex::new(inv, x * inv) } else { Complex::new(inv.sqrt(), 0.0) };
+            let c_m = if self.gouy_scale == 1.0 {
+                Complex::new(inv, x * inv)
+            } else if self.gouy_scale == 0.0 {
+                Complex::new(inv.sqrt(), 0.0)
+            } else {
+                Complex::from_polar(inv.sqrt(), self.gouy_scale * x.atan())
+            };
             let weight = coef * q_m;
             sum += c_m * phase * weight;
             if weight.abs() < NEGLIGIBLE_AMPLITUDE {
@@ -591,11 +609,15 @@ impl FabryPerot {
                 let a_m = mf * (mf * mf + 2.0) / 3.0;
                 let x = mf * dist / self.rayleigh_um;
                 // c_m and d(ln c_m)/dx.
-                let (c, dlnc) = if self.gouy_phase {
+                let (c, dlnc) = if self.gouy_scale == 1.0 {
                     let c = Complex::new(1.0, x) / (1.0 + x * x);
                     (c, i * c)
-                } else {
+                } else if self.gouy_scale == 0.0 {
                     (Complex::new((1.0 + x * x).sqrt().recip(), 0.0), Complex::new(-x / (1.0 + x * x), 0.0))
+                } else {
+                    // ln c = -ln(1 + x²)/2 + i·s·atan x.
+                    let c = Complex::from_polar((1.0 + x * x).sqrt().recip(), self.gouy_scale * x.atan());
+                    (c, Complex::new(-x, self.gouy_scale) / (1.0 + x * x))
                 };
                 let extra = a_m * k * t * cav.extra_reduced_um;
                 let phase = extra - mf * cav.extra_phase_rad;
@@ -1043,9 +1065,15 @@ mod tests {
     /// The evaluator's recurrences against the direct sum of [`round_trip_coupling`].
     #[test]
     fn evaluator_equals_direct_sum_of_round_trip_couplings() {
-        for gouy in [true, false] {
-            let params =
-                OpticalParams { beams: 6, gouy_phase: gouy, cleave_angle_deg: 0.7, ..OpticalParams::default() };
+        // (Gouy switch, Gouy scale error): the scale error 0.5 halves the Gouy phase.
+        for (gouy, scale_error) in [(true, 0.0), (false, 0.0), (true, -0.5)] {
+            let params = OpticalParams {
+                beams: 6,
+                gouy_phase: gouy,
+                gouy_scale_error: scale_error,
+                cleave_angle_deg: 0.7,
+                ..OpticalParams::default()
+            };
             let fp = bench(&params);
             let wl_medium = WL / N_AIR;
             let k = 2.0 * PI / (wl_medium * 1e-3);
@@ -1058,9 +1086,11 @@ mod tests {
                     let mut direct = Complex::new(r1 * cleave, 0.0);
                     for m in 1..=6u32 {
                         let mut c = round_trip_coupling(5.2, gap, tilt, wl_medium, m);
-                        if !gouy {
+                        if !gouy || scale_error != 0.0 {
+                            // Take out the Gouy phase, arg c_m at zero tilt, or half of it.
                             let square = round_trip_coupling(5.2, gap, 0.0, wl_medium, m);
-                            c *= square.norm() / square;
+                            let keep = if gouy { 1.0 + scale_error } else { 0.0 };
+                            c *= Complex::from_polar(1.0, (keep - 1.0) * square.arg());
                         }
                         let prop = Complex::new(0.0, -2.0 * f64::from(m) * k * f64::abs(gap)).exp();
                         direct += (1.0 - r1 * r1) * r2.powi(m as i32) * (-r1).powi(m as i32 - 1) * c * prop;
@@ -1079,6 +1109,7 @@ mod tests {
         let cases = [
             OpticalParams::default(),
             OpticalParams { gouy_phase: false, cleave_angle_deg: 0.7, beams: 6, ..OpticalParams::default() },
+            OpticalParams { gouy_scale_error: -0.4, beams: 5, ..OpticalParams::default() },
             OpticalParams { back_face: Some(BackFace::default()), cleave_angle_deg: 0.3, ..OpticalParams::default() },
             OpticalParams { beams: 1000, lamella_reflectance: 0.306, ..OpticalParams::default() },
         ];
@@ -1362,6 +1393,7 @@ mod tests {
             group_index: 1.463,
             reference_wavelength_nm: WL,
             reflectance: 0.035,
+            inverted: false,
         };
         let params = OpticalParams {
             lamella_reflectance: 0.0,
@@ -1499,6 +1531,7 @@ mod tests {
                     group_index: n * 1.02,
                     reference_wavelength_nm: 1560.0,
                     reflectance: r,
+                    inverted: t > 500.0,
                 }),
                 ..OpticalParams::default()
             };
