@@ -33,7 +33,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
         None if s.extrinsics == s.worker.nominal.extrinsics => {
             ui.colored_label(
                 ui.visuals().warn_fg_color,
-                "not identified yet: the diagnosis starts from the design extrinsics. Where the recorded motions                  cannot refit them (tilts off by a degree, the gap by tens of µm), the error looks like effects:                  identify first (Wizard) for a diagnosis you can trust. Estimates beyond 20× an effect's typical                  size are not named.",
+                "not identified yet: the diagnosis starts from the design extrinsics. Where the recorded motions cannot refit them (tilts off by a degree, the gap by tens of µm), the error looks like effects: identify first (Wizard) for a diagnosis you can trust. Estimates beyond 20× an effect's typical size are not named.",
             );
         }
         None => {
