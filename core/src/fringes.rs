@@ -97,6 +97,13 @@ pub enum FringeError {
 /// |x| < 1e6; used in the per-sample loops.
 #[inline(always)]
 pub(crate) fn sincos(x: f64) -> (f64, f64) {
+    sincos_k::<false>(x)
+}
+
+/// [`sincos`] with the polynomials fused (one rounding per multiply-add) when `FMA`: for
+/// callers compiled with the FMA feature.
+#[inline(always)]
+fn sincos_k<const FMA: bool>(x: f64) -> (f64, f64) {
     const PIO2_1: f64 = 1.570_796_326_734_125_6; // first 33 bits of π/2
     const PIO2_1T: f64 = 6.077_100_506_506_192e-11; // π/2 - PIO2_1
     const TOINT: f64 = 6_755_399_441_055_744.0; // 1.5·2^52: round to nearest integer
@@ -118,8 +125,18 @@ pub(crate) fn sincos(x: f64) -> (f64, f64) {
     let kf = kp - TOINT;
     let r = (x - kf * PIO2_1) - kf * PIO2_1T;
     let z = r * r;
-    let s = r + r * z * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)))));
-    let c = 1.0 - 0.5 * z + z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6)))));
+    let (s, c) = if FMA {
+        let ps =
+            madd::<true>(z, madd::<true>(z, madd::<true>(z, madd::<true>(z, madd::<true>(z, S6, S5), S4), S3), S2), S1);
+        let pc =
+            madd::<true>(z, madd::<true>(z, madd::<true>(z, madd::<true>(z, madd::<true>(z, C6, C5), C4), C3), C2), C1);
+        (madd::<true>(r * z, ps, r), madd::<true>(z * z, pc, madd::<true>(-0.5, z, 1.0)))
+    } else {
+        (
+            r + r * z * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6))))),
+            1.0 - 0.5 * z + z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6))))),
+        )
+    };
     let swap = 0u64.wrapping_sub(q & 1);
     let (sb, cb) = (s.to_bits(), c.to_bits());
     let ss = (sb & !swap) | (cb & swap);
@@ -134,11 +151,50 @@ fn rad_per_nm(wavelength_nm: f64, n_air: f64) -> f64 {
     4.0 * PI * n_air / wavelength_nm
 }
 
-fn check_finite(what: &'static str, xs: &[f64]) -> Result<(), FringeError> {
-    match xs.iter().position(|v| !v.is_finite()) {
-        Some(index) => Err(FringeError::NonFinite { what, index, value: xs[index] }),
-        None => Ok(()),
+/// One pass over the intensity: [`check_finite`], its largest magnitude, and every
+/// `dec`-th sample appended to `decimated` (when `dec > 1`).
+fn scan_intensity(xs: &[f64], dec: usize, decimated: &mut Vec<f64>) -> Result<f64, FringeError> {
+    const B: usize = 256;
+    let mut max_abs = [0.0f64; 4];
+    for (bi, block) in xs.chunks(B).enumerate() {
+        let mut lanes = [0.0f64; 4];
+        for (i, &v) in block.iter().enumerate() {
+            let l = i % 4;
+            lanes[l] += v * 0.0;
+            let a = v.abs();
+            max_abs[l] = if a > max_abs[l] { a } else { max_abs[l] };
+        }
+        if lanes.iter().any(|l| l.is_nan()) {
+            if let Some(i) = block.iter().position(|v| !v.is_finite()) {
+                let index = bi * B + i;
+                return Err(FringeError::NonFinite { what: "intensity", index, value: xs[index] });
+            }
+        }
+        if dec > 1 {
+            let k0 = bi * B;
+            decimated.extend(block.iter().skip(k0.next_multiple_of(dec) - k0).step_by(dec));
+        }
     }
+    Ok(max_abs.iter().fold(0f64, |m, &v| m.max(v)))
+}
+
+fn check_finite(what: &'static str, xs: &[f64]) -> Result<(), FringeError> {
+    // Branch-free test per block (it vectorises; x·0 is NaN exactly when x is not finite),
+    // the index searched only in a failing block.
+    const B: usize = 256;
+    for (bi, block) in xs.chunks(B).enumerate() {
+        let mut lanes = [0.0f64; 4];
+        for (i, &v) in block.iter().enumerate() {
+            lanes[i % 4] += v * 0.0;
+        }
+        if lanes.iter().any(|l| l.is_nan()) {
+            if let Some(i) = block.iter().position(|v| !v.is_finite()) {
+                let index = bi * B + i;
+                return Err(FringeError::NonFinite { what, index, value: xs[index] });
+            }
+        }
+    }
+    Ok(())
 }
 
 fn check_optics(wavelength_nm: f64, n_air: f64) -> Result<(), FringeError> {
@@ -260,8 +316,20 @@ pub fn detect_extrema(signal: &[f64], cfg: &HysteresisConfig) -> Result<Vec<Extr
 
 /// `detect_extrema` on a validated, non-empty signal, into reused buffers.
 fn extrema_into(signal: &[f64], cfg: &HysteresisConfig, scratch: &mut Vec<f64>, out: &mut Vec<Extremum>) {
+    let max_abs = signal.iter().fold(0f64, |m, v| m.max(v.abs()));
+    extrema_into_scaled(signal, max_abs, cfg, scratch, out);
+}
+
+/// [`extrema_into`] with the signal's largest magnitude already known.
+fn extrema_into_scaled(
+    signal: &[f64],
+    max_abs: f64,
+    cfg: &HysteresisConfig,
+    scratch: &mut Vec<f64>,
+    out: &mut Vec<Extremum>,
+) {
     let sigma = estimate_noise_sigma(signal, scratch);
-    let scale = signal.iter().fold(0f64, |m, v| m.max(v.abs())).max(f64::MIN_POSITIVE);
+    let scale = max_abs.max(f64::MIN_POSITIVE);
     let floor = (cfg.noise_floor_factor * sigma).max(1e-12 * scale);
     out.clear();
     zigzag(signal, floor, cfg.relative, out);
@@ -1417,7 +1485,7 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
         let (r, ca) = if SHAPED { (ch.r[i], ch.ca[i]) } else { (1.0, 0.0) };
         let aa = madd::<FMA>(w0, sc.a0, madd::<FMA>(t, sc.a1, ca));
         let bb = r * madd::<FMA>(w0, sc.b0, t * sc.b1);
-        let (sn, co) = sincos(psi);
+        let (sn, co) = sincos_k::<FMA>(psi);
         let (f, fp) = harm.f_and_slope(sn, co);
         let h = bb * fp * live;
         let nu = (ch.y[i] - madd::<FMA>(bb, f, aa)) * live;
@@ -1432,34 +1500,78 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
 
 /// Sums of a chunk into 4-lane accumulators: JᵀJ blocks (w0², w0·w1, w1² times vvᵀ,
 /// v = (h, 1, f)), Jᵀν, the γ border, γγ, γν and ν².
+///
+/// Four passes over the chunk, each with at most 9 accumulators, so that they stay in
+/// registers (33 do not fit); every accumulator lane still adds the same terms in the same
+/// order as one pass would.
 #[inline(always)]
 #[allow(clippy::needless_range_loop)] // lane-indexed on purpose: it vectorises
 fn chunk_sums<const FMA: bool>(ch: &Chunk, m: usize, acc: &mut [[f64; 4]; NACC]) {
     let m4 = m.div_ceil(4) * 4;
-    for i0 in (0..m4).step_by(4) {
-        for l in 0..4 {
-            let i = i0 + l;
-            let (w0, w1, f, h, nu, hu) = (ch.w0[i], ch.w1[i], ch.f[i], ch.h[i], ch.nu[i], ch.hu[i]);
-            let (w00, w01, w11) = (w0 * w0, w0 * w1, w1 * w1);
-            let vv = [h * h, h, h * f, 1.0, f, f * f];
-            for q in 0..6 {
-                acc[q][l] = madd::<FMA>(w00, vv[q], acc[q][l]);
-                acc[6 + q][l] = madd::<FMA>(w01, vv[q], acc[6 + q][l]);
-                acc[12 + q][l] = madd::<FMA>(w11, vv[q], acc[12 + q][l]);
+    // one pass: accumulators acc[idx[..]] += weight·value of each sample
+    #[inline(always)]
+    fn pass<const FMA: bool, const K: usize>(
+        m4: usize,
+        acc: &mut [[f64; 4]; NACC],
+        idx: [usize; K],
+        terms: impl Fn(usize) -> [(f64, f64); K],
+    ) {
+        let mut a: [[f64; 4]; K] = std::array::from_fn(|q| acc[idx[q]]);
+        for i0 in (0..m4).step_by(4) {
+            for l in 0..4 {
+                let t = terms(i0 + l);
+                for q in 0..K {
+                    a[q][l] = madd::<FMA>(t[q].0, t[q].1, a[q][l]);
+                }
             }
-            let v = [h, 1.0, f];
-            let (n0, n1, g0, g1) = (w0 * nu, w1 * nu, w0 * hu, w1 * hu);
-            for q in 0..3 {
-                acc[18 + q][l] = madd::<FMA>(n0, v[q], acc[18 + q][l]);
-                acc[21 + q][l] = madd::<FMA>(n1, v[q], acc[21 + q][l]);
-                acc[24 + q][l] = madd::<FMA>(g0, v[q], acc[24 + q][l]);
-                acc[27 + q][l] = madd::<FMA>(g1, v[q], acc[27 + q][l]);
-            }
-            acc[30][l] = madd::<FMA>(hu, hu, acc[30][l]);
-            acc[31][l] = madd::<FMA>(hu, nu, acc[31][l]);
-            acc[32][l] = madd::<FMA>(nu, nu, acc[32][l]);
+        }
+        for q in 0..K {
+            acc[idx[q]] = a[q];
         }
     }
+    let (w0, w1, f, h, nu, hu) = (&ch.w0, &ch.w1, &ch.f, &ch.h, &ch.nu, &ch.hu);
+    // JᵀJ, the (h², h, h·f) columns
+    pass::<FMA, 9>(m4, acc, [0, 1, 2, 6, 7, 8, 12, 13, 14], |i| {
+        let (w00, w01, w11) = (w0[i] * w0[i], w0[i] * w1[i], w1[i] * w1[i]);
+        let vv = [h[i] * h[i], h[i], h[i] * f[i]];
+        [
+            (w00, vv[0]),
+            (w00, vv[1]),
+            (w00, vv[2]),
+            (w01, vv[0]),
+            (w01, vv[1]),
+            (w01, vv[2]),
+            (w11, vv[0]),
+            (w11, vv[1]),
+            (w11, vv[2]),
+        ]
+    });
+    // JᵀJ, the (1, f, f²) columns
+    pass::<FMA, 9>(m4, acc, [3, 4, 5, 9, 10, 11, 15, 16, 17], |i| {
+        let (w00, w01, w11) = (w0[i] * w0[i], w0[i] * w1[i], w1[i] * w1[i]);
+        let vv = [1.0, f[i], f[i] * f[i]];
+        [
+            (w00, vv[0]),
+            (w00, vv[1]),
+            (w00, vv[2]),
+            (w01, vv[0]),
+            (w01, vv[1]),
+            (w01, vv[2]),
+            (w11, vv[0]),
+            (w11, vv[1]),
+            (w11, vv[2]),
+        ]
+    });
+    // Jᵀν and ν²
+    pass::<FMA, 7>(m4, acc, [18, 19, 20, 21, 22, 23, 32], |i| {
+        let (n0, n1) = (w0[i] * nu[i], w1[i] * nu[i]);
+        [(n0, h[i]), (n0, 1.0), (n0, f[i]), (n1, h[i]), (n1, 1.0), (n1, f[i]), (nu[i], nu[i])]
+    });
+    // the γ border, γγ and γν
+    pass::<FMA, 8>(m4, acc, [24, 25, 26, 27, 28, 29, 30, 31], |i| {
+        let (g0, g1) = (w0[i] * hu[i], w1[i] * hu[i]);
+        [(g0, h[i]), (g0, 1.0), (g0, f[i]), (g1, h[i]), (g1, 1.0), (g1, f[i]), (hu[i], hu[i]), (hu[i], nu[i])]
+    });
 }
 
 impl NormalEq {
@@ -2034,7 +2146,6 @@ fn run_tracker(
             });
         }
     }
-    check_finite("intensity", intensity)?;
     // Path estimate from every 16th sample (fringes are sampled ≥ 20 times, so this is
     // close): it sets the decimation before the single full pass over the hint below.
     let path_est: f64 = hint_dl_nm
@@ -2061,6 +2172,7 @@ fn run_tracker(
     dm.ca.clear();
     let shape = model.map(|m| m.harmonics);
     dm.shaped = shape.is_some();
+    let max_abs = scan_intensity(intensity, dec, &mut dm.y)?;
 
     // Path travelled by the hint (nm): the envelope is a function of where the robot is,
     // so it is interpolated along this coordinate and stays constant during pauses.
@@ -2068,7 +2180,7 @@ fn run_tracker(
     // end.
     // Extrema first (one pass over the intensity); the grid pass below records the hint
     // and the path at each of them, so nothing later reads the big arrays at random.
-    extrema_into(intensity, &cfg.hysteresis, &mut ws.scratch, &mut ws.extrema);
+    extrema_into_scaled(intensity, max_abs, &cfg.hysteresis, &mut ws.scratch, &mut ws.extrema);
     ws.ext_hint.clear();
     ws.ext_path.clear();
     let mut cgrid = std::mem::take(&mut out.phase_rad);
@@ -2104,43 +2216,53 @@ fn run_tracker(
         for k0 in (0..n).step_by(BLOCK) {
             let k1 = (k0 + BLOCK).min(n);
             let hb = &hint_dl_nm[k0..k1];
-            let (mut lmax, mut lmin, mut lstep, mut lbad) = ([h_max; 4], [h_min; 4], [max_step; 4], [false; 4]);
-            for (i, &h) in hb.iter().enumerate() {
-                let l = i % 4;
-                let step = (h - prev).abs();
-                prev = h;
-                path_blk[i] = step;
-                lbad[l] |= !h.is_finite();
-                lmax[l] = lmax[l].max(h);
-                lmin[l] = lmin[l].min(h);
-                lstep[l] = lstep[l].max(step);
+            let mb = k1 - k0;
+            // steps from the previous sample (the first sample's step is 0)
+            path_blk[0] = (hb[0] - prev).abs();
+            for (p, w) in path_blk[1..mb].iter_mut().zip(hb.windows(2)) {
+                *p = (w[1] - w[0]).abs();
             }
-            bad |= lbad.iter().any(|&b| b);
+            prev = hb[mb - 1];
+            // branch-free extremes (compare-and-select, it vectorises); a non-finite hint
+            // is caught by `bad` and rejected below, so NaN handling does not matter here
+            let (mut lmax, mut lmin, mut lstep, mut lbad) = ([h_max; 4], [h_min; 4], [max_step; 4], [0.0f64; 4]);
+            for (i, (&h, &step)) in hb.iter().zip(&path_blk[..mb]).enumerate() {
+                let l = i % 4;
+                lbad[l] += h * 0.0;
+                lmax[l] = if h > lmax[l] { h } else { lmax[l] };
+                lmin[l] = if h < lmin[l] { h } else { lmin[l] };
+                lstep[l] = if step > lstep[l] { step } else { lstep[l] };
+            }
+            bad |= lbad.iter().any(|b| b.is_nan());
             h_max = lmax.iter().fold(h_max, |m, &v| m.max(v));
             h_min = lmin.iter().fold(h_min, |m, &v| m.min(v));
             max_step = lstep.iter().fold(max_step, |m, &v| m.max(v));
-            cgrid.extend(path_blk[..k1 - k0].iter_mut().zip(k0..).map(|(p, k)| {
+            // the running path (the one serial chain) and the grid coordinate; k/T is exact
+            let mut kf = k0 as f64;
+            cgrid.extend(path_blk[..mb].iter_mut().map(|p| {
                 acc += *p;
                 *p = acc;
-                acc * inv_ds + k as f64 / T_KNOT
+                let c = acc * inv_ds + kf * (1.0 / T_KNOT);
+                kf += 1.0;
+                c
             }));
             let cb = &cgrid[k0..k1];
-            // knots exactly at c = j: interpolate (s, k) between the two samples
-            if cb[k1 - k0 - 1] >= next {
-                for i in 0..k1 - k0 {
-                    let ck = cb[i];
-                    if ck >= next {
-                        let k = k0 + i;
-                        let (c_prev, s_prev) = if i > 0 { (cb[i - 1], path_blk[i - 1]) } else { (c_last, s_last) };
-                        while ck >= next {
-                            let lam = (next - c_prev) / (ck - c_prev);
-                            grid.knot_s.push(s_prev + lam * (path_blk[i] - s_prev));
-                            grid.knot_k.push(k as f64 - 1.0 + lam);
-                            grid.seg_first.push(k);
-                            next += 1.0;
-                        }
-                    }
+            // knots exactly at c = j: interpolate (s, k) between the two samples (c increases
+            // strictly, so the first sample at or beyond the knot is a binary search)
+            let mut from = 0usize;
+            while cb[mb - 1] >= next {
+                let i = from + cb[from..].partition_point(|&ck| ck < next);
+                let ck = cb[i];
+                let k = k0 + i;
+                let (c_prev, s_prev) = if i > 0 { (cb[i - 1], path_blk[i - 1]) } else { (c_last, s_last) };
+                while ck >= next {
+                    let lam = (next - c_prev) / (ck - c_prev);
+                    grid.knot_s.push(s_prev + lam * (path_blk[i] - s_prev));
+                    grid.knot_k.push(k as f64 - 1.0 + lam);
+                    grid.seg_first.push(k);
+                    next += 1.0;
                 }
+                from = i + 1;
             }
             while let Some(e) = ext_index.get(ei).filter(|e| e.index < k1) {
                 ext_hint.push(hint_dl_nm[e.index]);
@@ -2149,7 +2271,6 @@ fn run_tracker(
             }
             if dec > 1 {
                 for k in (k0.next_multiple_of(dec)..k1).step_by(dec) {
-                    dm.y.push(intensity[k]);
                     dm.hint.push(hint_dl_nm[k]);
                     dm.c.push(cgrid[k]);
                     if let Some(sh) = shape {
@@ -2660,8 +2781,12 @@ fn run_tracker(
     let mut phase = cgrid;
     let mut dl = std::mem::take(&mut out.dl_nm);
     dl.clear();
+    dl.reserve(n);
     let mut sigma = std::mem::take(&mut out.sigma_dl_nm);
     sigma.clear();
+    if cfg.per_sample_sigma {
+        sigma.reserve(n);
+    }
     let sig_scale = inflate * nm_per_rad * nm_per_rad;
     for j in 0..jn - 1 {
         let (k0, k1) = (grid.seg_first[j], grid.seg_first[j + 1]);
@@ -3170,9 +3295,10 @@ mod tests {
         let mut worst = 0f64;
         for i in 0..200_000 {
             let x = -3.0e5 + i as f64 * 3.000_07;
-            let (s, c) = sincos(x);
             let (s0, c0) = x.sin_cos();
-            worst = worst.max((s - s0).abs()).max((c - c0).abs());
+            for (s, c) in [sincos(x), sincos_k::<true>(x)] {
+                worst = worst.max((s - s0).abs()).max((c - c0).abs());
+            }
         }
         assert!(worst < 1e-12, "worst {worst}");
         for x in [0.0, 1e-3, -PI / 4.0, PI / 4.0, PI, -PI, 2.5, 1e4] {
