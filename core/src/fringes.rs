@@ -2081,9 +2081,11 @@ pub fn track_phase(
     n_air: f64,
     cfg: &TrackConfig,
 ) -> Result<PhaseTrack, FringeError> {
-    let mut tracker = PhaseTracker::new(wavelength_nm, n_air, *cfg)?;
-    tracker.track(intensity, hint_dl_nm)?;
-    Ok(tracker.into_result())
+    check_optics(wavelength_nm, n_air)?;
+    cfg.validate()?;
+    let mut out = PhaseTrack::default();
+    with_spare_workspace(|ws| run_tracker(ws, &mut out, intensity, hint_dl_nm, None, wavelength_nm, n_air, cfg))?;
+    Ok(out)
 }
 
 /// [`track_phase`] with the fringe's harmonics known per sample ([`PhaseTracker::track_shaped`]).
@@ -2095,9 +2097,29 @@ pub fn track_phase_shaped(
     n_air: f64,
     cfg: &TrackConfig,
 ) -> Result<PhaseTrack, FringeError> {
-    let mut tracker = PhaseTracker::new(wavelength_nm, n_air, *cfg)?;
-    tracker.track_shaped(intensity, hint_dl_nm, model)?;
-    Ok(tracker.into_result())
+    check_optics(wavelength_nm, n_air)?;
+    cfg.validate()?;
+    let mut out = PhaseTrack::default();
+    with_spare_workspace(|ws| {
+        run_tracker(ws, &mut out, intensity, hint_dl_nm, Some(model), wavelength_nm, n_air, cfg)
+    })?;
+    Ok(out)
+}
+
+thread_local! {
+    /// The one-shot functions' workspace, kept per thread between calls: a fresh one costs
+    /// more than the tracking itself on long traces (the kernel zero-fills every new page,
+    /// tens of MB for a 1 M-sample trace). It holds no result, only scratch buffers (about
+    /// 20 bytes per sample and 600 per fringe of the longest trace tracked on the thread).
+    static SPARE_WORKSPACE: std::cell::Cell<Option<Box<Workspace>>> = const { std::cell::Cell::new(None) };
+}
+
+/// Runs `f` with this thread's spare workspace (a new one if it is in use).
+fn with_spare_workspace<R>(f: impl FnOnce(&mut Workspace) -> R) -> R {
+    let mut ws = SPARE_WORKSPACE.take().unwrap_or_default();
+    let r = f(&mut ws);
+    SPARE_WORKSPACE.set(Some(ws));
+    r
 }
 
 #[allow(clippy::too_many_arguments)] // the tracker's inputs, all sample-aligned or settings
