@@ -1508,70 +1508,66 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
 #[allow(clippy::needless_range_loop)] // lane-indexed on purpose: it vectorises
 fn chunk_sums<const FMA: bool>(ch: &Chunk, m: usize, acc: &mut [[f64; 4]; NACC]) {
     let m4 = m.div_ceil(4) * 4;
-    // one pass: accumulators acc[idx[..]] += weight·value of each sample
-    #[inline(always)]
-    fn pass<const FMA: bool, const K: usize>(
-        m4: usize,
-        acc: &mut [[f64; 4]; NACC],
-        idx: [usize; K],
-        terms: impl Fn(usize) -> [(f64, f64); K],
-    ) {
-        let mut a: [[f64; 4]; K] = std::array::from_fn(|q| acc[idx[q]]);
+    let (w0, w1, f, h, nu, hu) = (&ch.w0, &ch.w1, &ch.f, &ch.h, &ch.nu, &ch.hu);
+    // JᵀJ: for each weight (w0², w0·w1, w1²) the (h², h, h·f) and the (1, f, f²) columns
+    for half in 0..2 {
+        let idx: [usize; 9] = std::array::from_fn(|q| 3 * half + 6 * (q / 3) + q % 3);
+        let mut a: [[f64; 4]; 9] = std::array::from_fn(|q| acc[idx[q]]);
         for i0 in (0..m4).step_by(4) {
             for l in 0..4 {
-                let t = terms(i0 + l);
-                for q in 0..K {
-                    a[q][l] = madd::<FMA>(t[q].0, t[q].1, a[q][l]);
+                let i = i0 + l;
+                let (w00, w01, w11) = (w0[i] * w0[i], w0[i] * w1[i], w1[i] * w1[i]);
+                let vv = if half == 0 { [h[i] * h[i], h[i], h[i] * f[i]] } else { [1.0, f[i], f[i] * f[i]] };
+                for q in 0..3 {
+                    a[q][l] = madd::<FMA>(w00, vv[q], a[q][l]);
+                    a[3 + q][l] = madd::<FMA>(w01, vv[q], a[3 + q][l]);
+                    a[6 + q][l] = madd::<FMA>(w11, vv[q], a[6 + q][l]);
                 }
             }
         }
-        for q in 0..K {
+        for q in 0..9 {
             acc[idx[q]] = a[q];
         }
     }
-    let (w0, w1, f, h, nu, hu) = (&ch.w0, &ch.w1, &ch.f, &ch.h, &ch.nu, &ch.hu);
-    // JᵀJ, the (h², h, h·f) columns
-    pass::<FMA, 9>(m4, acc, [0, 1, 2, 6, 7, 8, 12, 13, 14], |i| {
-        let (w00, w01, w11) = (w0[i] * w0[i], w0[i] * w1[i], w1[i] * w1[i]);
-        let vv = [h[i] * h[i], h[i], h[i] * f[i]];
-        [
-            (w00, vv[0]),
-            (w00, vv[1]),
-            (w00, vv[2]),
-            (w01, vv[0]),
-            (w01, vv[1]),
-            (w01, vv[2]),
-            (w11, vv[0]),
-            (w11, vv[1]),
-            (w11, vv[2]),
-        ]
-    });
-    // JᵀJ, the (1, f, f²) columns
-    pass::<FMA, 9>(m4, acc, [3, 4, 5, 9, 10, 11, 15, 16, 17], |i| {
-        let (w00, w01, w11) = (w0[i] * w0[i], w0[i] * w1[i], w1[i] * w1[i]);
-        let vv = [1.0, f[i], f[i] * f[i]];
-        [
-            (w00, vv[0]),
-            (w00, vv[1]),
-            (w00, vv[2]),
-            (w01, vv[0]),
-            (w01, vv[1]),
-            (w01, vv[2]),
-            (w11, vv[0]),
-            (w11, vv[1]),
-            (w11, vv[2]),
-        ]
-    });
-    // Jᵀν and ν²
-    pass::<FMA, 7>(m4, acc, [18, 19, 20, 21, 22, 23, 32], |i| {
-        let (n0, n1) = (w0[i] * nu[i], w1[i] * nu[i]);
-        [(n0, h[i]), (n0, 1.0), (n0, f[i]), (n1, h[i]), (n1, 1.0), (n1, f[i]), (nu[i], nu[i])]
-    });
-    // the γ border, γγ and γν
-    pass::<FMA, 8>(m4, acc, [24, 25, 26, 27, 28, 29, 30, 31], |i| {
-        let (g0, g1) = (w0[i] * hu[i], w1[i] * hu[i]);
-        [(g0, h[i]), (g0, 1.0), (g0, f[i]), (g1, h[i]), (g1, 1.0), (g1, f[i]), (hu[i], hu[i]), (hu[i], nu[i])]
-    });
+    // Jᵀν (18..24) and ν² (32)
+    {
+        let mut a: [[f64; 4]; 7] = std::array::from_fn(|q| acc[if q < 6 { 18 + q } else { 32 }]);
+        for i0 in (0..m4).step_by(4) {
+            for l in 0..4 {
+                let i = i0 + l;
+                let v = [h[i], 1.0, f[i]];
+                let (n0, n1) = (w0[i] * nu[i], w1[i] * nu[i]);
+                for q in 0..3 {
+                    a[q][l] = madd::<FMA>(n0, v[q], a[q][l]);
+                    a[3 + q][l] = madd::<FMA>(n1, v[q], a[3 + q][l]);
+                }
+                a[6][l] = madd::<FMA>(nu[i], nu[i], a[6][l]);
+            }
+        }
+        for q in 0..7 {
+            acc[if q < 6 { 18 + q } else { 32 }] = a[q];
+        }
+    }
+    // the γ border (24..30), γγ (30) and γν (31)
+    {
+        let mut a: [[f64; 4]; 8] = std::array::from_fn(|q| acc[24 + q]);
+        for i0 in (0..m4).step_by(4) {
+            for l in 0..4 {
+                let i = i0 + l;
+                let v = [h[i], 1.0, f[i]];
+                let (g0, g1) = (w0[i] * hu[i], w1[i] * hu[i]);
+                for q in 0..3 {
+                    a[q][l] = madd::<FMA>(g0, v[q], a[q][l]);
+                    a[3 + q][l] = madd::<FMA>(g1, v[q], a[3 + q][l]);
+                }
+                a[6][l] = madd::<FMA>(hu[i], hu[i], a[6][l]);
+                a[7][l] = madd::<FMA>(hu[i], nu[i], a[7][l]);
+            }
+        }
+        for q in 0..8 {
+            acc[24 + q] = a[q];
+        }
+    }
 }
 
 impl NormalEq {
