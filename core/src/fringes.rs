@@ -1564,9 +1564,7 @@ fn chunk_sums<const FMA: bool>(ch: &Chunk, m: usize, acc: &mut [[f64; 4]; NACC])
                 a[7][l] = madd::<FMA>(hu[i], nu[i], a[7][l]);
             }
         }
-        for q in 0..8 {
-            acc[24 + q] = a[q];
-        }
+        acc[24..32].copy_from_slice(&a);
     }
 }
 
