@@ -97,6 +97,13 @@ pub enum FringeError {
 /// |x| < 1e6; used in the per-sample loops.
 #[inline(always)]
 pub(crate) fn sincos(x: f64) -> (f64, f64) {
+    sincos_k::<false>(x)
+}
+
+/// [`sincos`] with the polynomials fused (one rounding per multiply-add) when `FMA`: for
+/// callers compiled with the FMA feature.
+#[inline(always)]
+fn sincos_k<const FMA: bool>(x: f64) -> (f64, f64) {
     const PIO2_1: f64 = 1.570_796_326_734_125_6; // first 33 bits of π/2
     const PIO2_1T: f64 = 6.077_100_506_506_192e-11; // π/2 - PIO2_1
     const TOINT: f64 = 6_755_399_441_055_744.0; // 1.5·2^52: round to nearest integer
@@ -118,8 +125,18 @@ pub(crate) fn sincos(x: f64) -> (f64, f64) {
     let kf = kp - TOINT;
     let r = (x - kf * PIO2_1) - kf * PIO2_1T;
     let z = r * r;
-    let s = r + r * z * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)))));
-    let c = 1.0 - 0.5 * z + z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6)))));
+    let (s, c) = if FMA {
+        let ps =
+            madd::<true>(z, madd::<true>(z, madd::<true>(z, madd::<true>(z, madd::<true>(z, S6, S5), S4), S3), S2), S1);
+        let pc =
+            madd::<true>(z, madd::<true>(z, madd::<true>(z, madd::<true>(z, madd::<true>(z, C6, C5), C4), C3), C2), C1);
+        (madd::<true>(r * z, ps, r), madd::<true>(z * z, pc, madd::<true>(-0.5, z, 1.0)))
+    } else {
+        (
+            r + r * z * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6))))),
+            1.0 - 0.5 * z + z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6))))),
+        )
+    };
     let swap = 0u64.wrapping_sub(q & 1);
     let (sb, cb) = (s.to_bits(), c.to_bits());
     let ss = (sb & !swap) | (cb & swap);
@@ -134,11 +151,50 @@ fn rad_per_nm(wavelength_nm: f64, n_air: f64) -> f64 {
     4.0 * PI * n_air / wavelength_nm
 }
 
-fn check_finite(what: &'static str, xs: &[f64]) -> Result<(), FringeError> {
-    match xs.iter().position(|v| !v.is_finite()) {
-        Some(index) => Err(FringeError::NonFinite { what, index, value: xs[index] }),
-        None => Ok(()),
+/// One pass over the intensity: [`check_finite`], its largest magnitude, and every
+/// `dec`-th sample appended to `decimated` (when `dec > 1`).
+fn scan_intensity(xs: &[f64], dec: usize, decimated: &mut Vec<f64>) -> Result<f64, FringeError> {
+    const B: usize = 256;
+    let mut max_abs = [0.0f64; 4];
+    for (bi, block) in xs.chunks(B).enumerate() {
+        let mut lanes = [0.0f64; 4];
+        for (i, &v) in block.iter().enumerate() {
+            let l = i % 4;
+            lanes[l] += v * 0.0;
+            let a = v.abs();
+            max_abs[l] = if a > max_abs[l] { a } else { max_abs[l] };
+        }
+        if lanes.iter().any(|l| l.is_nan()) {
+            if let Some(i) = block.iter().position(|v| !v.is_finite()) {
+                let index = bi * B + i;
+                return Err(FringeError::NonFinite { what: "intensity", index, value: xs[index] });
+            }
+        }
+        if dec > 1 {
+            let k0 = bi * B;
+            decimated.extend(block.iter().skip(k0.next_multiple_of(dec) - k0).step_by(dec));
+        }
     }
+    Ok(max_abs.iter().fold(0f64, |m, &v| m.max(v)))
+}
+
+fn check_finite(what: &'static str, xs: &[f64]) -> Result<(), FringeError> {
+    // Branch-free test per block (it vectorises; x·0 is NaN exactly when x is not finite),
+    // the index searched only in a failing block.
+    const B: usize = 256;
+    for (bi, block) in xs.chunks(B).enumerate() {
+        let mut lanes = [0.0f64; 4];
+        for (i, &v) in block.iter().enumerate() {
+            lanes[i % 4] += v * 0.0;
+        }
+        if lanes.iter().any(|l| l.is_nan()) {
+            if let Some(i) = block.iter().position(|v| !v.is_finite()) {
+                let index = bi * B + i;
+                return Err(FringeError::NonFinite { what, index, value: xs[index] });
+            }
+        }
+    }
+    Ok(())
 }
 
 fn check_optics(wavelength_nm: f64, n_air: f64) -> Result<(), FringeError> {
@@ -260,8 +316,20 @@ pub fn detect_extrema(signal: &[f64], cfg: &HysteresisConfig) -> Result<Vec<Extr
 
 /// `detect_extrema` on a validated, non-empty signal, into reused buffers.
 fn extrema_into(signal: &[f64], cfg: &HysteresisConfig, scratch: &mut Vec<f64>, out: &mut Vec<Extremum>) {
+    let max_abs = signal.iter().fold(0f64, |m, v| m.max(v.abs()));
+    extrema_into_scaled(signal, max_abs, cfg, scratch, out);
+}
+
+/// [`extrema_into`] with the signal's largest magnitude already known.
+fn extrema_into_scaled(
+    signal: &[f64],
+    max_abs: f64,
+    cfg: &HysteresisConfig,
+    scratch: &mut Vec<f64>,
+    out: &mut Vec<Extremum>,
+) {
     let sigma = estimate_noise_sigma(signal, scratch);
-    let scale = signal.iter().fold(0f64, |m, v| m.max(v.abs())).max(f64::MIN_POSITIVE);
+    let scale = max_abs.max(f64::MIN_POSITIVE);
     let floor = (cfg.noise_floor_factor * sigma).max(1e-12 * scale);
     out.clear();
     zigzag(signal, floor, cfg.relative, out);
@@ -1417,7 +1485,7 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
         let (r, ca) = if SHAPED { (ch.r[i], ch.ca[i]) } else { (1.0, 0.0) };
         let aa = madd::<FMA>(w0, sc.a0, madd::<FMA>(t, sc.a1, ca));
         let bb = r * madd::<FMA>(w0, sc.b0, t * sc.b1);
-        let (sn, co) = sincos(psi);
+        let (sn, co) = sincos_k::<FMA>(psi);
         let (f, fp) = harm.f_and_slope(sn, co);
         let h = bb * fp * live;
         let nu = (ch.y[i] - madd::<FMA>(bb, f, aa)) * live;
@@ -1432,33 +1500,71 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
 
 /// Sums of a chunk into 4-lane accumulators: JᵀJ blocks (w0², w0·w1, w1² times vvᵀ,
 /// v = (h, 1, f)), Jᵀν, the γ border, γγ, γν and ν².
+///
+/// Four passes over the chunk, each with at most 9 accumulators, so that they stay in
+/// registers (33 do not fit); every accumulator lane still adds the same terms in the same
+/// order as one pass would.
 #[inline(always)]
 #[allow(clippy::needless_range_loop)] // lane-indexed on purpose: it vectorises
 fn chunk_sums<const FMA: bool>(ch: &Chunk, m: usize, acc: &mut [[f64; 4]; NACC]) {
     let m4 = m.div_ceil(4) * 4;
-    for i0 in (0..m4).step_by(4) {
-        for l in 0..4 {
-            let i = i0 + l;
-            let (w0, w1, f, h, nu, hu) = (ch.w0[i], ch.w1[i], ch.f[i], ch.h[i], ch.nu[i], ch.hu[i]);
-            let (w00, w01, w11) = (w0 * w0, w0 * w1, w1 * w1);
-            let vv = [h * h, h, h * f, 1.0, f, f * f];
-            for q in 0..6 {
-                acc[q][l] = madd::<FMA>(w00, vv[q], acc[q][l]);
-                acc[6 + q][l] = madd::<FMA>(w01, vv[q], acc[6 + q][l]);
-                acc[12 + q][l] = madd::<FMA>(w11, vv[q], acc[12 + q][l]);
+    let (w0, w1, f, h, nu, hu) = (&ch.w0, &ch.w1, &ch.f, &ch.h, &ch.nu, &ch.hu);
+    // JᵀJ: for each weight (w0², w0·w1, w1²) the (h², h, h·f) and the (1, f, f²) columns
+    for half in 0..2 {
+        let idx: [usize; 9] = std::array::from_fn(|q| 3 * half + 6 * (q / 3) + q % 3);
+        let mut a: [[f64; 4]; 9] = std::array::from_fn(|q| acc[idx[q]]);
+        for i0 in (0..m4).step_by(4) {
+            for l in 0..4 {
+                let i = i0 + l;
+                let (w00, w01, w11) = (w0[i] * w0[i], w0[i] * w1[i], w1[i] * w1[i]);
+                let vv = if half == 0 { [h[i] * h[i], h[i], h[i] * f[i]] } else { [1.0, f[i], f[i] * f[i]] };
+                for q in 0..3 {
+                    a[q][l] = madd::<FMA>(w00, vv[q], a[q][l]);
+                    a[3 + q][l] = madd::<FMA>(w01, vv[q], a[3 + q][l]);
+                    a[6 + q][l] = madd::<FMA>(w11, vv[q], a[6 + q][l]);
+                }
             }
-            let v = [h, 1.0, f];
-            let (n0, n1, g0, g1) = (w0 * nu, w1 * nu, w0 * hu, w1 * hu);
-            for q in 0..3 {
-                acc[18 + q][l] = madd::<FMA>(n0, v[q], acc[18 + q][l]);
-                acc[21 + q][l] = madd::<FMA>(n1, v[q], acc[21 + q][l]);
-                acc[24 + q][l] = madd::<FMA>(g0, v[q], acc[24 + q][l]);
-                acc[27 + q][l] = madd::<FMA>(g1, v[q], acc[27 + q][l]);
-            }
-            acc[30][l] = madd::<FMA>(hu, hu, acc[30][l]);
-            acc[31][l] = madd::<FMA>(hu, nu, acc[31][l]);
-            acc[32][l] = madd::<FMA>(nu, nu, acc[32][l]);
         }
+        for q in 0..9 {
+            acc[idx[q]] = a[q];
+        }
+    }
+    // Jᵀν (18..24) and ν² (32)
+    {
+        let mut a: [[f64; 4]; 7] = std::array::from_fn(|q| acc[if q < 6 { 18 + q } else { 32 }]);
+        for i0 in (0..m4).step_by(4) {
+            for l in 0..4 {
+                let i = i0 + l;
+                let v = [h[i], 1.0, f[i]];
+                let (n0, n1) = (w0[i] * nu[i], w1[i] * nu[i]);
+                for q in 0..3 {
+                    a[q][l] = madd::<FMA>(n0, v[q], a[q][l]);
+                    a[3 + q][l] = madd::<FMA>(n1, v[q], a[3 + q][l]);
+                }
+                a[6][l] = madd::<FMA>(nu[i], nu[i], a[6][l]);
+            }
+        }
+        for q in 0..7 {
+            acc[if q < 6 { 18 + q } else { 32 }] = a[q];
+        }
+    }
+    // the γ border (24..30), γγ (30) and γν (31)
+    {
+        let mut a: [[f64; 4]; 8] = std::array::from_fn(|q| acc[24 + q]);
+        for i0 in (0..m4).step_by(4) {
+            for l in 0..4 {
+                let i = i0 + l;
+                let v = [h[i], 1.0, f[i]];
+                let (g0, g1) = (w0[i] * hu[i], w1[i] * hu[i]);
+                for q in 0..3 {
+                    a[q][l] = madd::<FMA>(g0, v[q], a[q][l]);
+                    a[3 + q][l] = madd::<FMA>(g1, v[q], a[3 + q][l]);
+                }
+                a[6][l] = madd::<FMA>(hu[i], hu[i], a[6][l]);
+                a[7][l] = madd::<FMA>(hu[i], nu[i], a[7][l]);
+            }
+        }
+        acc[24..32].copy_from_slice(&a);
     }
 }
 
@@ -1969,9 +2075,11 @@ pub fn track_phase(
     n_air: f64,
     cfg: &TrackConfig,
 ) -> Result<PhaseTrack, FringeError> {
-    let mut tracker = PhaseTracker::new(wavelength_nm, n_air, *cfg)?;
-    tracker.track(intensity, hint_dl_nm)?;
-    Ok(tracker.into_result())
+    check_optics(wavelength_nm, n_air)?;
+    cfg.validate()?;
+    let mut out = PhaseTrack::default();
+    with_spare_workspace(|ws| run_tracker(ws, &mut out, intensity, hint_dl_nm, None, wavelength_nm, n_air, cfg))?;
+    Ok(out)
 }
 
 /// [`track_phase`] with the fringe's harmonics known per sample ([`PhaseTracker::track_shaped`]).
@@ -1983,9 +2091,29 @@ pub fn track_phase_shaped(
     n_air: f64,
     cfg: &TrackConfig,
 ) -> Result<PhaseTrack, FringeError> {
-    let mut tracker = PhaseTracker::new(wavelength_nm, n_air, *cfg)?;
-    tracker.track_shaped(intensity, hint_dl_nm, model)?;
-    Ok(tracker.into_result())
+    check_optics(wavelength_nm, n_air)?;
+    cfg.validate()?;
+    let mut out = PhaseTrack::default();
+    with_spare_workspace(|ws| {
+        run_tracker(ws, &mut out, intensity, hint_dl_nm, Some(model), wavelength_nm, n_air, cfg)
+    })?;
+    Ok(out)
+}
+
+thread_local! {
+    /// The one-shot functions' workspace, kept per thread between calls: a fresh one costs
+    /// more than the tracking itself on long traces (the kernel zero-fills every new page,
+    /// tens of MB for a 1 M-sample trace). It holds no result, only scratch buffers (about
+    /// 20 bytes per sample and 600 per fringe of the longest trace tracked on the thread).
+    static SPARE_WORKSPACE: std::cell::Cell<Option<Box<Workspace>>> = const { std::cell::Cell::new(None) };
+}
+
+/// Runs `f` with this thread's spare workspace (a new one if it is in use).
+fn with_spare_workspace<R>(f: impl FnOnce(&mut Workspace) -> R) -> R {
+    let mut ws = SPARE_WORKSPACE.take().unwrap_or_default();
+    let r = f(&mut ws);
+    SPARE_WORKSPACE.set(Some(ws));
+    r
 }
 
 #[allow(clippy::too_many_arguments)] // the tracker's inputs, all sample-aligned or settings
@@ -2034,7 +2162,6 @@ fn run_tracker(
             });
         }
     }
-    check_finite("intensity", intensity)?;
     // Path estimate from every 16th sample (fringes are sampled ≥ 20 times, so this is
     // close): it sets the decimation before the single full pass over the hint below.
     let path_est: f64 = hint_dl_nm
@@ -2061,6 +2188,7 @@ fn run_tracker(
     dm.ca.clear();
     let shape = model.map(|m| m.harmonics);
     dm.shaped = shape.is_some();
+    let max_abs = scan_intensity(intensity, dec, &mut dm.y)?;
 
     // Path travelled by the hint (nm): the envelope is a function of where the robot is,
     // so it is interpolated along this coordinate and stays constant during pauses.
@@ -2068,7 +2196,7 @@ fn run_tracker(
     // end.
     // Extrema first (one pass over the intensity); the grid pass below records the hint
     // and the path at each of them, so nothing later reads the big arrays at random.
-    extrema_into(intensity, &cfg.hysteresis, &mut ws.scratch, &mut ws.extrema);
+    extrema_into_scaled(intensity, max_abs, &cfg.hysteresis, &mut ws.scratch, &mut ws.extrema);
     ws.ext_hint.clear();
     ws.ext_path.clear();
     let mut cgrid = std::mem::take(&mut out.phase_rad);
@@ -2104,43 +2232,53 @@ fn run_tracker(
         for k0 in (0..n).step_by(BLOCK) {
             let k1 = (k0 + BLOCK).min(n);
             let hb = &hint_dl_nm[k0..k1];
-            let (mut lmax, mut lmin, mut lstep, mut lbad) = ([h_max; 4], [h_min; 4], [max_step; 4], [false; 4]);
-            for (i, &h) in hb.iter().enumerate() {
-                let l = i % 4;
-                let step = (h - prev).abs();
-                prev = h;
-                path_blk[i] = step;
-                lbad[l] |= !h.is_finite();
-                lmax[l] = lmax[l].max(h);
-                lmin[l] = lmin[l].min(h);
-                lstep[l] = lstep[l].max(step);
+            let mb = k1 - k0;
+            // steps from the previous sample (the first sample's step is 0)
+            path_blk[0] = (hb[0] - prev).abs();
+            for (p, w) in path_blk[1..mb].iter_mut().zip(hb.windows(2)) {
+                *p = (w[1] - w[0]).abs();
             }
-            bad |= lbad.iter().any(|&b| b);
+            prev = hb[mb - 1];
+            // branch-free extremes (compare-and-select, it vectorises); a non-finite hint
+            // is caught by `bad` and rejected below, so NaN handling does not matter here
+            let (mut lmax, mut lmin, mut lstep, mut lbad) = ([h_max; 4], [h_min; 4], [max_step; 4], [0.0f64; 4]);
+            for (i, (&h, &step)) in hb.iter().zip(&path_blk[..mb]).enumerate() {
+                let l = i % 4;
+                lbad[l] += h * 0.0;
+                lmax[l] = if h > lmax[l] { h } else { lmax[l] };
+                lmin[l] = if h < lmin[l] { h } else { lmin[l] };
+                lstep[l] = if step > lstep[l] { step } else { lstep[l] };
+            }
+            bad |= lbad.iter().any(|b| b.is_nan());
             h_max = lmax.iter().fold(h_max, |m, &v| m.max(v));
             h_min = lmin.iter().fold(h_min, |m, &v| m.min(v));
             max_step = lstep.iter().fold(max_step, |m, &v| m.max(v));
-            cgrid.extend(path_blk[..k1 - k0].iter_mut().zip(k0..).map(|(p, k)| {
+            // the running path (the one serial chain) and the grid coordinate; k/T is exact
+            let mut kf = k0 as f64;
+            cgrid.extend(path_blk[..mb].iter_mut().map(|p| {
                 acc += *p;
                 *p = acc;
-                acc * inv_ds + k as f64 / T_KNOT
+                let c = acc * inv_ds + kf * (1.0 / T_KNOT);
+                kf += 1.0;
+                c
             }));
             let cb = &cgrid[k0..k1];
-            // knots exactly at c = j: interpolate (s, k) between the two samples
-            if cb[k1 - k0 - 1] >= next {
-                for i in 0..k1 - k0 {
-                    let ck = cb[i];
-                    if ck >= next {
-                        let k = k0 + i;
-                        let (c_prev, s_prev) = if i > 0 { (cb[i - 1], path_blk[i - 1]) } else { (c_last, s_last) };
-                        while ck >= next {
-                            let lam = (next - c_prev) / (ck - c_prev);
-                            grid.knot_s.push(s_prev + lam * (path_blk[i] - s_prev));
-                            grid.knot_k.push(k as f64 - 1.0 + lam);
-                            grid.seg_first.push(k);
-                            next += 1.0;
-                        }
-                    }
+            // knots exactly at c = j: interpolate (s, k) between the two samples (c increases
+            // strictly, so the first sample at or beyond the knot is a binary search)
+            let mut from = 0usize;
+            while cb[mb - 1] >= next {
+                let i = from + cb[from..].partition_point(|&ck| ck < next);
+                let ck = cb[i];
+                let k = k0 + i;
+                let (c_prev, s_prev) = if i > 0 { (cb[i - 1], path_blk[i - 1]) } else { (c_last, s_last) };
+                while ck >= next {
+                    let lam = (next - c_prev) / (ck - c_prev);
+                    grid.knot_s.push(s_prev + lam * (path_blk[i] - s_prev));
+                    grid.knot_k.push(k as f64 - 1.0 + lam);
+                    grid.seg_first.push(k);
+                    next += 1.0;
                 }
+                from = i + 1;
             }
             while let Some(e) = ext_index.get(ei).filter(|e| e.index < k1) {
                 ext_hint.push(hint_dl_nm[e.index]);
@@ -2149,7 +2287,6 @@ fn run_tracker(
             }
             if dec > 1 {
                 for k in (k0.next_multiple_of(dec)..k1).step_by(dec) {
-                    dm.y.push(intensity[k]);
                     dm.hint.push(hint_dl_nm[k]);
                     dm.c.push(cgrid[k]);
                     if let Some(sh) = shape {
@@ -2660,8 +2797,12 @@ fn run_tracker(
     let mut phase = cgrid;
     let mut dl = std::mem::take(&mut out.dl_nm);
     dl.clear();
+    dl.reserve(n);
     let mut sigma = std::mem::take(&mut out.sigma_dl_nm);
     sigma.clear();
+    if cfg.per_sample_sigma {
+        sigma.reserve(n);
+    }
     let sig_scale = inflate * nm_per_rad * nm_per_rad;
     for j in 0..jn - 1 {
         let (k0, k1) = (grid.seg_first[j], grid.seg_first[j + 1]);
@@ -3170,9 +3311,10 @@ mod tests {
         let mut worst = 0f64;
         for i in 0..200_000 {
             let x = -3.0e5 + i as f64 * 3.000_07;
-            let (s, c) = sincos(x);
             let (s0, c0) = x.sin_cos();
-            worst = worst.max((s - s0).abs()).max((c - c0).abs());
+            for (s, c) in [sincos(x), sincos_k::<true>(x)] {
+                worst = worst.max((s - s0).abs()).max((c - c0).abs());
+            }
         }
         assert!(worst < 1e-12, "worst {worst}");
         for x in [0.0, 1e-3, -PI / 4.0, PI / 4.0, PI, -PI, 2.5, 1e4] {
