@@ -799,27 +799,22 @@ impl Diagnosis {
         // so the refit also starts from the opposite sign and from ± the typical size, and the
         // best fit is kept.
         let c = &self.candidates[best];
-        let mut starts = vec![sc.estimate];
-        if c.effect(1.0).is_optical() {
-            starts.extend([-sc.estimate, c.typical, -c.typical]);
-        }
-        // Another start wins only when its χ² is lower by more than 9 (3σ for one parameter).
-        let mut nf: Option<fit::Fit> = None;
-        for v in starts {
+        let with = |v: f64| {
             let mut start = f.state.clone();
             start.effects.push((c.clone(), v));
-            match self.refit(&start) {
-                Ok(fit)
-                    if nf.as_ref().is_none_or(|b| fit.residuals.norm_squared() < b.residuals.norm_squared() - 9.0) =>
-                {
-                    nf = Some(fit)
+            start
+        };
+        let mut nf = self.refit(&with(sc.estimate))?;
+        if c.effect(1.0).is_optical() {
+            // Another start wins only when its χ² is lower by more than 9 (3σ for one parameter).
+            for v in [-sc.estimate, c.typical, -c.typical] {
+                if let Ok(other) = self.refit(&with(v)) {
+                    if other.residuals.norm_squared() < nf.residuals.norm_squared() - 9.0 {
+                        nf = other;
+                    }
                 }
-                Ok(_) => {}
-                Err(e) if nf.is_none() && v == sc.estimate => return Err(e),
-                Err(_) => {}
             }
         }
-        let nf = nf.ok_or_else(|| DiagnoseError::Model(format!("refit with {} failed", c.name)))?;
         let held = [self.held_rms(&f.state)?, self.held_rms(&nf.state)?];
         // Confirmed unless the held-out motions get worse by more than their noise allows. When
         // they already miss the model by more than their σ (errors the analysis does not see),

@@ -9,7 +9,7 @@ use crate::diagnose::fit::Predictor;
 use crate::identify::measurements::{observations_from_traces, ExtractOptions};
 use crate::identify::{Observation, ObservationKind};
 use crate::measure::PhaseModel;
-use crate::model::effects::Effect;
+use crate::model::effects::{update_approach, Effect};
 use crate::model::extrinsics::Extrinsics;
 use crate::plan::{JointTarget, Plan, Segment};
 use rand::{rngs::StdRng, SeedableRng};
@@ -81,13 +81,7 @@ pub fn templates(motions: &[DesignedMotion], start_s: f64) -> Vec<Observation> {
     let mut out = Vec::new();
     let mut approach = [0i8; 6];
     let mut at = [0.0; 6];
-    let go = |approach: &mut [i8; 6], from: &[f64; 6], to: &[f64; 6]| {
-        for j in 0..6 {
-            if to[j] != from[j] {
-                approach[j] = if to[j] > from[j] { 1 } else { -1 };
-            }
-        }
-    };
+    let go = |approach: &mut [i8; 6], from: &[f64; 6], to: &[f64; 6]| update_approach(approach, from, to, &[0.0; 6]);
     for m in motions {
         let d = duration_s(m);
         let t0 = t + 1.0;

@@ -191,6 +191,7 @@ pub fn score(
             let f = t / resid_var.max(1.0);
             let delta_bic = if rss > 0.0 && rss > t { n * (rss / (rss - t)).ln() - n.ln() } else { 0.0 };
             let sigma = if visible { resid_var.sqrt().max(1.0) / ns2.sqrt() } else { f64::INFINITY };
+            let plausible = estimate.abs() <= PLAUSIBLE_TYPICAL_MULTIPLE * c.typical.abs();
             projected.push(sp);
             CandidateScore {
                 name: c.name.clone(),
@@ -201,11 +202,8 @@ pub fn score(
                 delta_bic,
                 absorbed_share,
                 detectability_at_typical: ns2 * c.typical * c.typical,
-                plausible: estimate.abs() <= PLAUSIBLE_TYPICAL_MULTIPLE * c.typical.abs(),
-                significant: visible
-                    && f > threshold
-                    && delta_bic > 0.0
-                    && estimate.abs() <= PLAUSIBLE_TYPICAL_MULTIPLE * c.typical.abs(),
+                plausible,
+                significant: visible && f > threshold && delta_bic > 0.0 && plausible,
             }
         })
         .collect();

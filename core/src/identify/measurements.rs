@@ -4,6 +4,7 @@
 use crate::fringes::{detect_extrema, HysteresisConfig};
 use crate::identify::{Observation, ObservationKind};
 use crate::measure::{self, MeasureError, Measurement, PhaseModel};
+use crate::model::effects::update_approach;
 use crate::trace::Trace;
 
 /// How traces become observations.
@@ -156,13 +157,8 @@ impl Approach {
         if trace.is_empty() {
             return self.state;
         }
-        let first = trace.joints_display(0);
         if let Some(last) = self.last_pose {
-            for j in 0..6 {
-                if (first[j] - last[j]).abs() > APPROACH_MIN_MOVE[j] {
-                    self.state[j] = if first[j] > last[j] { 1 } else { -1 };
-                }
-            }
+            update_approach(&mut self.state, &last, &trace.joints_display(0), &APPROACH_MIN_MOVE);
         }
         let start = self.state;
         self.state = approach_at(trace, trace.len() - 1, &start);

@@ -199,8 +199,9 @@ pub fn predict_with_path(
             let gap_um = optical_gap_um(c.length_um, t_s);
             let mut nm = fp.fundamental_phase_rad(gap_um, c.tilt_rad) * fp.wavelength_nm()
                 / (4.0 * std::f64::consts::PI * fp.medium_index());
+            let phase_rad = 2.0 * std::f64::consts::PI * gap_um / fp.fringe_period_um();
             for p in path {
-                nm += p.cyclic_error_nm(2.0 * std::f64::consts::PI * gap_um / fp.fringe_period_um());
+                nm += p.cyclic_error_nm(phase_rad);
             }
             nm
         }

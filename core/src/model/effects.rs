@@ -288,6 +288,17 @@ pub fn reversal_play(effects: &[Effect], robot: &RobotDescription) -> [f64; 6] {
     play
 }
 
+/// Update the directions each joint last moved in after a straight move `from` → `to`
+/// (display units): joints that moved more than `min_move` take the move's sign.
+#[inline]
+pub fn update_approach(approach: &mut [i8; 6], from: &[f64; 6], to: &[f64; 6], min_move: &[f64; 6]) {
+    for j in 0..6 {
+        if (to[j] - from[j]).abs() > min_move[j] {
+            approach[j] = if to[j] > from[j] { 1 } else { -1 };
+        }
+    }
+}
+
 /// A pose's real joints from its reading (display units) and the directions each joint last
 /// moved in: the stage lags by half its play.
 #[inline]

@@ -421,7 +421,7 @@ impl FabryPerot {
     /// both near |L| ≈ 70 µm, square lamella.
     pub fn fringe_phase_rad(&self, gap_um: f64, tilt_rad: f64) -> f64 {
         let gap = gap_um.abs();
-        let gouy = if self.gouy_scale != 0.0 { self.gouy_scale * (gap / self.rayleigh_um).atan() } else { 0.0 };
+        let gouy = self.gouy_scale * (gap / self.rayleigh_um).atan();
         2.0 * self.k_per_um * gap - gouy - self.k_per_um * tilt_rad * tilt_rad * gap + PI
     }
 
