@@ -1,6 +1,7 @@
 //! End to end: a session recorded on the virtual bench with a hidden pivot offset
-//! (assets/benches/hidden-pivot.ron), then `photorobot diagnose <session> --json`: the workflow runs
-//! its discriminating motions on that bench and names the hidden effect from the traces.
+//! (assets/benches/hidden-pivot.ron) or a hidden reversal error, then `photorobot diagnose
+//! <session> --json`: the workflow runs its discriminating motions on that bench and names the
+//! hidden effect from the traces.
 
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::files::save_ron;
@@ -98,12 +99,73 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
         if r["motion"].as_str().unwrap().starts_with("rotation 6°") {
             // Measured (seed 5, 2026-11-24): with the hidden q4 pivot named, 3036 → 19.9 nm about
             // X_f and 3694 → 26.2 nm about Z_f; with its equivalent, the q6 pivot along Z_w,
-            // 2830 → 18.1 and 3642 → 32.2 nm. More than 50× either way, a few tens of nm left.
-            assert!(with * 50.0 < without && with < 40.0, "{}: {without} → {with} nm", r["motion"]);
+            // 2830 → 18.1 and 3642 → 32.2 nm; with the reversal errors among the candidates
+            // (other discriminating motions: q6 along X_w named, then q4 along Z_w),
+            // 540.7 → 16.0 and 4762 → 24.1 nm. "Without" is the final extrinsics without the
+            // effects and moves with what was named; more than 20× and a few tens of nm left.
+            assert!(with * 20.0 < without && with < 40.0, "{}: {without} → {with} nm", r["motion"]);
         } else {
             assert!(with <= without.max(50.0), "{}: {without} → {with} nm", r["motion"]);
         }
     }
+}
+
+/// A hidden reversal error (1 µm of play on the X stage, SPEC section 9's typical size) from
+/// traces: the recorded motions each go one way, and their tracking takes the start phase from
+/// the motion, so the calibration data cannot see the play; the workflow runs its reversal
+/// motions, tracked with the start phase from the samples, and names it.
+#[test]
+fn diagnose_names_a_hidden_reversal_error_from_virtual_bench_traces() {
+    use photorobot_core::model::effects::Effect;
+    let t0 = std::time::Instant::now();
+    let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
+    preset.name = "hidden-reversal".into();
+    preset.effects = vec![Effect::ReversalError { joint: "q3".into(), step: 1.0 }];
+    let dir = tempfile::tempdir().unwrap();
+    let bench_file = dir.path().join("hidden-reversal.ron");
+    save_ron(&bench_file, &preset).unwrap();
+    let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
+    let cancel = AtomicBool::new(false);
+    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+    let run = run_plan(&mut bench, &session_plan(), &mut control);
+    run.outcome.unwrap();
+    std::fs::create_dir_all(dir.path().join("traces")).unwrap();
+    for (i, t) in run.traces.iter().enumerate() {
+        t.write_csv(&dir.path().join("traces").join(format!("{i:03}.csv"))).unwrap();
+    }
+    save_ron(&dir.path().join("extrinsics.ron"), &preset.truth).unwrap();
+    let mut out = Vec::new();
+    let args =
+        ["photorobot", "diagnose", dir.path().to_str().unwrap(), "--bench", bench_file.to_str().unwrap(), "--json"];
+    photorobot_app::cli::run(args, &mut out).unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    if let Ok(p) = std::env::var("DIAGNOSE_DUMP_REVERSAL") {
+        std::fs::write(p, &out).unwrap();
+    }
+    eprintln!(
+        "verdict {}, rms {} → {} nm ({} → {} σ), {:.1} s",
+        v["verdict"],
+        v["residual_rms_before_nm"],
+        v["residual_rms_after_nm"],
+        v["residual_rms_before_sigma"],
+        v["residual_rms_after_sigma"],
+        t0.elapsed().as_secs_f64()
+    );
+    for e in v["effects"].as_array().unwrap() {
+        eprintln!("  {} = {} ± {} {}", e["name"], e["estimate"], e["sigma"], e["unit"]);
+    }
+    assert_eq!(v["discriminating_motions_ran"], true);
+    let first = &v["effects"][0];
+    assert_eq!(first["name"], "reversal error q3", "{v}");
+    // Measured (seed 5, 2026-11-24): 0.943 ± 0.017 µm, then a spurious q2 scale of
+    // −3276 ± 287 ppm; residual 6.97σ → 1.05σ. The play comes out 6 % low, about 3.4σ: the
+    // stall tracked from the samples is within ~0.5 nm of 10 nm (fringes_on_virtual_bench),
+    // and the calibration traces, tracked from the motion, follow part of it where the model
+    // says they do not. Hence 10 %, not 3σ.
+    let (est, sigma) = (first["estimate"].as_f64().unwrap(), first["sigma"].as_f64().unwrap());
+    assert!((est - 1.0).abs() < 0.1, "{est} ± {sigma} µm");
+    let after = v["residual_rms_after_sigma"].as_f64().unwrap();
+    assert!(after <= 1.5, "residual {after}σ after");
 }
 
 #[test]

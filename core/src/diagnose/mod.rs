@@ -55,6 +55,10 @@ pub const EXTRACT_OPTIONS: crate::identify::measurements::ExtractOptions =
     };
 /// Label prefix of the discriminating motions ([`motions::pool`]).
 pub const DISCRIMINATING_PREFIX: &str = "D ";
+/// At most this many discriminating motions per design: 10 until the reversal errors were
+/// seen in traces; their motions (a reversal of each prismatic stage, out and back) then took
+/// the slots of the q6 rotations that show a pivot offset best.
+pub const MAX_MOTIONS: usize = 14;
 /// At most this many effects are added.
 pub const MAX_EFFECTS: usize = 4;
 
@@ -125,11 +129,6 @@ pub struct DiagnosisResult {
     pub residual_where: Vec<ResidualGroup>,
     /// Extrinsics of the final model.
     pub extrinsics: Extrinsics,
-    /// Candidates left out because recorded traces cannot show them: reversal errors (the
-    /// fringe tracker anchors each trace's start phase to the motion hint over its first
-    /// fringe, where a stage takes up its play; named on observations that resolve it).
-    #[serde(default)]
-    pub not_seen_in_traces: Vec<String>,
 }
 
 /// One step of the workflow, for display.
@@ -149,10 +148,6 @@ pub enum Step {
         worst: Vec<ResidualGroup>,
         /// Candidates no observation and no pool motion can see (dropped).
         invisible: Vec<String>,
-        /// Candidates recorded traces cannot show (dropped; see
-        /// [`DiagnosisResult::not_seen_in_traces`]).
-        #[serde(default)]
-        not_seen_in_traces: Vec<String>,
     },
     /// Candidates scored, best first.
     Scored {
@@ -205,7 +200,7 @@ impl Step {
     /// A few lines for a person.
     pub fn summary(&self) -> String {
         match self {
-            Step::Baseline { fitted, held_out, rms_sigma, rms_nm, worst, invisible, not_seen_in_traces } => {
+            Step::Baseline { fitted, held_out, rms_sigma, rms_nm, worst, invisible } => {
                 let mut s = format!(
                     "{fitted} observations fitted, {held_out} held out; residual rms {rms_sigma:.2}× the noise ({rms_nm:.2} nm on gap changes)"
                 );
@@ -217,12 +212,6 @@ impl Step {
                 }
                 if !invisible.is_empty() {
                     s += &format!("\n  no motion can see: {}", invisible.join(", "));
-                }
-                if !not_seen_in_traces.is_empty() {
-                    s += &format!(
-                        "\n  not in recorded traces (the tracker anchors each start phase to the hint): {}",
-                        not_seen_in_traces.join(", ")
-                    );
                 }
                 s
             }
@@ -338,7 +327,6 @@ pub struct Diagnosis {
     equivalent: Vec<String>,
     separated: Vec<String>,
     session_traces: Vec<crate::trace::Trace>,
-    not_seen_in_traces: Vec<String>,
     stage: Stage,
     /// The steps done so far.
     pub steps: Vec<Step>,
@@ -414,7 +402,6 @@ impl Diagnosis {
             equivalent: Vec::new(),
             separated: Vec::new(),
             session_traces: Vec::new(),
-            not_seen_in_traces: Vec::new(),
             stage: Stage::Baseline,
             steps: Vec::new(),
             result: None,
@@ -434,13 +421,6 @@ impl Diagnosis {
         let extracted = observations_from_traces(traces, &model, &EXTRACT_OPTIONS);
         let mut d = Self::new(base, extracted.observations, extrinsics)?;
         d.session_traces = traces.to_vec();
-        // A stage takes up its play at the start of a motion, within the tracker's first knot:
-        // the tracked dL does not carry a reversal error (measured: 0.8 nm of 21 nm), and the
-        // candidate would only fit the tracker's start-phase residuals.
-        let (blind, keep): (Vec<_>, Vec<_>) =
-            d.candidates.drain(..).partition(|c| matches!(c.kind, candidates::CandidateKind::ReversalError(_)));
-        d.candidates = keep;
-        d.not_seen_in_traces = blind.into_iter().map(|c| c.name).collect();
         Ok((d, extracted.skipped))
     }
 
@@ -553,7 +533,6 @@ impl Diagnosis {
             rms_nm,
             worst: replay::localise(&obs, &f.residuals).into_iter().take(8).collect(),
             invisible,
-            not_seen_in_traces: self.not_seen_in_traces.clone(),
         });
         self.fit = Some(f);
         self.stage = Stage::Score;
@@ -609,7 +588,7 @@ impl Diagnosis {
                 (m, gain)
             });
             match best.max_by(|a, b| a.1.total_cmp(&b.1)) {
-                Some((m, gain)) if gain > 1.0 && chosen.len() < 10 => {
+                Some((m, gain)) if gain > 1.0 && chosen.len() < MAX_MOTIONS => {
                     for (t, h) in have.iter_mut().enumerate() {
                         *h += per_motion[m][t];
                     }
@@ -894,7 +873,6 @@ impl Diagnosis {
                 vec![]
             },
             extrinsics: f.state.extrinsics,
-            not_seen_in_traces: self.not_seen_in_traces.clone(),
         });
         self.steps.push(Step::Finished { verdict });
         self.stage = Stage::Done;

@@ -6,7 +6,7 @@
 
 use crate::bench::{run_plan, Bench, RunControl};
 use crate::diagnose::fit::Predictor;
-use crate::identify::measurements::{observations_from_traces, ExtractOptions};
+use crate::identify::measurements::{observations_from_traces_with, ExtractOptions};
 use crate::identify::{Observation, ObservationKind};
 use crate::measure::PhaseModel;
 use crate::model::effects::{update_approach, Effect};
@@ -48,6 +48,10 @@ pub struct DesignedMotion {
     pub label: String,
     /// The motion.
     pub kind: MotionKind,
+    /// Tracked with the start phase from the samples ([`crate::measure::AnalyseOptions::free_start`]):
+    /// a motion that reverses a stage, to see its play. Otherwise the tracked gap change starts
+    /// as if every moving stage had approached in its direction of motion.
+    pub free_start: bool,
 }
 
 /// σ of a gap change the templates assume (nm): a bench's stage noise (SPEC section 9).
@@ -75,7 +79,9 @@ pub fn duration_s(m: &DesignedMotion) -> f64 {
 
 /// Observation templates of motions run from bench time `start_s` (values zero, σ the template
 /// σ, times estimated by [`duration_s`]). Approach directions: the bench starts at q = 0 with
-/// none known, and each motion starts with a move from where the last one ended.
+/// none known, and each motion starts with a move from where the last one ended; a motion
+/// without [`DesignedMotion::free_start`] starts as its tracking sees it, each moving stage
+/// approached in its direction of motion ([`crate::identify::measurements`]).
 pub fn templates(motions: &[DesignedMotion], start_s: f64) -> Vec<Observation> {
     let mut t = start_s;
     let mut out = Vec::new();
@@ -96,8 +102,11 @@ pub fn templates(motions: &[DesignedMotion], start_s: f64) -> Vec<Observation> {
         match &m.kind {
             MotionKind::Move { from_display, to_display } => {
                 go(&mut approach, &at, from_display);
-                let from_approach = approach;
+                let setup = approach;
                 go(&mut approach, from_display, to_display);
+                // tracked from the samples: the real approach; otherwise the motion's own
+                // direction for the joints it moves (those it does not move keep theirs)
+                let from_approach = if m.free_start { setup } else { approach };
                 for k in 1..=4 {
                     let f = k as f64 / 4.0;
                     let to: [f64; 6] = std::array::from_fn(|j| from_display[j] + f * (to_display[j] - from_display[j]));
@@ -141,7 +150,7 @@ fn pose(q1: f64, q2: f64, q3: f64, q4: f64, q5: f64, q6: f64) -> [f64; 6] {
 }
 
 fn mv(label: String, from_display: [f64; 6], to_display: [f64; 6]) -> DesignedMotion {
-    DesignedMotion { label, kind: MotionKind::Move { from_display, to_display } }
+    DesignedMotion { label, kind: MotionKind::Move { from_display, to_display }, free_start: false }
 }
 
 /// The pool of discriminating motions (femto-6dof joint order: q1 Z_w, q2 Y_w, q3 X_w, q4-q6
@@ -187,8 +196,10 @@ pub fn pool() -> Vec<DesignedMotion> {
         a[j] = -150.0;
         let mut b = [0.0; 6];
         b[j] = 150.0;
-        out.push(mv(format!("D {name} -150 -> +150 µm (reversal, out)"), a, b));
-        out.push(mv(format!("D {name} +150 -> -150 µm (reversal, back)"), b, a));
+        out.push(DesignedMotion { free_start: true, ..mv(format!("D {name} -150 -> +150 µm (reversal, out)"), a, b) });
+        out.push(DesignedMotion {
+            free_start: true, ..mv(format!("D {name} +150 -> -150 µm (reversal, back)"), b, a)
+        });
     }
     out.push(mv(
         "D q2 -100 -> +100 µm".into(),
@@ -198,6 +209,7 @@ pub fn pool() -> Vec<DesignedMotion> {
     out.push(DesignedMotion {
         label: "D return to q = 0 after 30 s".into(),
         kind: MotionKind::Dwell { at_display: [0.0; 6], duration_s: 30.0 },
+        free_start: false,
     });
     out
 }
@@ -237,7 +249,11 @@ impl SimulatedBench {
     /// A simulated bench on the nominal model `base` with the hidden `truth` and `effects`.
     pub fn new(base: &PhaseModel, truth: Extrinsics, effects: Vec<Effect>, seed: u64) -> Result<Self, String> {
         let probe = templates(
-            &[DesignedMotion { label: String::new(), kind: MotionKind::Sweep { at_display: [0.0; 6] } }],
+            &[DesignedMotion {
+                label: String::new(),
+                kind: MotionKind::Sweep { at_display: [0.0; 6] },
+                free_start: false,
+            }],
             0.0,
         );
         Ok(Self {
@@ -354,7 +370,11 @@ pub fn paper_calibration() -> Vec<Observation> {
     .into_iter()
     .enumerate()
     {
-        motions.push(DesignedMotion { label: format!("G sweep {k}"), kind: MotionKind::Sweep { at_display: at } });
+        motions.push(DesignedMotion {
+            label: format!("G sweep {k}"),
+            kind: MotionKind::Sweep { at_display: at },
+            free_start: false,
+        });
     }
     let mut out = templates(&motions, 0.0);
     let end = out.iter().map(|o| o.time_s[1]).fold(0.0, f64::max);
@@ -386,16 +406,29 @@ pub struct BenchRunner<'a> {
     pub time_offset_s: f64,
     /// The traces run so far.
     pub traces: Vec<crate::trace::Trace>,
+    /// Labels of the motions run with [`DesignedMotion::free_start`].
+    free_start: std::collections::HashSet<String>,
 }
 
 impl<'a> BenchRunner<'a> {
     /// A runner on `bench` whose observations come after bench time `time_offset_s`.
     pub fn new(bench: &'a mut dyn Bench, time_offset_s: f64) -> Self {
-        Self { bench, options: crate::diagnose::EXTRACT_OPTIONS, time_offset_s, traces: Vec::new() }
+        Self {
+            bench,
+            options: crate::diagnose::EXTRACT_OPTIONS,
+            time_offset_s,
+            traces: Vec::new(),
+            free_start: Default::default(),
+        }
     }
 
-    fn extract(&self, traces: &[crate::trace::Trace], analysis: &PhaseModel) -> Vec<Observation> {
-        let mut obs = observations_from_traces(traces, analysis, &self.options).observations;
+    /// Observations of the traces from index `from` on, the earlier ones giving the stages'
+    /// approach directions.
+    fn extract(&self, from: usize, analysis: &PhaseModel) -> Vec<Observation> {
+        let (earlier, traces) = self.traces.split_at(from);
+        let labels = &self.free_start;
+        let free = |t: &crate::trace::Trace| labels.contains(&t.meta.label);
+        let mut obs = observations_from_traces_with(earlier, traces, analysis, &self.options, &free).observations;
         for o in &mut obs {
             o.time_s = [o.time_s[0] + self.time_offset_s, o.time_s[1] + self.time_offset_s];
         }
@@ -437,12 +470,13 @@ impl MotionRunner for BenchRunner<'_> {
         let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
         let run = run_plan(self.bench, &plan_of(motions), &mut control);
         run.outcome.map_err(|e| format!("discriminating motions on {}: {e}", self.bench.name()))?;
-        let obs = self.extract(&run.traces, analysis);
+        self.free_start.extend(motions.iter().filter(|m| m.free_start).map(|m| m.label.clone()));
+        let from = self.traces.len();
         self.traces.extend(run.traces);
-        Ok(obs)
+        Ok(self.extract(from, analysis))
     }
 
     fn reanalyse(&self, analysis: &PhaseModel) -> Option<Vec<Observation>> {
-        Some(self.extract(&self.traces, analysis))
+        Some(self.extract(0, analysis))
     }
 }

@@ -3,7 +3,7 @@
 
 use crate::fringes::{detect_extrema, HysteresisConfig};
 use crate::identify::{Observation, ObservationKind};
-use crate::measure::{self, MeasureError, Measurement, PhaseModel};
+use crate::measure::{self, AnalyseOptions, MeasureError, Measurement, PhaseModel};
 use crate::model::effects::update_approach;
 use crate::trace::Trace;
 
@@ -37,10 +37,21 @@ pub fn observations_from_trace(
     options: &ExtractOptions,
     group: usize,
 ) -> Result<Vec<Observation>, MeasureError> {
+    observations_from_trace_with(trace, model, options, group, &AnalyseOptions::default())
+}
+
+/// [`observations_from_trace`] with the motion tracked as `analyse` says.
+pub fn observations_from_trace_with(
+    trace: &Trace,
+    model: &PhaseModel,
+    options: &ExtractOptions,
+    group: usize,
+    analyse: &AnalyseOptions,
+) -> Result<Vec<Observation>, MeasureError> {
     let label = trace.meta.label.clone();
     let wavelength_nm = trace.wavelength_nm.first().copied().unwrap_or(1560.0);
     let mut out = Vec::new();
-    match measure::analyse(trace, model)? {
+    match measure::analyse_with(trace, model, analyse)? {
         Measurement::Sweep(s) => {
             out.push(Observation {
                 label,
@@ -184,20 +195,56 @@ fn approach_at(trace: &Trace, i: usize, start: &[i8; 6]) -> [i8; 6] {
     })
 }
 
+/// The direction of each joint's first motion in `trace` (more than [`APPROACH_MIN_MOVE`] from
+/// its first reading), `start` for the joints that do not move.
+fn first_motion(trace: &Trace, start: &[i8; 6]) -> [i8; 6] {
+    std::array::from_fn(|j| {
+        let c = trace.joint_column(j);
+        let q0 = c.first().copied().unwrap_or(0.0);
+        c.iter().find(|&&q| (q - q0).abs() > APPROACH_MIN_MOVE[j]).map_or(start[j], |&q| if q > q0 { 1 } else { -1 })
+    })
+}
+
 /// Observations from many traces; a trace whose analysis fails is listed in
-/// [`Extracted::skipped`] and the others are still used.
+/// [`Extracted::skipped`] and the others are still used. Motions are tracked with the default
+/// [`AnalyseOptions`] ([`observations_from_traces_with`]).
 pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &ExtractOptions) -> Extracted {
+    observations_from_traces_with(&[], traces, model, options, &|_| false)
+}
+
+/// Observations from `traces`, recorded after `earlier` on the same bench (only their joints
+/// are read: the stages' approach directions carry over). The motions for which `free_start`
+/// holds are tracked with [`AnalyseOptions::free_start`]; their gap changes start at the
+/// stages' real approach directions. The others start, as their tracking sees them, with each
+/// moving stage approached in its direction of motion: the tracker takes the start phase from
+/// the motion over the first fringe, where a stage that reverses takes up its play.
+pub fn observations_from_traces_with(
+    earlier: &[Trace],
+    traces: &[Trace],
+    model: &PhaseModel,
+    options: &ExtractOptions,
+    free_start: &(dyn Fn(&Trace) -> bool + Sync),
+) -> Extracted {
     use rayon::prelude::*;
     // Traces are independent: analyse them in parallel, then number the amplitude groups in
     // trace order.
-    let results: Vec<Result<Vec<Observation>, MeasureError>> =
-        traces.par_iter().map(|t| observations_from_trace(t, model, options, 0)).collect();
+    let results: Vec<Result<Vec<Observation>, MeasureError>> = traces
+        .par_iter()
+        .map(|t| {
+            let analyse = AnalyseOptions { free_start: free_start(t) };
+            observations_from_trace_with(t, model, options, 0, &analyse)
+        })
+        .collect();
     let mut out = Extracted::default();
     let mut group = 0;
     let mut approach = Approach::default();
+    for t in earlier {
+        approach.enter(t);
+    }
     for (t, r) in traces.iter().zip(results) {
         // Every trace moves the stages, analysed or not.
         let start = approach.enter(t);
+        let tracked_start = if free_start(t) { start } else { first_motion(t, &start) };
         let mut obs = match r {
             Ok(o) => o,
             Err(e) => {
@@ -208,7 +255,7 @@ pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &
         for o in &mut obs {
             let at = |time_s: f64| t.t_s.partition_point(|&x| x < time_s).min(t.len() - 1);
             o.approach = match o.kind {
-                ObservationKind::GapChange { .. } => [start, approach_at(t, at(o.time_s[1]), &start)],
+                ObservationKind::GapChange { .. } => [tracked_start, approach_at(t, at(o.time_s[1]), &start)],
                 ObservationKind::AbsoluteGap { .. } => [start; 2],
                 ObservationKind::FringeAmplitude { .. } => [approach_at(t, at(o.time_s[0]), &start); 2],
             };
