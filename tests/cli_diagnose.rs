@@ -36,27 +36,34 @@ fn session_plan() -> Plan {
     Plan { name: "diagnose e2e".into(), description: String::new(), segments: s }
 }
 
-#[test]
-fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
+/// Records `session_plan` on a virtual bench of `preset` (seed 5) into `dir` (traces and the
+/// truth as the calibrated extrinsics: the workflow refits them in its baseline), runs
+/// `photorobot diagnose dir [extra] --json`, writes the JSON to the file `$dump_var` names, if
+/// set, and prints the verdict and the effects.
+fn record_and_diagnose(
+    preset: &BenchPreset,
+    dir: &std::path::Path,
+    extra: &[&str],
+    dump_var: &str,
+) -> serde_json::Value {
     let t0 = std::time::Instant::now();
-    let preset = BenchPreset::resolve("hidden-pivot").unwrap();
-    let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
+    let mut bench = VirtualBench::new(preset, Some(5)).unwrap();
     let cancel = AtomicBool::new(false);
     let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
     let run = run_plan(&mut bench, &session_plan(), &mut control);
     run.outcome.unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::create_dir_all(dir.path().join("traces")).unwrap();
+    std::fs::create_dir_all(dir.join("traces")).unwrap();
     for (i, t) in run.traces.iter().enumerate() {
-        t.write_csv(&dir.path().join("traces").join(format!("{i:03}.csv"))).unwrap();
+        t.write_csv(&dir.join("traces").join(format!("{i:03}.csv"))).unwrap();
     }
-    // The calibrated extrinsics: the truth (the workflow refits them in its baseline).
-    save_ron(&dir.path().join("extrinsics.ron"), &preset.truth).unwrap();
+    save_ron(&dir.join("extrinsics.ron"), &preset.truth).unwrap();
     let mut out = Vec::new();
-    let args = ["photorobot", "diagnose", dir.path().to_str().unwrap(), "--json"];
+    let mut args = vec!["photorobot", "diagnose", dir.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    args.push("--json");
     photorobot_app::cli::run(args, &mut out).unwrap();
     let v: serde_json::Value = serde_json::from_slice(&out).unwrap();
-    if let Ok(p) = std::env::var("DIAGNOSE_DUMP") {
+    if let Ok(p) = std::env::var(dump_var) {
         std::fs::write(p, &out).unwrap();
     }
     eprintln!(
@@ -68,6 +75,17 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
         v["residual_rms_after_sigma"],
         t0.elapsed().as_secs_f64()
     );
+    for e in v["effects"].as_array().unwrap() {
+        eprintln!("  {} = {} ± {} {}", e["name"], e["estimate"], e["sigma"], e["unit"]);
+    }
+    v
+}
+
+#[test]
+fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
+    let preset = BenchPreset::resolve("hidden-pivot").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let v = record_and_diagnose(&preset, dir.path(), &[], "DIAGNOSE_DUMP");
     assert_eq!(v["discriminating_motions_ran"], true);
     // The first effect added: the joint-4 pivot along Z_w or one of its equivalents (a pivot of
     // joint 6 along Z_w or X_w, or of joint 5 along X_w, with the beam shifted), of its size.
@@ -117,43 +135,14 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
 #[test]
 fn diagnose_names_a_hidden_reversal_error_from_virtual_bench_traces() {
     use photorobot_core::model::effects::Effect;
-    let t0 = std::time::Instant::now();
     let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
     preset.name = "hidden-reversal".into();
     preset.effects = vec![Effect::ReversalError { joint: "q3".into(), step: 1.0 }];
     let dir = tempfile::tempdir().unwrap();
     let bench_file = dir.path().join("hidden-reversal.ron");
     save_ron(&bench_file, &preset).unwrap();
-    let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
-    let cancel = AtomicBool::new(false);
-    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-    let run = run_plan(&mut bench, &session_plan(), &mut control);
-    run.outcome.unwrap();
-    std::fs::create_dir_all(dir.path().join("traces")).unwrap();
-    for (i, t) in run.traces.iter().enumerate() {
-        t.write_csv(&dir.path().join("traces").join(format!("{i:03}.csv"))).unwrap();
-    }
-    save_ron(&dir.path().join("extrinsics.ron"), &preset.truth).unwrap();
-    let mut out = Vec::new();
-    let args =
-        ["photorobot", "diagnose", dir.path().to_str().unwrap(), "--bench", bench_file.to_str().unwrap(), "--json"];
-    photorobot_app::cli::run(args, &mut out).unwrap();
-    let v: serde_json::Value = serde_json::from_slice(&out).unwrap();
-    if let Ok(p) = std::env::var("DIAGNOSE_DUMP_REVERSAL") {
-        std::fs::write(p, &out).unwrap();
-    }
-    eprintln!(
-        "verdict {}, rms {} → {} nm ({} → {} σ), {:.1} s",
-        v["verdict"],
-        v["residual_rms_before_nm"],
-        v["residual_rms_after_nm"],
-        v["residual_rms_before_sigma"],
-        v["residual_rms_after_sigma"],
-        t0.elapsed().as_secs_f64()
-    );
-    for e in v["effects"].as_array().unwrap() {
-        eprintln!("  {} = {} ± {} {}", e["name"], e["estimate"], e["sigma"], e["unit"]);
-    }
+    let v =
+        record_and_diagnose(&preset, dir.path(), &["--bench", bench_file.to_str().unwrap()], "DIAGNOSE_DUMP_REVERSAL");
     assert_eq!(v["discriminating_motions_ran"], true);
     let first = &v["effects"][0];
     assert_eq!(first["name"], "reversal error q3", "{v}");

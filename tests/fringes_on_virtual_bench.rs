@@ -187,6 +187,28 @@ fn fringe_visibility_and_tilt_follow_the_model() {
 /// motion after a reversal differs by 0.8 nm with and without 2 µm of play, where the gap moves
 /// by 21 nm. The diagnosis sees reversal errors through observations
 /// (`core/src/diagnose/tests.rs`), not yet through traces.
+/// Lateral moves of the X stage at q1 = 100 µm that reverse it (or not): recorded moves to
+/// -120 and back and forth, an unrecorded move further out, then `again` and `last` (µm), each
+/// approached from below.
+fn reversal_plan(again: f64, last: f64) -> Plan {
+    let at = |q3: f64| JointTarget::default().with(2, q3).with(0, 100.0);
+    let rec = |q3: f64, label: &str| Segment::Move { to: at(q3), record: true, label: label.into() };
+    Plan {
+        name: "reversals".into(),
+        description: String::new(),
+        segments: vec![
+            // Recorded: the extraction knows the stages' directions from the first trace on
+            // (the bench starts centred in its play, as the model assumes of an unknown one).
+            rec(-120.0, "to start"),
+            rec(120.0, "X + after -"),
+            rec(-120.0, "X - after +"),
+            Segment::Move { to: at(-140.0), record: false, label: "further -".into() },
+            rec(again, "X + after -, again"),
+            rec(last, "X + after +"),
+        ],
+    }
+}
+
 #[test]
 fn a_hidden_reversal_error_is_seen_through_the_approach_directions() {
     use photorobot_core::identify::measurements::{observations_from_traces_with, ExtractOptions};
@@ -203,22 +225,7 @@ fn a_hidden_reversal_error_is_seen_through_the_approach_directions() {
     preset.stages.stage_noise_nm = 0.0;
     preset.stages.stage_noise_urad = 0.0;
     preset.effects = vec![Effect::ReversalError { joint: "q3".into(), step: 2.0 }];
-    let at = |q3: f64| JointTarget::default().with(2, q3).with(0, 100.0);
-    let rec = |q3: f64, label: &str| Segment::Move { to: at(q3), record: true, label: label.into() };
-    let plan = Plan {
-        name: "reversals".into(),
-        description: String::new(),
-        segments: vec![
-            // Recorded: the extraction knows the stages' directions from the first trace on
-            // (the bench starts centred in its play, as the model assumes of an unknown one).
-            rec(-120.0, "to start"),
-            rec(120.0, "X + after -"),
-            rec(-120.0, "X - after +"),
-            Segment::Move { to: at(-140.0), record: false, label: "further -".into() },
-            rec(40.0, "X + after -, again"),
-            rec(130.0, "X + after +"),
-        ],
-    };
+    let plan = reversal_plan(40.0, 130.0);
     let traces = run(&preset, &plan, 3);
     let m = model(&preset, preset.truth);
     // tracked from the samples: the gap changes start at the stages' real approaches
@@ -271,20 +278,8 @@ fn tracked_gap_changes_carry_the_play_of_a_reversing_stage() {
     use photorobot_core::model::effects::Effect;
     let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
     preset.effects = vec![Effect::ReversalError { joint: "q3".into(), step: 2.0 }];
-    let at = |q3: f64| JointTarget::default().with(2, q3).with(0, 100.0);
-    let rec = |q3: f64, label: &str| Segment::Move { to: at(q3), record: true, label: label.into() };
-    let plan = Plan {
-        name: "reversals".into(),
-        description: String::new(),
-        segments: vec![
-            rec(-120.0, "to start"),
-            rec(120.0, "X + after -"),
-            rec(-120.0, "X - after +"),
-            Segment::Move { to: at(-140.0), record: false, label: "further -".into() },
-            rec(-20.0, "X + after -, again"),
-            rec(140.0, "X + after +"),
-        ],
-    };
+    // the last two traces of 1.6 and 2.1 fringes (see the figures below)
+    let plan = reversal_plan(-20.0, 140.0);
     let traces = run(&preset, &plan, 11);
     let m = model(&preset, preset.truth);
     let obs = observations_from_traces_with(&[], &traces, &m, &ExtractOptions::default(), &|_| true).observations;
