@@ -119,7 +119,9 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
             // X_f and 3694 → 26.2 nm about Z_f; with its equivalent, the q6 pivot along Z_w,
             // 2830 → 18.1 and 3642 → 32.2 nm; with the reversal errors among the candidates
             // (other discriminating motions: q6 along X_w named, then q4 along Z_w),
-            // 540.7 → 16.0 and 4762 → 24.1 nm. "Without" is the final extrinsics without the
+            // 540.7 → 16.0 and 4762 → 24.1 nm; with motions under two fringes tracked from the
+            // samples (measure::SHORT_MOTION_FRINGES), q4 along Z_w itself, 19.93 ± 0.19 µm,
+            // 3662 → 16.8 and 4426 → 22.1 nm. "Without" is the final extrinsics without the
             // effects and moves with what was named; more than 20× and a few tens of nm left.
             assert!(with * 20.0 < without && with < 40.0, "{}: {without} → {with} nm", r["motion"]);
         } else {
@@ -146,8 +148,8 @@ fn diagnose_names_a_hidden_reversal_error_from_virtual_bench_traces() {
     assert_eq!(v["discriminating_motions_ran"], true);
     let first = &v["effects"][0];
     assert_eq!(first["name"], "reversal error q3", "{v}");
-    // Measured (seed 5, 2026-11-24): 0.943 ± 0.017 µm, then a spurious q2 scale of
-    // −3276 ± 287 ppm; residual 6.97σ → 1.05σ. The play comes out 6 % low, about 3.4σ: the
+    // Measured (seed 5, 2026-11-24): 0.943 ± 0.016 µm, then a spurious q2 scale of
+    // −4393 ± 282 ppm; residual 6.97σ → 1.05σ. The play comes out 6 % low, about 3.4σ: the
     // stall tracked from the samples is within ~0.5 nm of 10 nm (fringes_on_virtual_bench),
     // and the calibration traces, tracked from the motion, follow part of it where the model
     // says they do not. Hence 10 %, not 3σ.

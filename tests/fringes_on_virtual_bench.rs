@@ -287,15 +287,18 @@ fn tracked_gap_changes_carry_the_play_of_a_reversing_stage() {
     // Tracked with the default (the start phase follows the hint over the first fringe), the
     // extraction models the gap changes as starting with each moving stage approached in its
     // direction of motion. That is only part of the truth: the default tracker follows part
-    // of the stall (measured, seed 11: −2.6 to +15.4 nm against the model, of a 20.8 nm
+    // of the stall (measured, seed 11: −1.3 to +7.3 nm against the model, of a 20.8 nm
     // stall), hence `free_start` on the motions that must show a reversal error.
     let stiff = observations_from_traces(&traces, &m, &ExtractOptions::default()).observations;
     let mut stiff_worst = 0f64;
     for o in &stiff {
         let ObservationKind::GapChange { dl_nm, .. } = o.kind else { continue };
         let [from, to] = o.approach;
-        if o.label != "to start" {
+        // (the 1.6-fringe trace is tracked from the samples: measure::SHORT_MOTION_FRINGES)
+        if o.label != "to start" && o.label != "X + after -, again" {
             assert_eq!(from[2], to[2], "{}: the tracked start is the motion's direction", o.label);
+        } else if o.label != "to start" {
+            assert_eq!([from[2], to[2]], [-1, 1], "{}: the real approach", o.label);
         }
         let e = dl_nm - predict_with_path(&m, &fp, &preset.truth, o, 1.0, &preset.effects);
         eprintln!("default {:<22} {:?} error {e:.2} nm", o.label, o.approach);

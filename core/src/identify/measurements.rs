@@ -48,9 +48,22 @@ pub fn observations_from_trace_with(
     group: usize,
     analyse: &AnalyseOptions,
 ) -> Result<Vec<Observation>, MeasureError> {
+    traced(trace, model, options, group, analyse).map(|(obs, _)| obs)
+}
+
+/// The observations of a trace, and whether its motion's start phase came from the samples
+/// ([`crate::measure::MotionMeasurement::free_start`]).
+fn traced(
+    trace: &Trace,
+    model: &PhaseModel,
+    options: &ExtractOptions,
+    group: usize,
+    analyse: &AnalyseOptions,
+) -> Result<(Vec<Observation>, bool), MeasureError> {
     let label = trace.meta.label.clone();
     let wavelength_nm = trace.wavelength_nm.first().copied().unwrap_or(1560.0);
     let mut out = Vec::new();
+    let mut free_start = false;
     match measure::analyse_with(trace, model, analyse)? {
         Measurement::Sweep(s) => {
             out.push(Observation {
@@ -63,6 +76,7 @@ pub fn observations_from_trace_with(
             });
         }
         Measurement::Motion(m) => {
+            free_start = m.free_start;
             let n = trace.len();
             let k = options.points_per_motion.max(1);
             let turns = (3..6).any(|j| {
@@ -97,7 +111,7 @@ pub fn observations_from_trace_with(
             }
         }
     }
-    Ok(out)
+    Ok((out, free_start))
 }
 
 /// Fringe amplitude (half peak-to-peak between neighbouring extrema) along a trace, at the
@@ -214,8 +228,9 @@ pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &
 
 /// Observations from `traces`, recorded after `earlier` on the same bench (only their joints
 /// are read: the stages' approach directions carry over). The motions for which `free_start`
-/// holds are tracked with [`AnalyseOptions::free_start`]; their gap changes start at the
-/// stages' real approach directions. The others start, as their tracking sees them, with each
+/// holds are tracked with [`AnalyseOptions::free_start`], as are motions shorter than
+/// [`crate::measure::SHORT_MOTION_FRINGES`]; their gap changes start at the stages' real
+/// approach directions. The others start, as their tracking sees them, with each
 /// moving stage approached in its direction of motion: the tracker takes the start phase from
 /// the motion over the first fringe, where a stage that reverses takes up its play.
 pub fn observations_from_traces_with(
@@ -228,12 +243,9 @@ pub fn observations_from_traces_with(
     use rayon::prelude::*;
     // Traces are independent: analyse them in parallel, then number the amplitude groups in
     // trace order.
-    let results: Vec<Result<Vec<Observation>, MeasureError>> = traces
+    let results: Vec<Result<(Vec<Observation>, bool), MeasureError>> = traces
         .par_iter()
-        .map(|t| {
-            let analyse = AnalyseOptions { free_start: free_start(t) };
-            observations_from_trace_with(t, model, options, 0, &analyse)
-        })
+        .map(|t| traced(t, model, options, 0, &AnalyseOptions { free_start: free_start(t) }))
         .collect();
     let mut out = Extracted::default();
     let mut group = 0;
@@ -244,14 +256,14 @@ pub fn observations_from_traces_with(
     for (t, r) in traces.iter().zip(results) {
         // Every trace moves the stages, analysed or not.
         let start = approach.enter(t);
-        let tracked_start = if free_start(t) { start } else { first_motion(t, &start) };
-        let mut obs = match r {
+        let (mut obs, free) = match r {
             Ok(o) => o,
             Err(e) => {
                 out.skipped.push((t.meta.label.clone(), e.to_string()));
                 continue;
             }
         };
+        let tracked_start = if free { start } else { first_motion(t, &start) };
         for o in &mut obs {
             let at = |time_s: f64| t.t_s.partition_point(|&x| x < time_s).min(t.len() - 1);
             o.approach = match o.kind {
