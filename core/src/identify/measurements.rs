@@ -37,18 +37,7 @@ pub fn observations_from_trace(
     options: &ExtractOptions,
     group: usize,
 ) -> Result<Vec<Observation>, MeasureError> {
-    observations_from_trace_with(trace, model, options, group, &AnalyseOptions::default())
-}
-
-/// [`observations_from_trace`] with the motion tracked as `analyse` says.
-pub fn observations_from_trace_with(
-    trace: &Trace,
-    model: &PhaseModel,
-    options: &ExtractOptions,
-    group: usize,
-    analyse: &AnalyseOptions,
-) -> Result<Vec<Observation>, MeasureError> {
-    traced(trace, model, options, group, analyse).map(|(obs, _)| obs)
+    traced(trace, model, options, group, &AnalyseOptions::default()).map(|(obs, _)| obs)
 }
 
 /// The observations of a trace, and whether its motion's start phase came from the samples
