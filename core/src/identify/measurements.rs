@@ -1,7 +1,7 @@
 //! Recorded traces → observations for the identifiers: gap changes along motions, absolute gaps
 //! from sweeps, fringe amplitudes along tilt scans. Owns how a trace is cut into observations and what σ each gets.
 
-use crate::fringes::{detect_extrema, HysteresisConfig};
+use crate::fringes::{detect_extrema, Extremum, HysteresisConfig};
 use crate::identify::{Observation, ObservationKind};
 use crate::measure::{self, AnalyseOptions, MeasureError, Measurement, PhaseModel};
 use crate::model::effects::update_approach;
@@ -117,7 +117,7 @@ fn amplitudes(trace: &Trace, dl_nm: &[f64], half_fringe_nm: f64, group: usize, w
     }
     d2.sort_by(f64::total_cmp);
     let sigma = d2[d2.len() / 2] / 0.6745 / 6f64.sqrt();
-    let half_fringe_apart = |a: &crate::fringes::Extremum, b: &crate::fringes::Extremum| {
+    let half_fringe_apart = |a: &Extremum, b: &Extremum| {
         a.kind != b.kind
             && match (dl_nm.get(a.index), dl_nm.get(b.index)) {
                 (Some(a), Some(b)) => ((b - a).abs() / half_fringe_nm - 1.0).abs() < 0.15,
