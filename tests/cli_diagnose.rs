@@ -5,36 +5,8 @@
 
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::files::save_ron;
-use photorobot_core::plan::{JointTarget, Plan, Segment};
+use photorobot_e2e::session_plan;
 use std::sync::atomic::AtomicBool;
-
-fn mv(to: [f64; 6], record: bool, label: &str) -> Segment {
-    Segment::Move { to: JointTarget::all(to), record, label: label.into() }
-}
-
-/// A short calibration-like session: absolute gaps at three poses, X and Z translations, q4 and
-/// q5 rotations of ±4° (the paper's kinds of motion, on which the pivot offset is absorbed).
-fn session_plan() -> Plan {
-    let mut s = Vec::new();
-    for (k, at) in [[0.0; 6], [0.0, -100.0, 0.0, 0.0, 0.0, 0.0], [120.0, 0.0, -120.0, 0.0, 0.0, 0.0]].iter().enumerate()
-    {
-        s.push(mv(*at, false, "setup"));
-        s.push(Segment::Sweep { from_nm: 1540.0, to_nm: 1580.0, rate_nm_per_s: 10.0, label: format!("sweep {k}") });
-    }
-    for lateral in [-100.0, 100.0] {
-        s.push(mv([lateral, 0.0, -150.0, 0.0, 0.0, 0.0], false, "setup"));
-        s.push(mv([lateral, 0.0, 150.0, 0.0, 0.0, 0.0], true, &format!("X at q1 = {lateral}")));
-        s.push(mv([-150.0, 0.0, lateral, 0.0, 0.0, 0.0], false, "setup"));
-        s.push(mv([150.0, 0.0, lateral, 0.0, 0.0, 0.0], true, &format!("Z at q3 = {lateral}")));
-    }
-    for other in [-2.0, 0.0, 2.0] {
-        s.push(mv([0.0, 0.0, 0.0, -4.0, other, 0.0], false, "setup"));
-        s.push(mv([0.0, 0.0, 0.0, 4.0, other, 0.0], true, &format!("q4 at q5 = {other}")));
-        s.push(mv([0.0, 0.0, 0.0, other, -4.0, 0.0], false, "setup"));
-        s.push(mv([0.0, 0.0, 0.0, other, 4.0, 0.0], true, &format!("q5 at q4 = {other}")));
-    }
-    Plan { name: "diagnose e2e".into(), description: String::new(), segments: s }
-}
 
 /// Records `session_plan` on a virtual bench of `preset` (seed 5) into `dir` (traces and the
 /// truth as the calibrated extrinsics: the workflow refits them in its baseline), runs
@@ -87,10 +59,12 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
     let dir = tempfile::tempdir().unwrap();
     let v = record_and_diagnose(&preset, dir.path(), &[], "DIAGNOSE_DUMP");
     assert_eq!(v["discriminating_motions_ran"], true);
-    // The first effect added: the joint-4 pivot along Z_w or one of its equivalents (a pivot of
+    // The first effect named: the joint-4 pivot along Z_w or one of its equivalents (a pivot of
     // joint 6 along Z_w or X_w, or of joint 5 along X_w, with the beam shifted), of its size.
-    let added: Vec<&serde_json::Value> = v["steps"].as_array().unwrap().iter().filter_map(|s| s.get("Added")).collect();
-    let first = &added.first().expect("an effect added")["effect"];
+    // (The workflow may add one of them and remove it again when another explains it better:
+    // measured 2026-11-24, q6 along X_w added first, −17.8 µm, then q6 along Z_w, after which
+    // q6 along X_w refitted to −1.2 ± 1.2 µm and was removed.)
+    let first = &v["effects"][0];
     let name = first["name"].as_str().unwrap();
     let class = [
         "pivot offset q4 along Z_w",
@@ -114,15 +88,22 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
     for r in rows {
         let (without, with) = (r["without_effect_nm"].as_f64().unwrap(), r["with_effect_nm"].as_f64().unwrap());
         eprintln!("{}: {without:.1} nm without the effect, {with:.1} nm with it", r["motion"]);
-        if r["motion"].as_str().unwrap().starts_with("rotation 6°") {
+        // A rotation in which joint 4 turns moves P_r with the hidden pivot; with the fiber
+        // angles fixed by the fringe amplitudes of the rotations, the rotation about Z_f (joint 4
+        // barely turns) already keeps the cavity within 15 nm without the effect.
+        if r["motion"].as_str().unwrap().starts_with("rotation 6°") && without > 100.0 {
             // Measured (seed 5, 2026-11-24): with the hidden q4 pivot named, 3036 → 19.9 nm about
             // X_f and 3694 → 26.2 nm about Z_f; with its equivalent, the q6 pivot along Z_w,
             // 2830 → 18.1 and 3642 → 32.2 nm; with the reversal errors among the candidates
             // (other discriminating motions: q6 along X_w named, then q4 along Z_w),
             // 540.7 → 16.0 and 4762 → 24.1 nm; with motions under two fringes tracked from the
             // samples (measure::SHORT_MOTION_FRINGES), q4 along Z_w itself, 19.93 ± 0.19 µm,
-            // 3662 → 16.8 and 4426 → 22.1 nm. "Without" is the final extrinsics without the
-            // effects and moves with what was named; more than 20× and a few tens of nm left.
+            // 3662 → 16.8 and 4426 → 22.1 nm; with the fringe amplitudes of every rotation
+            // fitted (the fiber angles then within 0.01° of the truth), q6 along Z_w
+            // −20.35 ± 0.18 µm (and a spurious q1 scale error of 1278 ± 119 ppm), 2092 → 14.4 nm
+            // about X_f, and about Z_f 14.3 → 15.2 nm (not asserted: under 100 nm without).
+            // "Without" is the final extrinsics without the effects and moves with what was
+            // named; more than 20× and a few tens of nm left.
             assert!(with * 20.0 < without && with < 40.0, "{}: {without} → {with} nm", r["motion"]);
         } else {
             assert!(with <= without.max(50.0), "{}: {without} → {with} nm", r["motion"]);
@@ -152,13 +133,11 @@ fn diagnose_names_a_hidden_reversal_error_from_virtual_bench_traces() {
     // analysed again. Re-extracted with the fitted extrinsics (fiber angles off by degrees)
     // they moved by 0.2 µm, and a spurious q2 scale of −4393 ± 282 ppm took that up.
     assert_eq!(v["effects"].as_array().unwrap().len(), 1, "{v}");
-    // Measured (seed 5, 2026-11-24): 0.942 ± 0.016 µm; residual 6.97σ → 1.04σ. The play
-    // comes out 6 % low, about 3.5σ: the
-    // stall tracked from the samples is within ~0.5 nm of 10 nm (fringes_on_virtual_bench),
-    // and the calibration traces, tracked from the motion, follow part of it where the model
-    // says they do not. Hence 10 %, not 3σ.
+    // Measured (seed 5, 2026-11-24): 1.0036 ± 0.0140 µm; residual 2.82σ → 0.38σ. It was
+    // 0.942 ± 0.016 µm (3.5σ low) while the fit's fiber angles wandered by degrees: the fringe
+    // amplitudes of the rotations now fix them.
     let (est, sigma) = (first["estimate"].as_f64().unwrap(), first["sigma"].as_f64().unwrap());
-    assert!((est - 1.0).abs() < 0.1, "{est} ± {sigma} µm");
+    assert!((est - 1.0).abs() < 3.0 * sigma && (est - 1.0).abs() < 0.1, "{est} ± {sigma} µm");
     let after = v["residual_rms_after_sigma"].as_f64().unwrap();
     assert!(after <= 1.5, "residual {after}σ after");
 }

@@ -52,6 +52,8 @@ pub const EXTRACT_OPTIONS: crate::identify::measurements::ExtractOptions =
         sigma_floor_nm: 2.0,
         rotation_sigma_floor_nm: 2.5,
         gap_sigma_floor_um: 0.02,
+        amplitudes_from_rotations: true,
+        amplitude_neighbours: true,
     };
 /// Label prefix of the discriminating motions ([`motions::pool`]).
 pub const DISCRIMINATING_PREFIX: &str = "D ";
@@ -61,6 +63,9 @@ pub const DISCRIMINATING_PREFIX: &str = "D ";
 pub const MAX_MOTIONS: usize = 14;
 /// At most this many effects are added.
 pub const MAX_EFFECTS: usize = 4;
+/// An effect added earlier is removed again when, refitted with those added after it, its
+/// estimate is within this many σ of neutral: a later one explains what it took up.
+pub const REMOVE_BELOW_SIGMA: f64 = 3.0;
 
 /// The overall finding.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -178,6 +183,14 @@ pub enum Step {
         /// Whether the held-out motions confirm it (their rms did not grow).
         confirmed: bool,
     },
+    /// An effect added earlier removed: refitted with the effects added after it, its estimate
+    /// is within [`REMOVE_BELOW_SIGMA`] of neutral.
+    Removed {
+        /// The effect, with its estimate and σ in the fit that included it last.
+        effect: NamedEffect,
+        /// Whitened rms with it and without it.
+        rms_sigma: [f64; 2],
+    },
     /// The verdict.
     Finished {
         /// The verdict.
@@ -193,6 +206,7 @@ impl Step {
             Step::Scored { .. } => "2. candidates scored",
             Step::Designed { .. } => "3. discriminating motions",
             Step::Added { .. } => "4. effect added, refitted, checked on held-out motions",
+            Step::Removed { .. } => "4. effect removed: a later one explains it",
             Step::Finished { .. } => "5. verdict",
         }
     }
@@ -269,6 +283,15 @@ impl Step {
                 held_out_rms_sigma[0],
                 held_out_rms_sigma[1],
                 if *confirmed { "confirmed" } else { "NOT confirmed (removed)" }
+            ),
+            Step::Removed { effect, rms_sigma } => format!(
+                "{} = {:+.4} ± {} {} with the effects added after it: within {REMOVE_BELOW_SIGMA}σ of none\nrms {:.2}σ with it, {:.2}σ without",
+                effect.name,
+                effect.estimate,
+                effect.sigma.map_or("undetermined".into(), |s| format!("{s:.4}")),
+                effect.unit,
+                rms_sigma[0],
+                rms_sigma[1],
             ),
             Step::Finished { verdict } => match verdict {
                 Verdict::Named => "named: the effects above bring the residual to the noise floor".into(),
@@ -838,6 +861,7 @@ impl Diagnosis {
             self.fit = Some(nf);
             self.rescore()?;
             self.reanalyse(runner)?;
+            self.remove_explained()?;
         } else {
             self.excluded.push(best);
             self.rescore()?;
@@ -852,6 +876,44 @@ impl Diagnosis {
             }
         }
         Ok(())
+    }
+
+    /// Backward elimination: an effect added before the last one whose estimate, refitted with
+    /// the later ones, is within [`REMOVE_BELOW_SIGMA`] of neutral is removed (the first such,
+    /// weakest first, one at a time) and not proposed again. The pivot offsets of joint 6 along
+    /// X_w and Z_w both take up most of a hidden joint-4 pivot on the pool's motions; the one
+    /// named first can end at 1σ once the other is added.
+    fn remove_explained(&mut self) -> Result<(), DiagnoseError> {
+        loop {
+            let Some(f) = self.fit.clone() else { return Ok(()) };
+            let n = f.state.effects.len();
+            let weakest = (0..n.saturating_sub(1))
+                .filter_map(|k| {
+                    let z = f.effect_sigma[k].map_or(0.0, |s| f.state.effects[k].1.abs() / s);
+                    (z < REMOVE_BELOW_SIGMA).then_some((k, z))
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            let Some((k, _)) = weakest else { return Ok(()) };
+            let (cand, estimate) = f.state.effects[k].clone();
+            let mut start = f.state.clone();
+            start.effects.remove(k);
+            let nf = self.refit(&start)?;
+            let removed = match self.added.iter().position(|e| e.name == cand.name) {
+                Some(i) => {
+                    let mut e = self.added.remove(i);
+                    e.estimate = estimate;
+                    e.sigma = f.effect_sigma[k];
+                    e
+                }
+                None => return Err(DiagnoseError::Model(format!("{} fitted but not among the added", cand.name))),
+            };
+            if let Some(c) = self.candidates.iter().position(|c| c.name == cand.name) {
+                self.excluded.push(c);
+            }
+            self.steps.push(Step::Removed { effect: removed, rms_sigma: [f.rms(), nf.rms()] });
+            self.fit = Some(nf);
+            self.rescore()?;
+        }
     }
 
     fn do_finish(&mut self) -> Result<(), DiagnoseError> {

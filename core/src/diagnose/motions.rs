@@ -384,7 +384,12 @@ pub fn paper_calibration() -> Vec<Observation> {
             at[j] = a;
             out.push(Observation {
                 label: format!("tilt scan q{}", j + 1),
-                kind: ObservationKind::FringeAmplitude { at_display: at, amplitude_mw: 0.0, group: 0 },
+                kind: ObservationKind::FringeAmplitude {
+                    at_display: at,
+                    amplitude_mw: 0.0,
+                    group: 0,
+                    neighbours: None,
+                },
                 sigma: 1.0,
                 wavelength_nm: TEMPLATE_WAVELENGTH_NM,
                 time_s: [end + k as f64; 2],

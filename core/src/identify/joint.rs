@@ -317,6 +317,7 @@ mod tests {
                     at_display: [0.0, 0.0, 0.0, a, 0.0, 0.0],
                     amplitude_mw: 0.0,
                     group: 0,
+                    neighbours: None,
                 },
                 1e-6,
             );
@@ -325,6 +326,7 @@ mod tests {
                     at_display: [0.0, 0.0, 0.0, 0.0, a, 0.0],
                     amplitude_mw: 0.0,
                     group: 0,
+                    neighbours: None,
                 },
                 1e-6,
             );

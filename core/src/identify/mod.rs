@@ -60,7 +60,26 @@ pub enum ObservationKind {
         amplitude_mw: f64,
         /// Gain group.
         group: usize,
+        /// When the amplitude comes from three extrema in a row: where the outer two were.
+        /// The model then predicts the same combination of the three extrema, so that a fringe
+        /// level and amplitude that curve along the scan (the tilt's Gaussian) do not bias it.
+        /// `None`: the half peak-to-peak at `at_display` (older files, designed templates).
+        #[serde(default)]
+        neighbours: Option<AmplitudeNeighbours>,
     },
+}
+
+/// The outer extrema of a fringe amplitude measured from three extrema in a row: the middle
+/// one (at [`ObservationKind::FringeAmplitude::at_display`]) against the mean of its
+/// neighbours, `|(E₀ + E₂)/2 − E₁| / 2` (mW).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AmplitudeNeighbours {
+    /// Joints at the extremum before the middle one (µm, °).
+    pub before_display: [f64; 6],
+    /// Joints at the extremum after it (µm, °).
+    pub after_display: [f64; 6],
+    /// The middle extremum is a maximum of the reflected power (its neighbours are minima).
+    pub middle_is_max: bool,
 }
 
 /// One observation with its standard uncertainty (in the observation's unit: nm, µm or mW).
@@ -109,6 +128,13 @@ impl Observation {
 /// The coupling barely changes over one fringe (λ/2 ≪ z_R), so the gap is stepped through one
 /// fringe period and the extremes found on the trigonometric interpolant of the samples.
 pub fn half_peak_to_peak_mw(fp: &FabryPerot, gap_um: f64, tilt_rad: f64) -> f64 {
+    let (max, min) = fringe_extremes_mw(fp, gap_um, tilt_rad);
+    (max - min) / 2.0
+}
+
+/// The largest and the smallest reflected power over one fringe at gap `gap_um` and tilt
+/// `tilt_rad` (mW), from the full multi-beam model (see [`half_peak_to_peak_mw`]).
+pub fn fringe_extremes_mw(fp: &FabryPerot, gap_um: f64, tilt_rad: f64) -> (f64, f64) {
     use std::f64::consts::TAU;
     const N: usize = 32;
     const H: usize = 6; // harmonics kept: R ≤ 0.3 puts the 7th below 1e-4 of the fundamental
@@ -150,7 +176,7 @@ pub fn half_peak_to_peak_mw(fp: &FabryPerot, gap_um: f64, tilt_rad: f64) -> f64 
         }
         deriv(x, 0)
     };
-    (extreme(1.0) - extreme(-1.0)) / 2.0
+    (extreme(1.0), extreme(-1.0))
 }
 
 /// Predict an observation from extrinsics `e` and the gain of its amplitude group (ignored for
@@ -213,7 +239,18 @@ pub fn predict_with_path(
         }
         ObservationKind::AbsoluteGap { at_display, .. } => cavity(&real(at_display, 1))
             .map_or(f64::NAN, |c| optical_gap_um(c.length_um, t_mid) * (1.0 - c.tilt_rad * c.tilt_rad / 2.0)),
-        ObservationKind::FringeAmplitude { at_display, .. } => cavity(&real(at_display, 1))
+        ObservationKind::FringeAmplitude { at_display, neighbours: None, .. } => cavity(&real(at_display, 1))
             .map_or(f64::NAN, |c| gain * half_peak_to_peak_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)),
+        ObservationKind::FringeAmplitude { at_display, neighbours: Some(n), .. } => {
+            let extremes = |q: &[f64; 6]| {
+                cavity(&real(q, 1)).map_or((f64::NAN, f64::NAN), |c| {
+                    fringe_extremes_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)
+                })
+            };
+            let (mid, before, after) = (extremes(at_display), extremes(&n.before_display), extremes(&n.after_display));
+            let combined =
+                if n.middle_is_max { mid.0 - 0.5 * (before.1 + after.1) } else { 0.5 * (before.0 + after.0) - mid.1 };
+            gain * combined / 2.0
+        }
     }
 }
