@@ -180,7 +180,8 @@ pub enum Step {
         rms_sigma: [f64; 2],
         /// Held-out rms before and after.
         held_out_rms_sigma: [f64; 2],
-        /// Whether the held-out motions confirm it (their rms did not grow).
+        /// Whether the held-out motions confirm it (their rms did not grow) and the refit keeps
+        /// it beyond [`REMOVE_BELOW_SIGMA`].
         confirmed: bool,
     },
     /// An effect added earlier removed: refitted with the effects added after it, its estimate
@@ -837,9 +838,13 @@ impl Diagnosis {
         // they already miss the model by more than their σ (errors the analysis does not see),
         // the allowance scales with that misfit, as σ would after a Birge-ratio correction.
         let n_held = self.held_out.iter().filter(|h| **h).count().max(1) as f64;
-        let confirmed =
-            held[1] * held[1] <= held[0] * held[0] + 3.0 * (2.0 / n_held).sqrt() * (held[0] * held[0]).max(1.0);
         let k = nf.state.effects.len() - 1;
+        // And the refit must keep the effect: an estimate within REMOVE_BELOW_SIGMA of neutral
+        // after the refit is not an effect the data need (the linearised score chose it, the
+        // extrinsics refitted with it took the rest).
+        let kept = nf.effect_sigma[k].is_some_and(|s| nf.state.effects[k].1.abs() >= REMOVE_BELOW_SIGMA * s);
+        let confirmed =
+            kept && held[1] * held[1] <= held[0] * held[0] + 3.0 * (2.0 / n_held).sqrt() * (held[0] * held[0]).max(1.0);
         let effect = NamedEffect {
             name: sc.name.clone(),
             estimate: nf.state.effects[k].1,
