@@ -1529,7 +1529,8 @@ fn madd<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
 }
 
 /// Model terms of a chunk (elementwise, vectorises): ψ, f(ψ), h = B·f'(ψ), ν, h·u, and the
-/// hat-function weights (zero beyond `m`, so padding lanes add nothing).
+/// hat-function weights (w0, w1 and ν zero beyond `m`, and u zero there, so padding lanes
+/// add nothing).
 #[inline(always)]
 #[allow(clippy::needless_range_loop)] // lane-indexed on purpose: it vectorises
 fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc: &SegConst) {
@@ -1550,11 +1551,12 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
         let bb = r * madd::<FMA>(w0, sc.b0, t * sc.b1);
         let (sn, co) = sincos_k::<FMA>(psi);
         let (f, fp) = harm.f_and_slope(sn, co);
-        let h = bb * fp * live;
+        // h and f enter the sums only through w0, w1 or h·u (u = 0 on padding lanes)
+        let h = bb * fp;
         let nu = (ch.y[i] - madd::<FMA>(bb, f, aa)) * live;
         ch.w0[i] = w0 * live;
         ch.w1[i] = t * live;
-        ch.f[i] = r * f * live;
+        ch.f[i] = r * f;
         ch.h[i] = h;
         ch.nu[i] = nu;
         ch.hu[i] = h * u;
