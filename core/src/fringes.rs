@@ -158,8 +158,17 @@ fn scan_intensity(xs: &[f64], dec: usize, decimated: &mut Vec<f64>) -> Result<f6
     let mut max_abs = [0.0f64; 4];
     for (bi, block) in xs.chunks(B).enumerate() {
         let mut lanes = [0.0f64; 4];
-        for (i, &v) in block.iter().enumerate() {
-            let l = i % 4;
+        // four samples at a time with fixed lanes, so that the lanes stay in registers
+        let quads = block.chunks_exact(4);
+        let tail = quads.remainder();
+        for q in quads {
+            for l in 0..4 {
+                lanes[l] += q[l] * 0.0;
+                let a = q[l].abs();
+                max_abs[l] = if a > max_abs[l] { a } else { max_abs[l] };
+            }
+        }
+        for (l, &v) in tail.iter().enumerate() {
             lanes[l] += v * 0.0;
             let a = v.abs();
             max_abs[l] = if a > max_abs[l] { a } else { max_abs[l] };
@@ -184,8 +193,14 @@ fn check_finite(what: &'static str, xs: &[f64]) -> Result<(), FringeError> {
     const B: usize = 256;
     for (bi, block) in xs.chunks(B).enumerate() {
         let mut lanes = [0.0f64; 4];
-        for (i, &v) in block.iter().enumerate() {
-            lanes[i % 4] += v * 0.0;
+        let quads = block.chunks_exact(4);
+        for (l, &v) in quads.remainder().iter().enumerate() {
+            lanes[l] += v * 0.0;
+        }
+        for q in quads {
+            for l in 0..4 {
+                lanes[l] += q[l] * 0.0;
+            }
         }
         if lanes.iter().any(|l| l.is_nan()) {
             if let Some(i) = block.iter().position(|v| !v.is_finite()) {
@@ -1007,14 +1022,21 @@ struct Knot {
 
 /// Interpolation of knots along the motion path: cubic Hermite (Catmull-Rom slopes from
 /// the neighbouring knots) inside, clamped linear extrapolation beyond the end knots.
-/// `cursor` speeds up monotone queries.
+/// `knots` are sorted by `s`; `cursor` speeds up monotone queries (a few steps ahead are
+/// walked, farther ones found by bisection).
 fn knot_value(knots: &[Knot], s: f64, cursor: &mut usize, max_extrap: f64) -> f64 {
     let m = knots.len();
     if m == 1 {
         return knots[0].level;
     }
+    let mut walk = 0;
     while *cursor + 2 < m && knots[*cursor + 1].s <= s {
         *cursor += 1;
+        walk += 1;
+        if walk == 4 {
+            *cursor += knots[*cursor + 1..m - 1].partition_point(|k| k.s <= s);
+            break;
+        }
     }
     let i = *cursor;
     let (k0, k1) = (knots[i], knots[i + 1]);
@@ -1507,7 +1529,8 @@ fn madd<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
 }
 
 /// Model terms of a chunk (elementwise, vectorises): ψ, f(ψ), h = B·f'(ψ), ν, h·u, and the
-/// hat-function weights (zero beyond `m`, so padding lanes add nothing).
+/// hat-function weights (w0, w1 and ν zero beyond `m`, and u zero there, so padding lanes
+/// add nothing).
 #[inline(always)]
 #[allow(clippy::needless_range_loop)] // lane-indexed on purpose: it vectorises
 fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc: &SegConst) {
@@ -1528,11 +1551,12 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
         let bb = r * madd::<FMA>(w0, sc.b0, t * sc.b1);
         let (sn, co) = sincos_k::<FMA>(psi);
         let (f, fp) = harm.f_and_slope(sn, co);
-        let h = bb * fp * live;
+        // h and f enter the sums only through w0, w1 or h·u (u = 0 on padding lanes)
+        let h = bb * fp;
         let nu = (ch.y[i] - madd::<FMA>(bb, f, aa)) * live;
         ch.w0[i] = w0 * live;
         ch.w1[i] = t * live;
-        ch.f[i] = r * f * live;
+        ch.f[i] = r * f;
         ch.h[i] = h;
         ch.nu[i] = nu;
         ch.hu[i] = h * u;
@@ -1732,15 +1756,19 @@ fn accumulate_kernel<const FMA: bool, const SHAPED: bool>(
         let mut acc = [[0.0f64; 4]; NACC];
         while k < k1 {
             let m = (k1 - k).min(CHUNK);
-            for (((t, u), yy), ((&cv, &hv), &yv)) in ch.t[..m]
-                .iter_mut()
-                .zip(ch.u[..m].iter_mut())
-                .zip(ch.y[..m].iter_mut())
-                .zip(c[k..k + m].iter().zip(&hint[k..k + m]).zip(&y[k..k + m]))
-            {
+            let m4 = m.div_ceil(4) * 4;
+            // one array at a time, so that the copies vectorise: the kernel reads these
+            // lanes four at a time, and a 4-lane load of four scalar stores still in flight
+            // stalls (no store forwarding); the padding lanes are zero
+            for (t, &cv) in ch.t[..m].iter_mut().zip(&c[k..k + m]) {
                 *t = cv - sc.jf;
+            }
+            for (u, &hv) in ch.u[..m].iter_mut().zip(&hint[k..k + m]) {
                 *u = sc.gk * (hv - sc.h_ref);
-                *yy = yv;
+            }
+            ch.y[..m].copy_from_slice(&y[k..k + m]);
+            for v in [&mut ch.t, &mut ch.u, &mut ch.y] {
+                v[m..m4].fill(0.0);
             }
             if SHAPED {
                 for (i, h) in shape.harm[k..k + m].iter().enumerate() {
@@ -1827,11 +1855,91 @@ impl Decimated {
     }
 }
 
+/// General 3×3 matrix, row-major.
+type Mat3 = [[f64; 3]; 3];
+
+/// Symmetric part of the inverse of a 3×3 (nearly symmetric: a Schur complement), by its
+/// cofactors; None if singular (zero determinant). The operations of nalgebra's 3×3 inverse
+/// and `0.5·(S⁻¹ + S⁻ᵀ)`, in the same order: the same numbers.
+#[inline(always)]
+fn sym_inverse(m: &Mat3) -> Option<Sym3> {
+    let [[m11, m12, m13], [m21, m22, m23], [m31, m32, m33]] = *m;
+    let minor_11 = m22 * m33 - m32 * m23;
+    let minor_12 = m21 * m33 - m31 * m23;
+    let minor_13 = m21 * m32 - m31 * m22;
+    let det = m11 * minor_11 - m12 * minor_12 + m13 * minor_13;
+    if det == 0.0 {
+        return None;
+    }
+    let sym = |a: f64, b: f64| 0.5 * (a / det + b / det);
+    Some([
+        minor_11 / det,
+        sym(m13 * m32 - m33 * m12, -minor_12),
+        sym(m12 * m23 - m22 * m13, minor_13),
+        (m11 * m33 - m31 * m13) / det,
+        sym(m13 * m21 - m23 * m11, m12 * m31 - m32 * m11),
+        (m11 * m22 - m21 * m12) / det,
+    ])
+}
+
+/// Row `i` of a symmetric 3×3.
+#[inline(always)]
+fn sym_row(s: &Sym3, i: usize) -> [f64; 3] {
+    match i {
+        0 => [s[0], s[1], s[2]],
+        1 => [s[1], s[3], s[4]],
+        _ => [s[2], s[4], s[5]],
+    }
+}
+
+/// a·b for symmetric a and b (the product is general).
+#[inline(always)]
+fn sym_mul(a: &Sym3, b: &Sym3) -> Mat3 {
+    let bc = [sym_row(b, 0), sym_row(b, 1), sym_row(b, 2)];
+    std::array::from_fn(|r| {
+        let ar = sym_row(a, r);
+        std::array::from_fn(|c| ar[0] * bc[0][c] + ar[1] * bc[1][c] + ar[2] * bc[2][c])
+    })
+}
+
+/// d - c·g for symmetric d and c (c·g = c·S⁻¹·c is symmetric up to rounding).
+#[inline(always)]
+fn sym_sub_mul(d: &Sym3, c: &Sym3, g: &Mat3) -> Mat3 {
+    std::array::from_fn(|r| {
+        let (dr, cr) = (sym_row(d, r), sym_row(c, r));
+        std::array::from_fn(|col| dr[col] - (cr[0] * g[0][col] + cr[1] * g[1][col] + cr[2] * g[2][col]))
+    })
+}
+
+/// s·v for symmetric s.
+#[inline(always)]
+fn sym_mul_vec(s: &Sym3, v: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(
+        s[0] * v[0] + s[1] * v[1] + s[2] * v[2],
+        s[1] * v[0] + s[3] * v[1] + s[4] * v[2],
+        s[2] * v[0] + s[4] * v[1] + s[5] * v[2],
+    )
+}
+
+/// g·v.
+#[inline(always)]
+fn mat_mul_vec(g: &Mat3, v: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::from_fn(|r, _| g[r][0] * v[0] + g[r][1] * v[1] + g[r][2] * v[2])
+}
+
+/// gᵀ·v.
+#[inline(always)]
+fn mat_tr_mul_vec(g: &Mat3, v: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::from_fn(|c, _| g[0][c] * v[0] + g[1][c] * v[1] + g[2][c] * v[2])
+}
+
 /// Block LDLᵀ factor of a block-tridiagonal matrix: S_j⁻¹ and G_j = S_j⁻¹·C_j, with
-/// scratch space for the forward sweeps. Buffers are reused between factorisations.
+/// scratch space for the forward sweeps. Buffers are reused between factorisations. The
+/// 3×3 blocks are written out (symmetric ones as [`Sym3`]): generic small-matrix code
+/// cost more than the arithmetic on long traces (one block per fringe).
 struct Factor {
-    s_inv: Vec<Matrix3<f64>>,
-    g: Vec<Matrix3<f64>>,
+    s_inv: Vec<Sym3>,
+    g: Vec<Mat3>,
     y: Vec<Vector3<f64>>,
     w: Vec<Vector3<f64>>,
 }
@@ -1841,16 +1949,16 @@ struct Factor {
 impl Factor {
     fn new(jn: usize) -> Self {
         Self {
-            s_inv: vec![Matrix3::zeros(); jn],
-            g: vec![Matrix3::zeros(); jn],
+            s_inv: vec![[0.0; 6]; jn],
+            g: vec![[[0.0; 3]; 3]; jn],
             y: vec![Vector3::zeros(); jn],
             w: vec![Vector3::zeros(); jn],
         }
     }
 
     fn resize(&mut self, jn: usize) {
-        self.s_inv.resize(jn, Matrix3::zeros());
-        self.g.resize(jn, Matrix3::zeros());
+        self.s_inv.resize(jn, [0.0; 6]);
+        self.g.resize(jn, [[0.0; 3]; 3]);
         self.y.resize(jn, Vector3::zeros());
         self.w.resize(jn, Vector3::zeros());
     }
@@ -1858,20 +1966,18 @@ impl Factor {
     /// Factorise; false if a pivot block is singular.
     fn factor(&mut self, diag: &[Sym3], off: &[Sym3]) -> bool {
         let jn = diag.len();
-        let mut s = sym_to_mat(&diag[0]);
+        let mut s = std::array::from_fn(|r| sym_row(&diag[0], r));
         for j in 0..jn {
-            let Some(si) = s.try_inverse() else {
+            let Some(si) = sym_inverse(&s) else {
                 return false;
             };
-            let si = 0.5 * (si + si.transpose());
             self.s_inv[j] = si;
             if j + 1 < jn {
-                let cj = sym_to_mat(&off[j]);
-                let gj = si * cj;
-                s = sym_to_mat(&diag[j + 1]) - cj.transpose() * gj;
+                let gj = sym_mul(&si, &off[j]);
+                s = sym_sub_mul(&diag[j + 1], &off[j], &gj);
                 self.g[j] = gj;
             } else {
-                self.g[j] = Matrix3::zeros();
+                self.g[j] = [[0.0; 3]; 3];
             }
         }
         true
@@ -1881,11 +1987,11 @@ impl Factor {
         let jn = r.len();
         self.y[0] = r[0];
         for j in 1..jn {
-            self.y[j] = r[j] - self.g[j - 1].tr_mul(&self.y[j - 1]);
+            self.y[j] = r[j] - mat_tr_mul_vec(&self.g[j - 1], &self.y[j - 1]);
         }
-        x[jn - 1] = self.s_inv[jn - 1] * self.y[jn - 1];
+        x[jn - 1] = sym_mul_vec(&self.s_inv[jn - 1], &self.y[jn - 1]);
         for j in (0..jn - 1).rev() {
-            x[j] = self.s_inv[j] * self.y[j] - self.g[j] * x[j + 1];
+            x[j] = sym_mul_vec(&self.s_inv[j], &self.y[j]) - mat_mul_vec(&self.g[j], &x[j + 1]);
         }
     }
 
@@ -1896,14 +2002,15 @@ impl Factor {
         self.w[0] = q[0];
         for j in 1..jn {
             let g = &self.g[j - 1];
-            self.y[j] = r[j] - g.tr_mul(&self.y[j - 1]);
-            self.w[j] = q[j] - g.tr_mul(&self.w[j - 1]);
+            self.y[j] = r[j] - mat_tr_mul_vec(g, &self.y[j - 1]);
+            self.w[j] = q[j] - mat_tr_mul_vec(g, &self.w[j - 1]);
         }
-        x[jn - 1] = self.s_inv[jn - 1] * self.y[jn - 1];
-        z[jn - 1] = self.s_inv[jn - 1] * self.w[jn - 1];
+        x[jn - 1] = sym_mul_vec(&self.s_inv[jn - 1], &self.y[jn - 1]);
+        z[jn - 1] = sym_mul_vec(&self.s_inv[jn - 1], &self.w[jn - 1]);
         for j in (0..jn - 1).rev() {
-            x[j] = self.s_inv[j] * self.y[j] - self.g[j] * x[j + 1];
-            z[j] = self.s_inv[j] * self.w[j] - self.g[j] * z[j + 1];
+            let (si, g) = (&self.s_inv[j], &self.g[j]);
+            x[j] = sym_mul_vec(si, &self.y[j]) - mat_mul_vec(g, &x[j + 1]);
+            z[j] = sym_mul_vec(si, &self.w[j]) - mat_mul_vec(g, &z[j + 1]);
         }
     }
 
@@ -1938,10 +2045,11 @@ impl Factor {
         let jn = self.s_inv.len();
         out.clear();
         out.resize(jn, 0.0);
-        let mut sig = self.s_inv[jn - 1];
+        let mut sig = sym_to_mat(&self.s_inv[jn - 1]);
         out[jn - 1] = sig[(0, 0)];
         for j in (0..jn - 1).rev() {
-            sig = self.s_inv[j] + self.g[j] * sig * self.g[j].transpose();
+            let g = Matrix3::from_fn(|r, c| self.g[j][r][c]);
+            sig = sym_to_mat(&self.s_inv[j]) + g * sig * g.transpose();
             out[j] = sig[(0, 0)];
         }
     }
@@ -2157,8 +2265,49 @@ fn with_spare_workspace<R>(f: impl FnOnce(&mut Workspace) -> R) -> R {
     r
 }
 
+/// [`run_tracker_impl`], compiled for AVX2 and FMA when the CPU has them: the per-sample
+/// passes outside the kernel vectorise four lanes wide. Same results either way (no
+/// operation is fused unless written so).
 #[allow(clippy::too_many_arguments)] // the tracker's inputs, all sample-aligned or settings
 fn run_tracker(
+    ws: &mut Workspace,
+    out: &mut PhaseTrack,
+    intensity: &[f64],
+    hint_dl_nm: &[f64],
+    model: Option<&FringeModel>,
+    wavelength_nm: f64,
+    n_air: f64,
+    cfg: &TrackConfig,
+) -> Result<(), FringeError> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU features required by `run_tracker_avx2` were detected above.
+            return unsafe { run_tracker_avx2(ws, out, intensity, hint_dl_nm, model, wavelength_nm, n_air, cfg) };
+        }
+    }
+    run_tracker_impl(ws, out, intensity, hint_dl_nm, model, wavelength_nm, n_air, cfg)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+fn run_tracker_avx2(
+    ws: &mut Workspace,
+    out: &mut PhaseTrack,
+    intensity: &[f64],
+    hint_dl_nm: &[f64],
+    model: Option<&FringeModel>,
+    wavelength_nm: f64,
+    n_air: f64,
+    cfg: &TrackConfig,
+) -> Result<(), FringeError> {
+    run_tracker_impl(ws, out, intensity, hint_dl_nm, model, wavelength_nm, n_air, cfg)
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tracker's inputs, all sample-aligned or settings
+fn run_tracker_impl(
     ws: &mut Workspace,
     out: &mut PhaseTrack,
     intensity: &[f64],
@@ -2281,29 +2430,49 @@ fn run_tracker(
                 *p = (w[1] - w[0]).abs();
             }
             prev = hb[mb - 1];
-            // branch-free extremes (compare-and-select, it vectorises); a non-finite hint
-            // is caught by `bad` and rejected below, so NaN handling does not matter here
+            // branch-free extremes in four fixed lanes (compare-and-select, it vectorises);
+            // a non-finite hint is caught by `bad` and rejected below, so NaN handling does
+            // not matter here
             let (mut lmax, mut lmin, mut lstep, mut lbad) = ([h_max; 4], [h_min; 4], [max_step; 4], [0.0f64; 4]);
-            for (i, (&h, &step)) in hb.iter().zip(&path_blk[..mb]).enumerate() {
-                let l = i % 4;
+            let mut lane = |l: usize, h: f64, step: f64| {
                 lbad[l] += h * 0.0;
                 lmax[l] = if h > lmax[l] { h } else { lmax[l] };
                 lmin[l] = if h < lmin[l] { h } else { lmin[l] };
                 lstep[l] = if step > lstep[l] { step } else { lstep[l] };
+            };
+            let (hq, pq) = (hb.chunks_exact(4), path_blk[..mb].chunks_exact(4));
+            for (l, (&h, &step)) in hq.remainder().iter().zip(pq.remainder()).enumerate() {
+                lane(l, h, step);
+            }
+            for (h4, p4) in hq.zip(pq) {
+                for l in 0..4 {
+                    lane(l, h4[l], p4[l]);
+                }
             }
             bad |= lbad.iter().any(|b| b.is_nan());
             h_max = lmax.iter().fold(h_max, |m, &v| m.max(v));
             h_min = lmin.iter().fold(h_min, |m, &v| m.min(v));
             max_step = lstep.iter().fold(max_step, |m, &v| m.max(v));
-            // the running path (the one serial chain) and the grid coordinate; k/T is exact
+            // the running path (the one serial chain) and the grid coordinate; k/T is exact,
+            // and the start refinement is the identity unless set
             let mut kf = k0 as f64;
-            cgrid.extend(path_blk[..mb].iter_mut().map(|p| {
-                acc += *p;
-                *p = acc;
-                let c = refine_start(acc * inv_ds + kf * (1.0 / T_KNOT), refine);
-                kf += 1.0;
-                c
-            }));
+            if refine == 1.0 {
+                cgrid.extend(path_blk[..mb].iter_mut().map(|p| {
+                    acc += *p;
+                    *p = acc;
+                    let c = acc * inv_ds + kf * (1.0 / T_KNOT);
+                    kf += 1.0;
+                    c
+                }));
+            } else {
+                cgrid.extend(path_blk[..mb].iter_mut().map(|p| {
+                    acc += *p;
+                    *p = acc;
+                    let c = refine_start(acc * inv_ds + kf * (1.0 / T_KNOT), refine);
+                    kf += 1.0;
+                    c
+                }));
+            }
             let cb = &cgrid[k0..k1];
             // knots exactly at c = j: interpolate (s, k) between the two samples (c increases
             // strictly, so the first sample at or beyond the knot is a binary search)
