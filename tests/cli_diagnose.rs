@@ -142,6 +142,32 @@ fn diagnose_names_a_hidden_reversal_error_from_virtual_bench_traces() {
     assert!(after <= 1.5, "residual {after}σ after");
 }
 
+/// Thermal drift at its typical rate (0.5 nm/s) hidden. The session's motions see it only
+/// as a few nm per motion; the pool's dwell (arrive at a pose, wait 30 s, leave) sees 15 nm
+/// across the pause, from the fringe phases at the end of the arrival and the start of the
+/// departure. A still trace could not be tracked (its motion hint never changes), so the
+/// drift was misnamed (a q4 zero offset of −0.0045°) before.
+#[test]
+fn diagnose_names_a_hidden_thermal_drift_from_virtual_bench_traces() {
+    use photorobot_core::model::effects::Effect;
+    let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
+    preset.name = "hidden-drift".into();
+    preset.effects = vec![Effect::ThermalDrift { nm_per_s: 0.5, nm_per_s2: 0.0 }];
+    let dir = tempfile::tempdir().unwrap();
+    let bench_file = dir.path().join("hidden-drift.ron");
+    save_ron(&bench_file, &preset).unwrap();
+    let v = record_and_diagnose(&preset, dir.path(), &["--bench", bench_file.to_str().unwrap()], "DIAGNOSE_DUMP_DRIFT");
+    assert_eq!(v["discriminating_motions_ran"], true);
+    assert_eq!(v["verdict"], "named", "{v}");
+    let first = &v["effects"][0];
+    assert_eq!(first["name"], "thermal drift rate", "{v}");
+    // Measured (seed 5, 2026-11-24): 0.5172 ± 0.0360 nm/s; residual 0.60σ → 0.38σ.
+    let (est, sigma) = (first["estimate"].as_f64().unwrap(), first["sigma"].as_f64().unwrap());
+    assert!((est - 0.5).abs() < 3.0 * sigma && sigma < 0.1, "{est} ± {sigma} nm/s");
+    let after = v["residual_rms_after_sigma"].as_f64().unwrap();
+    assert!(after <= 1.5, "residual {after}σ after");
+}
+
 #[test]
 fn diagnose_on_a_folder_without_traces_says_what_it_expected() {
     let dir = tempfile::tempdir().unwrap();

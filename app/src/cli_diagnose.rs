@@ -106,11 +106,17 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     .map_err(|problem| CliError::Argument { argument: "--bench", problem })?;
     let (mut d, skipped) =
         Diagnosis::from_traces(&base, &traces, extrinsics).map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
+    // The session's bench, resumed a minute after the session ended: its time (and drift) goes
+    // on from the recorded traces', so the observations need no time offset.
     let mut bench = match &preset {
-        Some(p) => Some(VirtualBench::new(p, Some(a.seed.unwrap_or(p.seed + 1)))?),
+        Some(p) => {
+            let mut b = VirtualBench::new(p, Some(a.seed.unwrap_or(p.seed + 1)))?;
+            b.set_clock_s(d.end_time_s() + 60.0);
+            Some(b)
+        }
         None => None,
     };
-    let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, d.end_time_s() + 60.0));
+    let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, 0.0));
     if !a.json {
         writeln!(out, "diagnosis of {} ({} traces, bench {named})", a.session.display(), traces.len())?;
         for (label, why) in &skipped {

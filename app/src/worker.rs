@@ -425,7 +425,9 @@ impl Thread {
                 format!("{} traces gave no observation (e.g. {}: {})", skipped.len(), skipped[0].0, skipped[0].1),
             ));
         }
-        let offset = d.end_time_s().max(self.bench.clock_s()) + 60.0;
+        // The bench's own times are already after the session when it recorded it (its clock
+        // runs on); a bench started since (a session opened from disk) is shifted after it.
+        let offset = (d.end_time_s() + 60.0 - self.bench.clock_s()).max(0.0);
         let mut runner = BenchRunner::new(self.bench.as_mut(), offset);
         let tx = self.tx.clone();
         while let Some(step) = d.step(Some(&mut runner)).map_err(|e| e.to_string())? {

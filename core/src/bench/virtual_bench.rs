@@ -467,6 +467,15 @@ impl VirtualBench {
         self.truth.sample_period_s
     }
 
+    /// Resume the bench at bench time `t_s` (s): what a bench that kept running since a
+    /// recorded session would show (its drift goes on from there). A diagnosis that runs
+    /// motions after a session recorded earlier on this bench starts it at the session's end.
+    pub fn set_clock_s(&mut self, t_s: f64) {
+        if t_s.is_finite() {
+            self.clock_s = t_s;
+        }
+    }
+
     /// Compute every sample on the exact path (true) or on the fast path (false, the default);
     /// see the module documentation. Both draw the same noise: a seed gives the same trace on
     /// either path to within the fast path's tolerance.

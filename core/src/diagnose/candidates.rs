@@ -57,6 +57,22 @@ pub struct Candidate {
 const AXES: [&str; 3] = ["X_w", "Y_w", "Z_w"];
 
 impl Candidate {
+    /// True when both are parameters of the same library effect (the same kind of effect on
+    /// the same joint): thermal drift rate and acceleration, a pivot offset's three
+    /// coordinates, an axis tilt's two directions, the fringe nonlinearity's two terms.
+    pub fn same_effect(&self, other: &Candidate) -> bool {
+        let joint = |k: &CandidateKind| match k {
+            CandidateKind::JointScale(j)
+            | CandidateKind::JointZeroOffset(j)
+            | CandidateKind::PivotOffset(j, _)
+            | CandidateKind::AxisTilt(j, _)
+            | CandidateKind::ReversalError(j) => Some(j.clone()),
+            _ => None,
+        };
+        std::mem::discriminant(&self.effect(1.0)) == std::mem::discriminant(&other.effect(1.0))
+            && joint(&self.kind) == joint(&other.kind)
+    }
+
     /// The library effect with this parameter at `value` (in `unit`), every other parameter neutral.
     pub fn effect(&self, value: f64) -> Effect {
         match &self.kind {

@@ -54,6 +54,7 @@ pub const EXTRACT_OPTIONS: crate::identify::measurements::ExtractOptions =
         gap_sigma_floor_um: 0.02,
         amplitudes_from_rotations: true,
         amplitude_neighbours: true,
+        gap_across_pauses: true,
     };
 /// Label prefix of the discriminating motions ([`motions::pool`]).
 pub const DISCRIMINATING_PREFIX: &str = "D ";
@@ -797,13 +798,21 @@ impl Diagnosis {
             }
         }
         // Among candidates the data cannot tell apart with nearly equal evidence, the one that
-        // needs the least of its typical size is named (the others stay in the ambiguity set).
+        // needs the least of its typical size is named (the others stay in the ambiguity set);
+        // so among the parameters of one effect with nearly equal evidence (a drift rate and a
+        // drift acceleration both explain a pause: the session's motions, which would tell
+        // them apart, see a little less drift than there is, because the tracked phase
+        // follows the motion hint and stands still while the stages do).
         let plausible = |k: usize| (self.scores[k].estimate / self.candidates[k].typical).abs();
         let f_best = self.scores[best].score;
+        let same_effect: Vec<usize> = (0..self.candidates.len())
+            .filter(|&k| k != best && self.candidates[k].same_effect(&self.candidates[best]))
+            .collect();
         let best = std::iter::once(best)
             .chain(
                 ambiguous_idx
                     .iter()
+                    .chain(&same_effect)
                     .copied()
                     .filter(|&k| self.scores[k].significant && self.scores[k].score >= 0.9 * f_best),
             )

@@ -441,26 +441,55 @@ impl<'a> BenchRunner<'a> {
     }
 }
 
+/// How far a dwell's arrival and departure move q2 (µm): about four fringes, enough to track
+/// with the start phase from the motion hint ([`crate::measure::SHORT_MOTION_FRINGES`]).
+pub const DWELL_APPROACH_UM: f64 = 3.0;
+
 /// The plan that runs motions: an unrecorded setup move to each start, then the recorded motion.
+/// A dwell is not recorded as a still trace (a trace whose motion hint never changes cannot be
+/// tracked): the stages arrive at its pose in a recorded move along q2 ([`DWELL_APPROACH_UM`],
+/// labelled "<label> (arrive)"), wait unrecorded, and leave in a recorded move on in the same
+/// direction (labelled with the dwell's label); the gap change across the wait comes from the
+/// fringe phases at the end of the one and the start of the other
+/// ([`ExtractOptions::gap_across_pauses`]).
 pub fn plan_of(motions: &[DesignedMotion]) -> Plan {
     let mut segments = Vec::new();
+    let shifted = |at: &[f64; 6], dq2_um: f64| {
+        let mut q = *at;
+        q[1] += dq2_um;
+        q
+    };
     for m in motions {
         let start = match &m.kind {
-            MotionKind::Move { from_display, .. } => from_display,
-            MotionKind::Dwell { at_display, .. } | MotionKind::Sweep { at_display } => at_display,
+            MotionKind::Move { from_display, .. } => *from_display,
+            MotionKind::Dwell { at_display, .. } => shifted(at_display, -DWELL_APPROACH_UM),
+            MotionKind::Sweep { at_display } => *at_display,
         };
-        segments.push(Segment::Move { to: JointTarget::all(*start), record: false, label: "D setup".into() });
-        segments.push(match &m.kind {
+        segments.push(Segment::Move { to: JointTarget::all(start), record: false, label: "D setup".into() });
+        match &m.kind {
             MotionKind::Move { to_display, .. } => {
-                Segment::Move { to: JointTarget::all(*to_display), record: true, label: m.label.clone() }
+                segments.push(Segment::Move { to: JointTarget::all(*to_display), record: true, label: m.label.clone() })
             }
-            MotionKind::Dwell { duration_s, .. } => {
-                Segment::Dwell { duration_s: *duration_s, record: true, label: m.label.clone() }
-            }
-            MotionKind::Sweep { .. } => {
-                Segment::Sweep { from_nm: 1540.0, to_nm: 1580.0, rate_nm_per_s: 10.0, label: m.label.clone() }
-            }
-        });
+            MotionKind::Dwell { at_display, duration_s } => segments.extend([
+                Segment::Move {
+                    to: JointTarget::all(*at_display),
+                    record: true,
+                    label: format!("{} (arrive)", m.label),
+                },
+                Segment::Dwell { duration_s: *duration_s, record: false, label: m.label.clone() },
+                Segment::Move {
+                    to: JointTarget::all(shifted(at_display, DWELL_APPROACH_UM)),
+                    record: true,
+                    label: m.label.clone(),
+                },
+            ]),
+            MotionKind::Sweep { .. } => segments.push(Segment::Sweep {
+                from_nm: 1540.0,
+                to_nm: 1580.0,
+                rate_nm_per_s: 10.0,
+                label: m.label.clone(),
+            }),
+        }
     }
     Plan { name: "discriminating motions".into(), description: "designed by the diagnosis".into(), segments }
 }
@@ -484,4 +513,67 @@ impl MotionRunner for BenchRunner<'_> {
     fn reanalyse(&self, analysis: &PhaseModel) -> Option<Vec<Observation>> {
         Some(self.extract(0, analysis))
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::{BenchPreset, VirtualBench};
+    use crate::model::effects::Effect;
+
+    /// A dwell on a bench: the gap change across its pause, from the phases at the end of the
+    /// arrival and the start of the departure, against the hidden drift (a closed form: rate
+    /// times the pause), on two benches that differ only by the drift (same seed, same noise).
+    #[test]
+    fn a_dwell_measures_the_drift_across_its_pause() {
+        let base = BenchPreset::resolve("table2-ideal").unwrap();
+        let model = PhaseModel::new(
+            base.robot_description().unwrap(),
+            base.truth,
+            base.optics,
+            &base.ambient,
+            base.laser.wavelength_nm,
+        )
+        .unwrap();
+        let dwell = |label: &str, at_display: [f64; 6]| DesignedMotion {
+            label: label.into(),
+            kind: MotionKind::Dwell { at_display, duration_s: 30.0 },
+            free_start: false,
+        };
+        let motions =
+            [dwell("D dwell at 0", [0.0; 6]), dwell("D dwell at q3 = 100 µm", [0.0, 0.0, 100.0, 0.0, 0.0, 0.0])];
+        for rate in [0.0, 0.5] {
+            let mut preset = base.clone();
+            preset.effects = vec![Effect::ThermalDrift { nm_per_s: rate, nm_per_s2: 0.0 }];
+            let mut bench = VirtualBench::new(&preset, Some(2)).unwrap();
+            let mut runner = BenchRunner::new(&mut bench, 0.0);
+            let obs = runner.run(&motions, &model).unwrap();
+            // Arrival, pause and departure traces: the arrival's four points, then the pause and the
+            // departure's four points, both under the dwell's label.
+            assert_eq!(runner.traces.len(), 4, "two recorded moves per dwell");
+            let pauses: Vec<&Observation> = obs
+                .iter()
+                .filter(|o| {
+                    matches!(o.kind, ObservationKind::GapChange { from_display, to_display, .. }
+                    if (0..6).all(|j| (to_display[j] - from_display[j]).abs() < 0.05))
+                })
+                .collect();
+            assert_eq!(pauses.len(), 2, "one gap change across each pause: {pauses:?}");
+            for (o, m) in pauses.iter().zip(&motions) {
+                assert_eq!(o.label, m.label);
+                let pause_s = o.time_s[1] - o.time_s[0];
+                assert!((30.0..31.0).contains(&pause_s), "pause {pause_s} s");
+                let want = rate * pause_s;
+                assert!(
+                    (o.value() - want).abs() < 0.3,
+                    "{}: {} nm across the pause, drift {want} nm",
+                    o.label,
+                    o.value()
+                );
+                assert!(o.sigma >= EXTRACT_SIGMA_FLOOR_NM && o.sigma < 3.0, "σ {} nm", o.sigma);
+            }
+        }
+    }
+
+    const EXTRACT_SIGMA_FLOOR_NM: f64 = crate::diagnose::EXTRACT_OPTIONS.sigma_floor_nm;
 }

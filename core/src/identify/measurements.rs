@@ -31,7 +31,18 @@ pub struct ExtractOptions {
     /// the curvature of the fringe level and amplitude along a tilt scan (amplitude residuals
     /// at ~2σ rms on the virtual bench's rotations, 0.3σ with them).
     pub amplitude_neighbours: bool,
+    /// A gap change across each pause between two motions at the same pose (the first ends
+    /// where the second starts, at least [`MIN_PAUSE_S`] later, at the same wavelength): the
+    /// difference of the fringe phases the two trackings give there, wrapped to half a fringe.
+    /// The stages do not move, so only what changes the gap in time shows (thermal drift): a
+    /// still trace cannot be tracked (its motion hint never changes), a pause between two
+    /// tracked motions can.
+    pub gap_across_pauses: bool,
 }
+
+/// Shortest pause between two motions at the same pose that gives a gap change across it (s):
+/// motions recorded back to back have no time in between to see.
+pub const MIN_PAUSE_S: f64 = 1.0;
 
 impl Default for ExtractOptions {
     fn default() -> Self {
@@ -42,6 +53,7 @@ impl Default for ExtractOptions {
             gap_sigma_floor_um: 0.005,
             amplitudes_from_rotations: false,
             amplitude_neighbours: false,
+            gap_across_pauses: false,
         }
     }
 }
@@ -54,22 +66,81 @@ pub fn observations_from_trace(
     options: &ExtractOptions,
     group: usize,
 ) -> Result<Vec<Observation>, MeasureError> {
-    traced(trace, model, options, group, &AnalyseOptions::default()).map(|(obs, _)| obs)
+    traced(trace, model, options, group, &AnalyseOptions::default()).map(|t| t.observations)
 }
 
-/// The observations of a trace, and whether its motion's start phase came from the samples
-/// ([`crate::measure::MotionMeasurement::free_start`]).
+/// The fringe phase a motion's tracking gives at its two ends, for the gap change across a
+/// pause ([`ExtractOptions::gap_across_pauses`]).
+#[derive(Debug, Clone, Copy)]
+struct PhaseEnds {
+    /// Vacuum wavelength (nm) and air index of the tracking.
+    wavelength_nm: f64,
+    n_air: f64,
+    /// Fringe phase at the first and the last sample (rad; it grows with the gap).
+    first_rad: f64,
+    last_rad: f64,
+    /// σ of the phase at one end, in nm of gap: the tracked total's σ (both ends) over √2.
+    sigma_end_nm: f64,
+}
+
+/// What one trace gave: its observations, whether its motion's start phase came from the
+/// samples ([`crate::measure::MotionMeasurement::free_start`]) and, for a motion, the phase at
+/// its ends.
+struct Traced {
+    observations: Vec<Observation>,
+    free_start: bool,
+    ends: Option<PhaseEnds>,
+}
+
+/// The gap change across the pause between `before` (ended at its last sample) and `after`
+/// (starts at its first), when [`ExtractOptions::gap_across_pauses`] allows one: the same pose
+/// (within [`APPROACH_MIN_MOVE`]), the same wavelength, at least [`MIN_PAUSE_S`] between them.
+/// Its value is the phase difference wrapped to ±half a fringe, i.e. drift below a quarter
+/// wavelength over the pause; `approach` is the stages' directions during the pause.
+fn gap_across_pause(
+    (before, ends_before): (&Trace, &PhaseEnds),
+    (after, ends_after): (&Trace, &PhaseEnds),
+    approach: [i8; 6],
+    options: &ExtractOptions,
+) -> Option<Observation> {
+    let (last, first) = (before.len().checked_sub(1)?, 0);
+    let (from, to) = (before.joints_display(last), after.joints_display(first));
+    let still = (0..6).all(|j| (to[j] - from[j]).abs() <= APPROACH_MIN_MOVE[j]);
+    let pause_s = after.t_s[first] - before.t_s[last];
+    let same_light = (ends_before.wavelength_nm - ends_after.wavelength_nm).abs() < 1e-6
+        && (ends_before.n_air - ends_after.n_air).abs() < 1e-12;
+    if !(options.gap_across_pauses && still && same_light && pause_s >= MIN_PAUSE_S) {
+        return None;
+    }
+    let tau = std::f64::consts::TAU;
+    let dphi = ends_after.first_rad - ends_before.last_rad;
+    let dphi = dphi - tau * (dphi / tau).round();
+    if !dphi.is_finite() {
+        return None;
+    }
+    let nm_per_rad = ends_after.wavelength_nm / (2.0 * tau * ends_after.n_air);
+    Some(Observation {
+        label: after.meta.label.clone(),
+        kind: ObservationKind::GapChange { from_display: from, to_display: to, dl_nm: dphi * nm_per_rad },
+        sigma: ends_before.sigma_end_nm.hypot(ends_after.sigma_end_nm).hypot(options.sigma_floor_nm),
+        wavelength_nm: ends_after.wavelength_nm,
+        time_s: [before.t_s[last], after.t_s[first]],
+        approach: [approach; 2],
+    })
+}
+
 fn traced(
     trace: &Trace,
     model: &PhaseModel,
     options: &ExtractOptions,
     group: usize,
     analyse: &AnalyseOptions,
-) -> Result<(Vec<Observation>, bool), MeasureError> {
+) -> Result<Traced, MeasureError> {
     let label = trace.meta.label.clone();
     let wavelength_nm = trace.wavelength_nm.first().copied().unwrap_or(1560.0);
     let mut out = Vec::new();
     let mut free_start = false;
+    let mut ends = None;
     match measure::analyse_with(trace, model, analyse)? {
         Measurement::Sweep(s) => {
             out.push(Observation {
@@ -84,6 +155,13 @@ fn traced(
         Measurement::Motion(m) => {
             free_start = m.free_start;
             let n = trace.len();
+            ends = Some(PhaseEnds {
+                wavelength_nm: m.wavelength_nm,
+                n_air: m.n_air,
+                first_rad: m.track.phase_rad[0],
+                last_rad: m.track.phase_rad[n - 1],
+                sigma_end_nm: m.track.sigma_total_nm * std::f64::consts::FRAC_1_SQRT_2,
+            });
             let k = options.points_per_motion.max(1);
             let turns = (3..6).any(|j| {
                 let c = trace.joint_column(j);
@@ -124,7 +202,7 @@ fn traced(
             }
         }
     }
-    Ok((out, free_start))
+    Ok(Traced { observations: out, free_start, ends })
 }
 
 /// Fringe amplitude (half peak-to-peak between neighbouring extrema) along a trace, at the
@@ -274,7 +352,7 @@ pub fn observations_from_traces_with(
     use rayon::prelude::*;
     // Traces are independent: analyse them in parallel, then number the amplitude groups in
     // trace order.
-    let results: Vec<Result<(Vec<Observation>, bool), MeasureError>> = traces
+    let results: Vec<Result<Traced, MeasureError>> = traces
         .par_iter()
         .map(|t| traced(t, model, options, 0, &AnalyseOptions { free_start: free_start(t) }))
         .collect();
@@ -284,16 +362,23 @@ pub fn observations_from_traces_with(
     for t in earlier {
         approach.enter(t);
     }
+    // The last trace and its phase at the ends, when it was a tracked motion.
+    let mut previous: Option<(&Trace, PhaseEnds)> = None;
     for (t, r) in traces.iter().zip(results) {
         // Every trace moves the stages, analysed or not.
         let start = approach.enter(t);
-        let (mut obs, free) = match r {
+        let Traced { observations: mut obs, free_start: free, ends } = match r {
             Ok(o) => o,
             Err(e) => {
                 out.skipped.push((t.meta.label.clone(), e.to_string()));
+                previous = None;
                 continue;
             }
         };
+        if let (Some((before, before_ends)), Some(after_ends)) = (previous, ends.as_ref()) {
+            out.observations.extend(gap_across_pause((before, &before_ends), (t, after_ends), start, options));
+        }
+        previous = ends.map(|e| (t, e));
         let tracked_start = if free { start } else { first_motion(t, &start) };
         for o in &mut obs {
             let at = |time_s: f64| t.t_s.partition_point(|&x| x < time_s).min(t.len() - 1);
