@@ -1500,9 +1500,6 @@ struct SegConst {
 
 /// Scratch of one chunk: per-sample weights and model terms.
 struct Chunk {
-    t: [f64; CHUNK],
-    u: [f64; CHUNK],
-    y: [f64; CHUNK],
     w0: [f64; CHUNK],
     w1: [f64; CHUNK],
     f: [f64; CHUNK],
@@ -1529,12 +1526,21 @@ fn madd<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
 }
 
 /// Model terms of a chunk (elementwise, vectorises): ψ, f(ψ), h = B·f'(ψ), ν, h·u, and the
-/// hat-function weights (w0, w1 and ν zero beyond `m`, and u zero there, so padding lanes
-/// add nothing).
+/// hat-function weights (w0, w1, ν and u zero beyond `m`, so padding lanes add nothing).
+/// `c`, `hint` and `y` hold the chunk's samples (at least `m` rounded up to 4 of them; the
+/// padding lanes only need to be finite).
 #[inline(always)]
 #[allow(clippy::needless_range_loop)] // lane-indexed on purpose: it vectorises
-fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc: &SegConst) {
+fn chunk_terms<const FMA: bool, const SHAPED: bool>(
+    ch: &mut Chunk,
+    m: usize,
+    sc: &SegConst,
+    c: &[f64],
+    hint: &[f64],
+    y: &[f64],
+) {
     let m4 = m.div_ceil(4) * 4;
+    let (c, hint, y) = (&c[..m4], &hint[..m4], &y[..m4]);
     for i in 0..m4 {
         let harm = if SHAPED {
             Harmonic { cos_rel: ch.hc2[i], sin_rel: ch.hs2[i], cos3_rel: ch.hc3[i], sin3_rel: ch.hs3[i] }
@@ -1542,9 +1548,9 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
             sc.harm
         };
         let live = if i < m { 1.0 } else { 0.0 };
-        let t = ch.t[i];
+        let t = c[i] - sc.jf;
         let w0 = 1.0 - t;
-        let u = ch.u[i];
+        let u = sc.gk * (hint[i] - sc.h_ref) * live;
         let psi = madd::<FMA>(u, sc.scale, madd::<FMA>(w0, sc.d0, madd::<FMA>(t, sc.d1, sc.intercept)));
         let (r, ca) = if SHAPED { (ch.r[i], ch.ca[i]) } else { (1.0, 0.0) };
         let aa = madd::<FMA>(w0, sc.a0, madd::<FMA>(t, sc.a1, ca));
@@ -1553,7 +1559,7 @@ fn chunk_terms<const FMA: bool, const SHAPED: bool>(ch: &mut Chunk, m: usize, sc
         let (f, fp) = harm.f_and_slope(sn, co);
         // h and f enter the sums only through w0, w1 or h·u (u = 0 on padding lanes)
         let h = bb * fp;
-        let nu = (ch.y[i] - madd::<FMA>(bb, f, aa)) * live;
+        let nu = (y[i] - madd::<FMA>(bb, f, aa)) * live;
         ch.w0[i] = w0 * live;
         ch.w1[i] = t * live;
         ch.f[i] = r * f;
@@ -1714,12 +1720,10 @@ fn accumulate_kernel<const FMA: bool, const SHAPED: bool>(
     nm: &mut NormalEq,
 ) {
     let (y, hint, c, seg_first) = (d.y, d.hint, d.c, d.seg_first);
+    let n = y.len().min(hint.len()).min(c.len());
     let jn = st.delta.len();
     nm.reset();
     let mut ch = Chunk {
-        t: [0.0; CHUNK],
-        u: [0.0; CHUNK],
-        y: [0.0; CHUNK],
         w0: [0.0; CHUNK],
         w1: [0.0; CHUNK],
         f: [0.0; CHUNK],
@@ -1733,6 +1737,9 @@ fn accumulate_kernel<const FMA: bool, const SHAPED: bool>(
         r: [1.0; CHUNK],
         ca: [0.0; CHUNK],
     };
+    // grid coordinate, hint and intensity of a chunk at the very end of the data, padded
+    // with zeros (the padding lanes of the others read the following samples in place)
+    let mut tail = [[0.0; CHUNK]; 3];
     let shape = d.shape.unwrap_or(ShapeView { harm: &[], r: &[], ca: &[] });
     for j in 0..jn - 1 {
         let (mut k, k1) = (seg_first[j], seg_first[j + 1]);
@@ -1757,19 +1764,6 @@ fn accumulate_kernel<const FMA: bool, const SHAPED: bool>(
         while k < k1 {
             let m = (k1 - k).min(CHUNK);
             let m4 = m.div_ceil(4) * 4;
-            // one array at a time, so that the copies vectorise: the kernel reads these
-            // lanes four at a time, and a 4-lane load of four scalar stores still in flight
-            // stalls (no store forwarding); the padding lanes are zero
-            for (t, &cv) in ch.t[..m].iter_mut().zip(&c[k..k + m]) {
-                *t = cv - sc.jf;
-            }
-            for (u, &hv) in ch.u[..m].iter_mut().zip(&hint[k..k + m]) {
-                *u = sc.gk * (hv - sc.h_ref);
-            }
-            ch.y[..m].copy_from_slice(&y[k..k + m]);
-            for v in [&mut ch.t, &mut ch.u, &mut ch.y] {
-                v[m..m4].fill(0.0);
-            }
             if SHAPED {
                 for (i, h) in shape.harm[k..k + m].iter().enumerate() {
                     ch.hc2[i] = h.cos_rel;
@@ -1780,7 +1774,18 @@ fn accumulate_kernel<const FMA: bool, const SHAPED: bool>(
                 ch.r[..m].copy_from_slice(&shape.r[k..k + m]);
                 ch.ca[..m].copy_from_slice(&shape.ca[k..k + m]);
             }
-            chunk_terms::<FMA, SHAPED>(&mut ch, m, &sc);
+            // the samples in place (padding lanes read the next segment's, masked in the
+            // kernel), except at the very end of the data: a zero-padded copy
+            if k + m4 <= n {
+                chunk_terms::<FMA, SHAPED>(&mut ch, m, &sc, &c[k..], &hint[k..], &y[k..]);
+            } else {
+                for (v, src) in tail.iter_mut().zip([c, hint, y]) {
+                    v[..m].copy_from_slice(&src[k..k + m]);
+                    v[m..m4].fill(0.0);
+                }
+                let [tc, th, ty] = &tail;
+                chunk_terms::<FMA, SHAPED>(&mut ch, m, &sc, tc, th, ty);
+            }
             chunk_sums::<FMA>(&ch, m, &mut acc);
             nm.count += m;
             k += m;
