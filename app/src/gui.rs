@@ -147,11 +147,10 @@ impl Workbench {
                     ui.selectable_value(&mut self.tab, t, RichText::new(t.title()).size(16.0));
                 }
                 ui.separator();
+                // Settings… is in the File menu: with it here the bar overflowed 1400 px and
+                // clipped the button.
                 if ui.button(if self.state.settings.dark { "Light theme" } else { "Dark theme" }).clicked() {
                     self.state.settings.dark = !self.state.settings.dark;
-                }
-                if ui.button("Settings…").clicked() {
-                    self.editing = Some(self.state.settings.clone());
                 }
             });
         });
@@ -224,6 +223,9 @@ impl Workbench {
         }
         if ui.button("Save as…").clicked() {
             self.save(true);
+        }
+        if ui.button("Settings…").clicked() {
+            self.editing = Some(self.state.settings.clone());
         }
         if ui.button("Export report…").clicked() {
             if let Some(path) = self.state.dialogs.save_report() {
@@ -402,7 +404,9 @@ impl Workbench {
         let Some(mut s) = self.editing.take() else { return };
         let mut open = true;
         let mut apply = false;
-        egui::Window::new("Settings").open(&mut open).show(ctx, |ui| {
+        // Below the top bar, centred: not over the bar and its menus.
+        let at = ctx.content_rect().center_top() + egui::vec2(0.0, 48.0);
+        egui::Window::new("Settings").open(&mut open).pivot(egui::Align2::CENTER_TOP).default_pos(at).show(ctx, |ui| {
             egui::Grid::new("settings grid").num_columns(2).show(ui, |ui| {
                 ui.label("bench preset");
                 egui::ComboBox::from_id_salt("preset").selected_text(&s.preset).show_ui(ui, |ui| {

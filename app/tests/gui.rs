@@ -457,6 +457,14 @@ fn settings_persist_between_runs_and_the_theme_toggles() {
     assert!(mean_brightness(&mut h) < 80.0, "the dark theme is dark");
     h.get_by_label("Light theme").click();
     h.run_steps(3);
+    // Settings… is in the File menu; its window edits the seed and the theme among others.
+    h.get_by_label("File").click();
+    h.run_steps(2);
+    h.get_by_label("Settings…").click();
+    h.run_steps(3);
+    h.get_by_label("random seed");
+    h.get_by_label("live window");
+    screenshot(&mut h, "settings");
     h.state_mut().state.settings.seed = 42;
     let mut app = App { workbench: h.into_state() };
     let mut storage = MemoryStorage::default();
