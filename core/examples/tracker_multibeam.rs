@@ -8,15 +8,7 @@ use std::sync::atomic::AtomicBool;
 
 fn main() {
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
-    let mut m = PhaseModel::new(
-        preset.robot_description().unwrap(),
-        preset.truth,
-        preset.optics,
-        &preset.ambient,
-        preset.laser.wavelength_nm,
-    )
-    .unwrap();
-    m.extrinsics = preset.truth;
+    let m = PhaseModel::of_preset(&preset, preset.truth).unwrap();
     let args: Vec<f64> = std::env::args().skip(1).map(|a| a.parse().unwrap()).collect();
     let q2 = args.first().copied().unwrap_or(150.0);
     let mut p = preset.clone();

@@ -147,7 +147,7 @@ fn sincos_k<const FMA: bool>(x: f64) -> (f64, f64) {
 }
 
 /// Phase per unit length change of the cavity, rad/nm: 4π·n_air/λ.
-fn rad_per_nm(wavelength_nm: f64, n_air: f64) -> f64 {
+pub(crate) fn rad_per_nm(wavelength_nm: f64, n_air: f64) -> f64 {
     4.0 * PI * n_air / wavelength_nm
 }
 

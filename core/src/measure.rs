@@ -75,6 +75,13 @@ impl PhaseModel {
         Ok(Self { chain: Chain::new(robot), extrinsics, optics, n_air })
     }
 
+    /// The model of a bench preset (its robot, optics, ambient conditions and laser) with the
+    /// given extrinsics.
+    pub fn of_preset(preset: &crate::bench::BenchPreset, extrinsics: Extrinsics) -> Result<Self, String> {
+        let robot = preset.robot_description().map_err(|e| e.to_string())?;
+        Self::new(robot, extrinsics, preset.optics, &preset.ambient, preset.laser.wavelength_nm)
+    }
+
     /// The phase-equivalent gap (nm) at joints `q_display` (µm, °) and vacuum wavelength
     /// `wavelength_nm`: `φ·λ/(4π·n)`.
     pub fn phase_gap_nm(&self, fp: &FabryPerot, q_display: &[f64; 6]) -> f64 {

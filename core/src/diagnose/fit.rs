@@ -217,6 +217,11 @@ impl Fit {
     pub fn chi2(&self) -> f64 {
         self.residuals.norm_squared()
     }
+
+    /// How many σ added effect `k` is from neutral (0 when the data do not determine it).
+    pub fn effect_z(&self, k: usize) -> f64 {
+        self.effect_sigma[k].map_or(0.0, |s| self.state.effects[k].1.abs() / s)
+    }
 }
 
 /// RMS of a vector (0 for an empty one).

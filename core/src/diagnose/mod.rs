@@ -851,7 +851,7 @@ impl Diagnosis {
         // And the refit must keep the effect: an estimate within REMOVE_BELOW_SIGMA of neutral
         // after the refit is not an effect the data need (the linearised score chose it, the
         // extrinsics refitted with it took the rest).
-        let kept = nf.effect_sigma[k].is_some_and(|s| nf.state.effects[k].1.abs() >= REMOVE_BELOW_SIGMA * s);
+        let kept = nf.effect_z(k) >= REMOVE_BELOW_SIGMA;
         let confirmed =
             kept && held[1] * held[1] <= held[0] * held[0] + 3.0 * (2.0 / n_held).sqrt() * (held[0] * held[0]).max(1.0);
         let effect = NamedEffect {
@@ -902,10 +902,8 @@ impl Diagnosis {
             let Some(f) = self.fit.clone() else { return Ok(()) };
             let n = f.state.effects.len();
             let weakest = (0..n.saturating_sub(1))
-                .filter_map(|k| {
-                    let z = f.effect_sigma[k].map_or(0.0, |s| f.state.effects[k].1.abs() / s);
-                    (z < REMOVE_BELOW_SIGMA).then_some((k, z))
-                })
+                .map(|k| (k, f.effect_z(k)))
+                .filter(|&(_, z)| z < REMOVE_BELOW_SIGMA)
                 .min_by(|a, b| a.1.total_cmp(&b.1));
             let Some((k, _)) = weakest else { return Ok(()) };
             let (cand, estimate) = f.state.effects[k].clone();

@@ -527,14 +527,7 @@ mod tests {
     #[test]
     fn a_dwell_measures_the_drift_across_its_pause() {
         let base = BenchPreset::resolve("table2-ideal").unwrap();
-        let model = PhaseModel::new(
-            base.robot_description().unwrap(),
-            base.truth,
-            base.optics,
-            &base.ambient,
-            base.laser.wavelength_nm,
-        )
-        .unwrap();
+        let model = PhaseModel::of_preset(&base, base.truth).unwrap();
         let dwell = |label: &str, at_display: [f64; 6]| DesignedMotion {
             label: label.into(),
             kind: MotionKind::Dwell { at_display, duration_s: 30.0 },

@@ -333,9 +333,7 @@ fn pilot_bench(preset: &BenchPreset, prior: &Extrinsics, seed: u64) -> Result<Vi
 }
 
 fn model_for(preset: &BenchPreset, prior: &Extrinsics) -> Result<PhaseModel, DesignError> {
-    let robot = preset.robot_description().map_err(|e| DesignError::Pilot(e.to_string()))?;
-    PhaseModel::new(robot, *prior, preset.optics, &preset.ambient, preset.laser.wavelength_nm)
-        .map_err(DesignError::Pilot)
+    PhaseModel::of_preset(preset, *prior).map_err(DesignError::Pilot)
 }
 
 /// Run plans on the pilot bench; every recorded trace.

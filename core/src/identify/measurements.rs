@@ -118,10 +118,10 @@ fn gap_across_pause(
     if !dphi.is_finite() {
         return None;
     }
-    let nm_per_rad = ends_after.wavelength_nm / (2.0 * tau * ends_after.n_air);
+    let dl_nm = dphi / crate::fringes::rad_per_nm(ends_after.wavelength_nm, ends_after.n_air);
     Some(Observation {
         label: after.meta.label.clone(),
-        kind: ObservationKind::GapChange { from_display: from, to_display: to, dl_nm: dphi * nm_per_rad },
+        kind: ObservationKind::GapChange { from_display: from, to_display: to, dl_nm },
         sigma: ends_before.sigma_end_nm.hypot(ends_after.sigma_end_nm).hypot(options.sigma_floor_nm),
         wavelength_nm: ends_after.wavelength_nm,
         time_s: [before.t_s[last], after.t_s[first]],
@@ -129,6 +129,8 @@ fn gap_across_pause(
     })
 }
 
+/// The observations of a trace, whether its motion's start phase came from the samples and the
+/// phase at its ends ([`Traced`]).
 fn traced(
     trace: &Trace,
     model: &PhaseModel,
@@ -481,14 +483,7 @@ mod tests {
         let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
         let run = run_plan(&mut bench, &plan, &mut control);
         run.outcome.unwrap();
-        let model = PhaseModel::new(
-            preset.robot_description().unwrap(),
-            preset.truth,
-            preset.optics,
-            &preset.ambient,
-            preset.laser.wavelength_nm,
-        )
-        .unwrap();
+        let model = PhaseModel::of_preset(&preset, preset.truth).unwrap();
         let fp = FabryPerot::new(&model.optics, preset.laser.wavelength_nm, model.n_air).unwrap();
         let rms_after_gain = |neighbours: bool| {
             let options = ExtractOptions { amplitude_neighbours: neighbours, ..ExtractOptions::default() };
