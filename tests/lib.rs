@@ -1,5 +1,7 @@
 //! End-to-end tests live in the [[test]] targets of this crate.
 
+use photorobot_core::model::effects::Effect;
+use photorobot_core::model::optics::BackFace;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
 
 fn mv(to: [f64; 6], record: bool, label: &str) -> Segment {
@@ -28,4 +30,43 @@ pub fn session_plan() -> Plan {
         s.push(mv([0.0, 0.0, 0.0, other, 4.0, 0.0], true, &format!("q5 at q4 = {other}")));
     }
     Plan { name: "diagnose e2e".into(), description: String::new(), segments: s }
+}
+
+/// One library effect at a time at its typical size (SPEC section 9), as hidden on a virtual
+/// bench: (candidate name, hidden value in the candidate's unit, effects hidden); the first
+/// entry hides nothing.
+pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)> {
+    let b = BackFace::default();
+    let one = |name, value, e: Effect| (name, value, vec![e]);
+    vec![
+        ("nothing", 0.0, vec![]),
+        one("thermal drift rate", 0.5, Effect::ThermalDrift { nm_per_s: 0.5, nm_per_s2: 0.0 }),
+        one("optical path scale", 268.0, Effect::PathScale { ppm: 268.0 }),
+        one("joint scale error q3", 800.0, Effect::JointScale { joint: "q3".into(), ppm: 800.0 }),
+        one("joint zero offset q4", 0.05, Effect::JointZeroOffset { joint: "q4".into(), offset: 0.05 }),
+        one(
+            "pivot offset q4 along Z_w",
+            20.0,
+            Effect::PivotOffset { joint: "q4".into(), offset_world_um: [0.0, 0.0, 20.0] },
+        ),
+        one("axis tilt q4 toward link x", 0.6, Effect::AxisTilt { joint: "q4".into(), tilt_mrad: [0.6, 0.0] }),
+        one("reversal error q3", 1.0, Effect::ReversalError { joint: "q3".into(), step: 1.0 }),
+        one(
+            "reversal error q4",
+            20e-6f64.to_degrees(),
+            Effect::ReversalError { joint: "q4".into(), step: 20e-6f64.to_degrees() },
+        ),
+        one("Gouy phase scale error", -1.0, Effect::GouyPhase { scale_error: -1.0 }),
+        one(
+            "lamella back face amplitude reflectance",
+            0.2,
+            Effect::LamellaBackFace {
+                amplitude_reflectance: 0.2,
+                thickness_um: b.thickness_um,
+                phase_index: b.phase_index,
+                group_index: b.group_index,
+            },
+        ),
+        one("fringe nonlinearity cos φ", 2.0, Effect::FringeNonlinearity { in_phase_nm: 2.0, quadrature_nm: 0.0 }),
+    ]
 }

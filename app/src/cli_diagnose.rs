@@ -246,6 +246,17 @@ fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()>
         writeln!(out, "the recorded data cannot tell these from an extrinsic change: {}", r.need_motions.join(", "))?;
         writeln!(out, "motions that would: {}", r.discriminating_motions.join("; "))?;
     }
+    if !r.not_detectable.is_empty() {
+        writeln!(
+            out,
+            "not detectable at typical size on the data and motions available ({}): {}",
+            r.not_detectable.len(),
+            r.not_detectable.join(", ")
+        )?;
+    }
+    if !r.not_seen.is_empty() {
+        writeln!(out, "no observation can see: {}", r.not_seen.join(", "))?;
+    }
     for p in &r.partial {
         writeln!(
             out,

@@ -273,6 +273,12 @@ fn diagnosis_view_runs_the_workflow_step_by_step() {
     } else {
         h.get_by_label("without the effect (nm)");
     }
+    // What the data could not have seen at typical size.
+    assert!(!result.not_detectable.is_empty(), "a strategy-2 session cannot see every effect at typical size");
+    h.get_by_label(&format!(
+        "not detectable at typical size on these data and motions: {}",
+        result.not_detectable.join(", ")
+    ));
     screenshot(&mut h, "diagnosis-workflow");
     // Saved with the session.
     let saved = tmp.path().join("saved");

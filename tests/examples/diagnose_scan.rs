@@ -6,51 +6,12 @@
 //!
 //!     cargo run --release -p photorobot-e2e --example diagnose_scan [-- INDEX...] [--seed N]
 //!
-//! Without an index, every effect in the list below.
+//! Without an index, every effect of `photorobot_e2e::library_effects_at_typical_size`.
 
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::files::save_ron;
-use photorobot_core::model::effects::Effect;
-use photorobot_core::model::optics::BackFace;
-use photorobot_e2e::session_plan;
+use photorobot_e2e::{library_effects_at_typical_size, session_plan};
 use std::sync::atomic::AtomicBool;
-
-/// (name, hidden value, effects hidden); the first entry hides nothing.
-fn effects() -> Vec<(&'static str, f64, Vec<Effect>)> {
-    let b = BackFace::default();
-    let one = |name, value, e: Effect| (name, value, vec![e]);
-    vec![
-        ("nothing", 0.0, vec![]),
-        one("thermal drift rate", 0.5, Effect::ThermalDrift { nm_per_s: 0.5, nm_per_s2: 0.0 }),
-        one("optical path scale", 268.0, Effect::PathScale { ppm: 268.0 }),
-        one("joint scale error q3", 800.0, Effect::JointScale { joint: "q3".into(), ppm: 800.0 }),
-        one("joint zero offset q4", 0.05, Effect::JointZeroOffset { joint: "q4".into(), offset: 0.05 }),
-        one(
-            "pivot offset q4 along Z_w",
-            20.0,
-            Effect::PivotOffset { joint: "q4".into(), offset_world_um: [0.0, 0.0, 20.0] },
-        ),
-        one("axis tilt q4 toward link x", 0.6, Effect::AxisTilt { joint: "q4".into(), tilt_mrad: [0.6, 0.0] }),
-        one("reversal error q3", 1.0, Effect::ReversalError { joint: "q3".into(), step: 1.0 }),
-        one(
-            "reversal error q4",
-            20e-6f64.to_degrees(),
-            Effect::ReversalError { joint: "q4".into(), step: 20e-6f64.to_degrees() },
-        ),
-        one("Gouy phase scale error", -1.0, Effect::GouyPhase { scale_error: -1.0 }),
-        one(
-            "lamella back face amplitude reflectance",
-            0.2,
-            Effect::LamellaBackFace {
-                amplitude_reflectance: 0.2,
-                thickness_um: b.thickness_um,
-                phase_index: b.phase_index,
-                group_index: b.group_index,
-            },
-        ),
-        one("fringe nonlinearity cos φ", 2.0, Effect::FringeNonlinearity { in_phase_nm: 2.0, quadrature_nm: 0.0 }),
-    ]
-}
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -66,7 +27,7 @@ fn main() {
             i += 1;
         }
     }
-    let all = effects();
+    let all = library_effects_at_typical_size();
     if picks.is_empty() {
         picks = (0..all.len()).collect();
     }
@@ -126,10 +87,20 @@ fn main() {
             })
             .unwrap_or_default();
         let first_ok = v["effects"][0]["name"].as_str() == Some(name);
+        let listed = |field: &str| v[field].as_array().is_some_and(|a| a.iter().any(|n| n.as_str() == Some(name)));
+        let reported = [
+            ("not_detectable", "not detectable at typical size"),
+            ("not_seen", "seen by no observation"),
+            ("equivalent_to_extrinsics", "equivalent to an extrinsic change"),
+        ]
+        .iter()
+        .filter(|(f, _)| listed(f))
+        .map(|(_, what)| format!("; reported as {what}"))
+        .collect::<String>();
         let z = (v["effects"][0]["estimate"].as_f64().unwrap_or(f64::NAN) - hidden)
             / v["effects"][0]["sigma"].as_f64().unwrap_or(f64::NAN);
         println!(
-            "[{k}] hidden {name} = {hidden:.4}: verdict {}, {:.2}σ → {:.2}σ, first named {} ({}), {:.1} s\n      {}",
+            "[{k}] hidden {name} = {hidden:.4}: verdict {}, {:.2}σ → {:.2}σ, first named {} ({}){reported}, {:.1} s\n      {}",
             v["verdict"],
             v["residual_rms_before_sigma"].as_f64().unwrap_or(f64::NAN),
             v["residual_rms_after_sigma"].as_f64().unwrap_or(f64::NAN),

@@ -165,6 +165,12 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
                     d.equivalent_to_extrinsics.join(", ")
                 )));
             }
+            if !d.not_detectable.is_empty() {
+                ui.label(drawable(&format!(
+                    "not detectable at typical size on these data and motions: {}",
+                    d.not_detectable.join(", ")
+                )));
+            }
             if !d.discriminating_motions.is_empty() {
                 ui.label(drawable(&format!(
                     "discriminating motions {}: {}",

@@ -288,3 +288,20 @@ fn the_result_serialises_with_the_documented_fields() {
     let back: DiagnosisResult = serde_json::from_value(v).unwrap();
     assert_eq!(back, r);
 }
+
+/// A tilt of the q4 goniometer's axis toward its link x at a typical size (0.6 mrad) turns the
+/// lamella about the beam: no gap change of the calibration or of the pool depends on it
+/// beyond the noise. It is not named, not called unexplained, and it is reported as not
+/// detectable at that size, while effects the motions see at theirs are not in that list.
+#[test]
+fn an_effect_too_small_for_every_motion_is_reported_as_not_detectable() {
+    let name = "axis tilt q4 toward link x";
+    let (r, _) = diagnose(vec![Effect::AxisTilt { joint: "q4".into(), tilt_mrad: [0.6, 0.0] }], 11, true);
+    assert_eq!(r.verdict, Verdict::None, "{:?}", r.effects);
+    assert!(r.discriminating_motions_ran);
+    assert!(r.not_detectable.iter().any(|n| n == name), "{:?}", r.not_detectable);
+    assert!(!r.equivalent_to_extrinsics.iter().any(|n| n == name));
+    // Detectable at the typical size: not in the list.
+    assert!(!r.not_detectable.iter().any(|n| n == "joint zero offset q4"), "{:?}", r.not_detectable);
+    assert!(!r.not_detectable.iter().any(|n| n == "optical path scale"), "{:?}", r.not_detectable);
+}
