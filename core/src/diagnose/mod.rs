@@ -187,6 +187,10 @@ pub enum Step {
         added_observations: usize,
         /// Whitened rms of the baseline refitted with them.
         rms_sigma: f64,
+        /// Pool motions left out because the gap turns inside them ([`motions::gap_turns`]):
+        /// their tracking can miss by many σ.
+        #[serde(default)]
+        avoided: Vec<String>,
     },
     /// An effect added and the model refitted.
     Added {
@@ -263,12 +267,15 @@ impl Step {
                 }
                 s.trim_end().to_string()
             }
-            Step::Designed { needy, motions, ran_on, added_observations, rms_sigma } => {
+            Step::Designed { needy, motions, ran_on, added_observations, rms_sigma, avoided } => {
                 let mut s = format!(
                     "candidates the data cannot see at typical size: {}",
                     if needy.is_empty() { "none".into() } else { needy.join(", ") }
                 );
                 s += &format!("\nmotions chosen ({}): {}", motions.len(), motions.join("; "));
+                if !avoided.is_empty() {
+                    s += &format!("\navoided, the gap turns inside them: {}", avoided.join("; "));
+                }
                 match ran_on {
                     Some(b) => {
                         s += &format!(
@@ -636,6 +643,37 @@ impl Diagnosis {
         Ok((pool, per_motion, absorbed))
     }
 
+    /// When the observations come from tracked fringes, the pool motions whose gap turns inside
+    /// them (predicted by the current model, [`motions::gap_turns`]) add nothing to the design:
+    /// their contributions are zeroed. Returns their labels.
+    fn avoid_turns(
+        &self,
+        pool: &[DesignedMotion],
+        per_motion: &mut [Vec<f64>],
+        tracked: bool,
+    ) -> Result<Vec<String>, DiagnoseError> {
+        if !tracked {
+            return Ok(vec![]);
+        }
+        let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("design before the baseline".into()))?;
+        let mut avoided = Vec::new();
+        for (m, row) in pool.iter().zip(per_motion.iter_mut()) {
+            let t = motions::turn_templates(m);
+            if t.is_empty() {
+                continue;
+            }
+            let dl = self
+                .predictor
+                .predict(&f.state.extrinsics, &f.state.library_effects(), &f.state.gains, &t)
+                .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+            if motions::gap_turns(&dl) {
+                row.iter_mut().for_each(|v| *v = 0.0);
+                avoided.push(m.label.clone());
+            }
+        }
+        Ok(avoided)
+    }
+
     /// Choose pool motions greedily: the ones adding the most detectability (capped at
     /// [`DETECTABLE_SCORE`]) to targets that have `have` on the data.
     fn choose(per_motion: &[Vec<f64>], have: &[f64]) -> Vec<usize> {
@@ -689,7 +727,8 @@ impl Diagnosis {
             .filter(|&c| self.scores[c].detectability_at_typical < DETECTABLE_SCORE && !self.scores[c].significant)
             .collect();
         let targets: Vec<(usize, Vec<usize>)> = (0..self.candidates.len()).map(|c| (c, vec![])).collect();
-        let (pool, per_motion, absorbed) = self.pool_contributions(&targets)?;
+        let (pool, mut per_motion, absorbed) = self.pool_contributions(&targets)?;
+        let avoided = self.avoid_turns(&pool, &mut per_motion, runner.as_deref().is_none_or(|r| r.tracks_fringes()))?;
         self.equivalent = (0..self.candidates.len())
             .filter(|&c| absorbed[c] >= EQUIVALENT_SHARE)
             .map(|c| self.candidates[c].name.clone())
@@ -740,6 +779,7 @@ impl Diagnosis {
             ran_on,
             added_observations: added,
             rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
+            avoided,
         });
         self.stage = Stage::Name;
         Ok(())
@@ -760,7 +800,9 @@ impl Diagnosis {
         self.separated.push(name.clone());
         let targets: Vec<(usize, Vec<usize>)> =
             ambiguous.iter().flat_map(|&o| [(best, vec![o]), (o, vec![best])]).collect();
-        let (pool, per_motion, _) = self.pool_contributions(&targets)?;
+        let (pool, mut per_motion, _) = self.pool_contributions(&targets)?;
+        let tracked = runner.tracks_fringes();
+        let avoided = self.avoid_turns(&pool, &mut per_motion, tracked)?;
         let have = vec![0.0; targets.len()];
         let motions: Vec<DesignedMotion> = Self::choose(&per_motion, &have)
             .into_iter()
@@ -778,6 +820,7 @@ impl Diagnosis {
             ran_on: Some(runner.name()),
             added_observations: added,
             rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
+            avoided,
         });
         Ok(true)
     }

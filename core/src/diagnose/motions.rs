@@ -226,6 +226,55 @@ pub trait MotionRunner {
     fn reanalyse(&self, _analysis: &PhaseModel) -> Option<Vec<Observation>> {
         None
     }
+    /// Whether its observations come from tracked fringes (a bench's traces): the design then
+    /// avoids motions whose gap turns inside them ([`gap_turns`]).
+    fn tracks_fringes(&self) -> bool {
+        true
+    }
+}
+
+/// Points along a move at which [`gap_turns`] looks at the gap.
+const TURN_POINTS: usize = 40;
+/// The smallest excursion of the gap against its overall direction (nm) that counts as a turn.
+pub const TURN_MIN_NM: f64 = 20.0;
+
+/// Gap-change templates from a move's start to `TURN_POINTS` points along it.
+pub fn turn_templates(m: &DesignedMotion) -> Vec<Observation> {
+    let MotionKind::Move { from_display, to_display } = &m.kind else { return vec![] };
+    (1..=TURN_POINTS)
+        .map(|k| {
+            let f = k as f64 / TURN_POINTS as f64;
+            let to: [f64; 6] = std::array::from_fn(|j| from_display[j] + f * (to_display[j] - from_display[j]));
+            Observation {
+                label: m.label.clone(),
+                kind: ObservationKind::GapChange { from_display: *from_display, to_display: to, dl_nm: 0.0 },
+                sigma: TEMPLATE_SIGMA_NM,
+                wavelength_nm: TEMPLATE_WAVELENGTH_NM,
+                time_s: [0.0, 0.0],
+                approach: Default::default(),
+            }
+        })
+        .collect()
+}
+
+/// Whether the gap along a move (`dl_nm`: the predicted gap changes of [`turn_templates`])
+/// turns inside it: it goes against the move's overall direction by more than
+/// [`TURN_MIN_NM`] somewhere. The fringe phase then stands still inside the trace, as the
+/// motion hint does, and the tracking can miss: on table2-ideal a q5 rotation of ±4° at
+/// q3 = 150 µm, whose gap rises by 4.6 µm and falls back by 0.7 µm, ended 10.4 nm off with a
+/// tracker σ of 0.46 nm, and a q4 rotation at q1 = 150 µm (gap +0.11 µm, then −6.8 µm)
+/// missed by 5.8σ a quarter of the way (`effect_visibility` example).
+pub fn gap_turns(dl_nm: &[f64]) -> bool {
+    let Some(&last) = dl_nm.last() else { return false };
+    let sign = if last >= 0.0 { 1.0 } else { -1.0 };
+    // The largest fall of the gap, measured in the move's overall direction, from a running peak.
+    let (mut peak, mut worst) = (0.0f64, 0.0f64);
+    for &d in std::iter::once(&0.0).chain(dl_nm) {
+        let v = sign * d;
+        peak = peak.max(v);
+        worst = worst.max(peak - v);
+    }
+    worst > TURN_MIN_NM
 }
 
 /// A hidden perturbation outside the effect library, added to the simulated value of an
@@ -310,6 +359,10 @@ impl MotionRunner for SimulatedBench {
     fn run(&mut self, motions: &[DesignedMotion], _analysis: &PhaseModel) -> Result<Vec<Observation>, String> {
         let t = templates(motions, self.clock_s);
         self.simulate(&t)
+    }
+
+    fn tracks_fringes(&self) -> bool {
+        false
     }
 }
 
@@ -569,4 +622,49 @@ mod tests {
     }
 
     const EXTRACT_SIGMA_FLOOR_NM: f64 = crate::diagnose::EXTRACT_OPTIONS.sigma_floor_nm;
+
+    /// The turn detector on gap profiles with known shapes, in either overall direction.
+    #[test]
+    fn a_gap_that_goes_back_against_the_move_turns() {
+        let ramp: Vec<f64> = (1..=40).map(|k| 100.0 * k as f64).collect();
+        let neg = |v: &[f64]| v.iter().map(|d| -d).collect::<Vec<f64>>();
+        assert!(!gap_turns(&ramp) && !gap_turns(&neg(&ramp)));
+        // Up by 4.6 µm, back by 0.7 µm (a turn near the end).
+        let arch: Vec<f64> = (1..=40).map(|k| 4606.0 - 4606.0 * ((k as f64 - 28.0) / 28.0).powi(2)).collect();
+        assert!(gap_turns(&arch) && gap_turns(&neg(&arch)));
+        // +112 nm first, then down to −6.75 µm (a turn near the start).
+        let hook: Vec<f64> =
+            (1..=40).map(|k| if k <= 4 { 28.0 * k as f64 } else { 112.0 - (k - 4) as f64 * 6862.0 / 36.0 }).collect();
+        assert!((hook[3] - 112.0).abs() < 1e-9 && (hook[39] + 6750.0).abs() < 1e-6);
+        assert!(gap_turns(&hook) && gap_turns(&neg(&hook)));
+        // A wiggle under TURN_MIN_NM does not count.
+        let wiggle: Vec<f64> = ramp.iter().enumerate().map(|(k, d)| d - if k == 5 { 115.0 } else { 0.0 }).collect();
+        assert!(!gap_turns(&wiggle), "a 15 nm step back");
+        assert!(!gap_turns(&[]));
+    }
+
+    /// On table2-ideal's truth the gap turns inside exactly the pool rotations whose axis the
+    /// beam meets within the rotation: the q5 rotation at q3 = +150 µm and the q4 rotation at
+    /// q1 = +150 µm (the ones whose tracking missed, `effect_visibility`); not their mirror
+    /// images, not the translations.
+    #[test]
+    fn the_pool_rotations_whose_gap_turns_on_table2_ideal() {
+        let base = BenchPreset::resolve("table2-ideal").unwrap();
+        let model = PhaseModel::of_preset(&base, base.truth).unwrap();
+        let all: Vec<Observation> = pool().iter().flat_map(turn_templates).collect();
+        let p = Predictor::new(&model, &all).unwrap();
+        let turning: Vec<String> = pool()
+            .iter()
+            .filter(|m| {
+                let t = turn_templates(m);
+                !t.is_empty() && gap_turns(&p.predict(&base.truth, &[], &[], &t).unwrap())
+            })
+            .map(|m| m.label.clone())
+            .collect();
+        assert_eq!(
+            turning,
+            ["D q4 -4 -> +4° at q1 = 150, q3 = 0 µm", "D q5 -4 -> +4° at q1 = 0, q3 = 150 µm"],
+            "{turning:?}"
+        );
+    }
 }
