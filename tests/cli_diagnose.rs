@@ -53,6 +53,22 @@ fn record_and_diagnose(
     v
 }
 
+/// table2-ideal with `effects` hidden, saved as a bench file that the diagnosis runs its
+/// discriminating motions on; the session recorded on it and diagnosed.
+fn diagnose_hidden(
+    name: &str,
+    effects: Vec<photorobot_core::model::effects::Effect>,
+    dump_var: &str,
+) -> serde_json::Value {
+    let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
+    preset.name = name.into();
+    preset.effects = effects;
+    let dir = tempfile::tempdir().unwrap();
+    let bench_file = dir.path().join("bench.ron");
+    save_ron(&bench_file, &preset).unwrap();
+    record_and_diagnose(&preset, dir.path(), &["--bench", bench_file.to_str().unwrap()], dump_var)
+}
+
 #[test]
 fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
     let preset = BenchPreset::resolve("hidden-pivot").unwrap();
@@ -118,14 +134,11 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
 #[test]
 fn diagnose_names_a_hidden_reversal_error_from_virtual_bench_traces() {
     use photorobot_core::model::effects::Effect;
-    let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
-    preset.name = "hidden-reversal".into();
-    preset.effects = vec![Effect::ReversalError { joint: "q3".into(), step: 1.0 }];
-    let dir = tempfile::tempdir().unwrap();
-    let bench_file = dir.path().join("hidden-reversal.ron");
-    save_ron(&bench_file, &preset).unwrap();
-    let v =
-        record_and_diagnose(&preset, dir.path(), &["--bench", bench_file.to_str().unwrap()], "DIAGNOSE_DUMP_REVERSAL");
+    let v = diagnose_hidden(
+        "hidden-reversal",
+        vec![Effect::ReversalError { joint: "q3".into(), step: 1.0 }],
+        "DIAGNOSE_DUMP_REVERSAL",
+    );
     assert_eq!(v["discriminating_motions_ran"], true);
     let first = &v["effects"][0];
     assert_eq!(first["name"], "reversal error q3", "{v}");
@@ -150,13 +163,11 @@ fn diagnose_names_a_hidden_reversal_error_from_virtual_bench_traces() {
 #[test]
 fn diagnose_names_a_hidden_thermal_drift_from_virtual_bench_traces() {
     use photorobot_core::model::effects::Effect;
-    let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
-    preset.name = "hidden-drift".into();
-    preset.effects = vec![Effect::ThermalDrift { nm_per_s: 0.5, nm_per_s2: 0.0 }];
-    let dir = tempfile::tempdir().unwrap();
-    let bench_file = dir.path().join("hidden-drift.ron");
-    save_ron(&bench_file, &preset).unwrap();
-    let v = record_and_diagnose(&preset, dir.path(), &["--bench", bench_file.to_str().unwrap()], "DIAGNOSE_DUMP_DRIFT");
+    let v = diagnose_hidden(
+        "hidden-drift",
+        vec![Effect::ThermalDrift { nm_per_s: 0.5, nm_per_s2: 0.0 }],
+        "DIAGNOSE_DUMP_DRIFT",
+    );
     assert_eq!(v["discriminating_motions_ran"], true);
     assert_eq!(v["verdict"], "named", "{v}");
     let first = &v["effects"][0];
@@ -175,13 +186,7 @@ fn diagnose_names_a_hidden_thermal_drift_from_virtual_bench_traces() {
 #[test]
 fn diagnose_names_a_hidden_path_scale_from_virtual_bench_traces() {
     use photorobot_core::model::effects::Effect;
-    let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
-    preset.name = "hidden-path-scale".into();
-    preset.effects = vec![Effect::PathScale { ppm: 268.0 }];
-    let dir = tempfile::tempdir().unwrap();
-    let bench_file = dir.path().join("hidden-path-scale.ron");
-    save_ron(&bench_file, &preset).unwrap();
-    let v = record_and_diagnose(&preset, dir.path(), &["--bench", bench_file.to_str().unwrap()], "DIAGNOSE_DUMP_PATH");
+    let v = diagnose_hidden("hidden-path-scale", vec![Effect::PathScale { ppm: 268.0 }], "DIAGNOSE_DUMP_PATH");
     assert_eq!(v["verdict"], "named", "{v}");
     let effects = v["effects"].as_array().unwrap();
     assert_eq!(effects.len(), 1, "{v}");
@@ -212,18 +217,7 @@ fn diagnose_reports_hidden_effects_the_traces_cannot_show() {
         ("fringe nonlinearity cos φ", "not_seen", Effect::FringeNonlinearity { in_phase_nm: 2.0, quadrature_nm: 0.0 }),
     ];
     for (name, field, effect) in cases {
-        let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
-        preset.name = format!("hidden {name}");
-        preset.effects = vec![effect];
-        let dir = tempfile::tempdir().unwrap();
-        let bench_file = dir.path().join("bench.ron");
-        save_ron(&bench_file, &preset).unwrap();
-        let v = record_and_diagnose(
-            &preset,
-            dir.path(),
-            &["--bench", bench_file.to_str().unwrap()],
-            "DIAGNOSE_DUMP_UNSEEN",
-        );
+        let v = diagnose_hidden(&format!("hidden {name}"), vec![effect], "DIAGNOSE_DUMP_UNSEEN");
         assert_eq!(v["discriminating_motions_ran"], true);
         assert_eq!(v["verdict"], "none", "{name}: {v}");
         let listed = |f: &str| v[f].as_array().unwrap().iter().any(|n| n.as_str() == Some(name));

@@ -656,17 +656,19 @@ impl Diagnosis {
             return Ok(vec![]);
         }
         let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("design before the baseline".into()))?;
+        // Every move's points in one prediction (the model is built once).
+        let per: Vec<Vec<Observation>> = pool.iter().map(motions::turn_templates).collect();
+        let all: Vec<Observation> = per.iter().flatten().cloned().collect();
+        let dl = self
+            .predictor
+            .predict(&f.state.extrinsics, &f.state.library_effects(), &f.state.gains, &all)
+            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
         let mut avoided = Vec::new();
-        for (m, row) in pool.iter().zip(per_motion.iter_mut()) {
-            let t = motions::turn_templates(m);
-            if t.is_empty() {
-                continue;
-            }
-            let dl = self
-                .predictor
-                .predict(&f.state.extrinsics, &f.state.library_effects(), &f.state.gains, &t)
-                .map_err(|e| DiagnoseError::Model(e.to_string()))?;
-            if motions::gap_turns(&dl) {
+        let mut at = 0;
+        for ((m, row), t) in pool.iter().zip(per_motion.iter_mut()).zip(&per) {
+            let (from, to) = (at, at + t.len());
+            at = to;
+            if !t.is_empty() && motions::gap_turns(&dl[from..to]) {
                 row.iter_mut().for_each(|v| *v = 0.0);
                 avoided.push(m.label.clone());
             }
@@ -737,21 +739,18 @@ impl Diagnosis {
         let have: Vec<f64> = needy.iter().map(|&c| self.scores[c].detectability_at_typical).collect();
         let chosen = Self::choose(&needy_motion, &have);
         let motions: Vec<DesignedMotion> = chosen.iter().map(|&m| pool[m].clone()).collect();
-        let needy_names: Vec<String> = needy
-            .iter()
-            .filter(|&&c| {
-                !self.equivalent.contains(&self.candidates[c].name) && !self.not_seen.contains(&self.candidates[c].name)
-            })
-            .map(|&c| self.candidates[c].name.clone())
-            .collect();
+        // Reported as needing motions: neither equivalent to an extrinsic change nor unseeable.
+        let reportable = |c: usize| {
+            !self.equivalent.contains(&self.candidates[c].name) && !self.not_seen.contains(&self.candidates[c].name)
+        };
+        let needy_names: Vec<String> =
+            needy.iter().filter(|&&c| reportable(c)).map(|&c| self.candidates[c].name.clone()).collect();
         // Of those, the ones the chosen motions would make detectable at typical size.
         let seen_with_motions: Vec<String> = needy
             .iter()
             .enumerate()
             .filter(|&(t, &c)| {
-                !self.equivalent.contains(&self.candidates[c].name)
-                    && !self.not_seen.contains(&self.candidates[c].name)
-                    && have[t] + chosen.iter().map(|&m| needy_motion[m][t]).sum::<f64>() >= DETECTABLE_SCORE
+                reportable(c) && have[t] + chosen.iter().map(|&m| needy_motion[m][t]).sum::<f64>() >= DETECTABLE_SCORE
             })
             .map(|(_, &c)| self.candidates[c].name.clone())
             .collect();
