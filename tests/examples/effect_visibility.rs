@@ -17,6 +17,7 @@
 //! counterpart" and the amplitudes' sums mean little.
 
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
+use photorobot_core::diagnose::candidates::library;
 use photorobot_core::diagnose::fit::Predictor;
 use photorobot_core::diagnose::motions::{pool, BenchRunner, MotionRunner};
 use photorobot_core::diagnose::EXTRACT_OPTIONS;
@@ -74,7 +75,8 @@ fn kind_of(o: &Observation) -> usize {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let (mut seed, mut picks, mut all_rows, mut tracks) = (5u64, Vec::new(), false, false);
+    let (mut seed, mut picks, mut all_rows, mut tracks, mut profile, mut noiseless, mut amplitude_rows) =
+        (5u64, Vec::new(), false, false, false, false, false);
     let mut i = 0;
     while i < args.len() {
         match args[i].as_str() {
@@ -84,6 +86,9 @@ fn main() {
             }
             "--all" => all_rows = true,
             "--tracks" => tracks = true,
+            "--profile" => profile = true,
+            "--noiseless" => noiseless = true,
+            "--amplitudes" => amplitude_rows = true,
             a => picks.push(a.parse::<usize>().expect("an effect index")),
         }
         i += 1;
@@ -92,7 +97,18 @@ fn main() {
     if picks.is_empty() {
         picks = (1..all.len()).collect();
     }
-    let base = BenchPreset::resolve("table2-ideal").expect("embedded preset");
+    let mut base = BenchPreset::resolve("table2-ideal").expect("embedded preset");
+    if noiseless {
+        base.laser.rin_rel = 0.0;
+        base.detector.white_noise_rel_fringe = 0.0;
+        base.detector.shot_noise_mw_at_1mw = 0.0;
+        base.detector.adc_bits = 32;
+        base.detector.gain_drift_per_hour = 0.0;
+        base.stages.encoder_noise_nm = 0.0;
+        base.stages.encoder_noise_urad = 0.0;
+        base.stages.stage_noise_nm = 0.0;
+        base.stages.stage_noise_urad = 0.0;
+    }
     let model = PhaseModel::of_preset(&base, base.truth).expect("model");
     let without = observe(&base, &model, seed, "without", tracks);
     for k in picks {
@@ -123,6 +139,17 @@ fn main() {
             s[0] += zp * zp;
             s[1] += zm * zm;
             s[2] += 1.0;
+            if (noiseless || amplitude_rows) && kind_of(o) == 2 {
+                println!(
+                    "   {:<46} amplitude {:.9} model {:.9} mW  σ {:.9} miss {:+.2}σ relative miss {:+.5}",
+                    o.label,
+                    o.value(),
+                    p1[n],
+                    o.sigma,
+                    (o.value() - p1[n]) / o.sigma,
+                    o.value() / p1[n] - 1.0
+                );
+            }
             if kind_of(o) == 0 && (all_rows || zm.abs() > 0.5 || zp.abs() > 0.5) {
                 println!(
                     "   {:<46} measured {measured:+9.3} model {predicted:+9.3} σ {:6.3} nm   miss {zm:+6.2}σ   residuals with {:+6.2}σ without {:+6.2}σ",
@@ -133,6 +160,9 @@ fn main() {
                 );
             }
         }
+        if profile {
+            profile_chi2(&predictor, &base, effects, *hidden, &with);
+        }
         for (kind, s) in ["gap changes", "absolute gaps", "amplitudes"].iter().zip(sums) {
             println!(
                 "   {kind:<14} n {:4}  model Σ(Δ/σ)² {:10.1}  mismatch Σ(miss/σ)² {:10.1}",
@@ -140,4 +170,70 @@ fn main() {
             );
         }
     }
+}
+
+/// χ² of each kind of observation (amplitudes with each trace's gain at its best) at the truth,
+/// with the one library parameter of `effects` at 0.99 to 1.01 × `hidden`, and the value each
+/// kind alone puts the parameter at (parabola through the profile).
+fn profile_chi2(
+    predictor: &Predictor,
+    base: &BenchPreset,
+    effects: &[photorobot_core::model::effects::Effect],
+    hidden: f64,
+    obs: &[Observation],
+) {
+    let robot = base.robot_description().expect("robot");
+    let Some(c) = library(&robot).into_iter().find(|c| effects.len() == 1 && c.effect(hidden) == effects[0]) else {
+        println!("   profile: not one library parameter");
+        return;
+    };
+    let factors = [0.99, 0.995, 1.0, 1.005, 1.01];
+    let mut chi = Vec::new();
+    for f in factors {
+        let e = vec![c.effect(hidden * f)];
+        let m = predictor.predict(&base.truth, &e, &vec![1.0; 1000], obs).expect("prediction");
+        let mut k = [0.0f64; 3];
+        let groups = photorobot_core::diagnose::fit::gain_groups(obs);
+        let (mut ym, mut mm) = (vec![0.0; groups], vec![0.0; groups]);
+        for (o, mi) in obs.iter().zip(&m) {
+            match o.kind {
+                ObservationKind::FringeAmplitude { group, .. } => {
+                    ym[group] += o.value() * mi / (o.sigma * o.sigma);
+                    mm[group] += mi * mi / (o.sigma * o.sigma);
+                }
+                _ => k[kind_of(o)] += ((o.value() - mi) / o.sigma).powi(2),
+            }
+        }
+        for (o, mi) in obs.iter().zip(&m) {
+            if let ObservationKind::FringeAmplitude { group, .. } = o.kind {
+                let g = ym[group] / mm[group];
+                k[2] += ((o.value() - g * mi) / o.sigma).powi(2);
+            }
+        }
+        chi.push(k);
+    }
+    for (f, k) in factors.iter().zip(&chi) {
+        println!(
+            "   profile {} = {:.6} {}: χ² gap changes {:10.2} absolute {:8.2} amplitudes {:10.2}",
+            c.name,
+            hidden * f,
+            c.unit,
+            k[0],
+            k[1],
+            k[2]
+        );
+    }
+    // Parabola through the points at 0.995, 1, 1.005 of each kind and of the sum.
+    let h = 0.005 * hidden;
+    let vertex = |a: f64, b: f64, d: f64| {
+        let curv = (a - 2.0 * b + d) / (h * h);
+        (hidden - (d - a) / (2.0 * h) / curv, (2.0 / curv).sqrt())
+    };
+    for (kind, i) in [("gap changes", 0), ("amplitudes", 2)] {
+        let (v, s) = vertex(chi[1][i], chi[2][i], chi[3][i]);
+        println!("   {kind} alone: {} = {v:.6} ± {s:.6} {}", c.name, c.unit);
+    }
+    let sum = |j: usize| chi[j].iter().sum::<f64>();
+    let (v, s) = vertex(sum(1), sum(2), sum(3));
+    println!("   all: {} = {v:.6} ± {s:.6} {}", c.name, c.unit);
 }

@@ -72,7 +72,7 @@ pub enum ObservationKind {
 /// The outer extrema of a fringe amplitude measured from three extrema in a row: the middle
 /// one (at [`ObservationKind::FringeAmplitude::at_display`]) against the mean of its
 /// neighbours, `|(E₀ + E₂)/2 − E₁| / 2` (mW).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AmplitudeNeighbours {
     /// Joints at the extremum before the middle one (µm, °).
     pub before_display: [f64; 6],
@@ -80,6 +80,13 @@ pub struct AmplitudeNeighbours {
     pub after_display: [f64; 6],
     /// The middle extremum is a maximum of the reflected power (its neighbours are minima).
     pub middle_is_max: bool,
+    /// Where each extremum's value was read (before, middle, after): the joints at the first
+    /// and the last sample of the window its parabola was fitted in (µm, °). The model then
+    /// fits the same parabola to its own power along the path between them, so that the tilt
+    /// and the gap moving together through the window count as they did on the bench.
+    /// `None` (older files): each extremum is the fixed-tilt fringe's at its pose.
+    #[serde(default)]
+    pub windows_display: Option<Box<[[[f64; 6]; 2]; 3]>>,
 }
 
 /// One observation with its standard uncertainty (in the observation's unit: nm, µm or mW).
@@ -174,9 +181,121 @@ pub fn fringe_extremes_mw(fp: &FabryPerot, gap_um: f64, tilt_rad: f64) -> (f64, 
             }
             x -= (deriv(x, 1) / d2).clamp(-0.2, 0.2);
         }
-        deriv(x, 0)
+        // What the fringe analysis measures: the top of a least-squares parabola through the
+        // fringe within ±VERTEX_WINDOW_HALF_FRINGE of a half fringe (π) of it, the window
+        // centred on that top (see `measurements::vertex_value`). Not the fringe's own
+        // extreme: for a cosine 0.05 % of the amplitude lower, more as the harmonics grow.
+        const K: usize = 33;
+        let w = VERTEX_WINDOW_HALF_FRINGE * std::f64::consts::PI;
+        let mut top = (deriv(x, 0), x);
+        for _ in 0..3 {
+            let xs: Vec<f64> = (0..K).map(|i| -1.0 + 2.0 * i as f64 / (K - 1) as f64).collect();
+            let ys: Vec<f64> = xs.iter().map(|u| deriv(top.1 + u * w, 0)).collect();
+            match parabola_top(&xs, &ys) {
+                Some((value, u, curvature)) if sign * curvature < 0.0 => top = (value, top.1 + u * w),
+                _ => break,
+            }
+        }
+        top.0
     };
     (extreme(1.0), extreme(-1.0))
+}
+
+/// What `measurements::vertex_value` reads from the samples of one window: the top of the
+/// least-squares parabola through the power across the window. The tilt follows the straight
+/// joint path from `window[0]` to `window[1]` (the samples are evenly spaced in time and the
+/// joints move at a steady speed through one window); the gap runs evenly over the window's
+/// width on the tracked gap, ±[`VERTEX_WINDOW_HALF_FRINGE`] of a half fringe, as measured,
+/// not as the model would move it (a model that misses an effect can miss the gap's rate by a
+/// lot). The fringe's phase is not the bench's (the absolute gap is known to far less than a
+/// fringe), so the gap is shifted until the model's top of the wanted kind (`max`: a maximum)
+/// sits at the window's centre, as the samples' does by construction. NaN when the beam
+/// misses the lamella or the parabola curves the wrong way.
+fn windowed_top(
+    fp: &FabryPerot,
+    window: [[f64; 6]; 2],
+    max: bool,
+    gap_tilt: impl Fn(&[f64; 6]) -> Option<(f64, f64)>,
+) -> f64 {
+    const K: usize = 17;
+    let sign = if max { 1.0 } else { -1.0 };
+    let xs: Vec<f64> = (0..K).map(|i| -1.0 + 2.0 * i as f64 / (K - 1) as f64).collect();
+    let Some(path) = xs
+        .iter()
+        .map(|x| {
+            let f = 0.5 * (x + 1.0);
+            gap_tilt(&std::array::from_fn(|j| window[0][j] + f * (window[1][j] - window[0][j])))
+        })
+        .collect::<Option<Vec<(f64, f64)>>>()
+    else {
+        return f64::NAN;
+    };
+    let period = fp.fringe_period_um();
+    let half_width_um = VERTEX_WINDOW_HALF_FRINGE * period / 2.0;
+    let xs = &xs;
+    // The gap runs the way the model moves it from window[0] to window[1] (a turning point
+    // inside a window gives no amplitude): with the tilt moving too, the direction counts.
+    let run = (path[K - 1].0 - path[0].0).signum();
+    // The window's width is on the tracked phase, which the tilt moves too (the Gouy phase, a
+    // back face's second fringe): the gap takes up what the tilt adds, so that the phase runs
+    // evenly over ±half_width_um.
+    let (g_c, t_c) = path[K / 2];
+    let phase_c = fp.fundamental_phase_rad(g_c, t_c);
+    let tilt_um: Vec<f64> = path
+        .iter()
+        .map(|(_, t)| (fp.fundamental_phase_rad(g_c, *t) - phase_c) * period / std::f64::consts::TAU)
+        .collect();
+    let gap = |k: usize, shift_um: f64| g_c + shift_um + run * xs[k] * half_width_um - tilt_um[k];
+    // Start from the fixed-tilt fringe's extreme nearest the centre, then move the fringe
+    // until the parabola's top is at the centre.
+    let mut shift_um = (0..32)
+        .map(|k| (k as f64 / 32.0 - 0.5) * period)
+        .max_by(|a, b| (sign * fp.power(gap(K / 2, *a), t_c)).total_cmp(&(sign * fp.power(gap(K / 2, *b), t_c))))
+        .unwrap_or(0.0);
+    let mut value = f64::NAN;
+    for _ in 0..4 {
+        let ys: Vec<f64> = path.iter().enumerate().map(|(k, (_, t))| fp.power(gap(k, shift_um), *t)).collect();
+        match parabola_top(xs, &ys) {
+            Some((v, x, curvature)) if sign * curvature < 0.0 => {
+                value = v;
+                shift_um += run * x * half_width_um;
+            }
+            _ => return f64::NAN,
+        }
+    }
+    value
+}
+
+/// Half-width of the window around an intensity extremum in which its value is read from a
+/// least-squares parabola, as a fraction of a half fringe (0.2: ±0.63 rad of fringe phase,
+/// where a cosine departs from its parabola by under 0.2 % of the amplitude).
+pub const VERTEX_WINDOW_HALF_FRINGE: f64 = 0.2;
+
+/// Least-squares parabola y = c₀ + c₁x + c₂x² through the points (x in about ±1): its
+/// coefficients, or `None` when the normal equations are singular.
+fn parabola(xs: &[f64], ys: &[f64]) -> Option<nalgebra::Vector3<f64>> {
+    let mut a = nalgebra::Matrix3::<f64>::zeros();
+    let mut b = nalgebra::Vector3::<f64>::zeros();
+    for (&x, &y) in xs.iter().zip(ys) {
+        let row = nalgebra::Vector3::new(1.0, x, x * x);
+        a += row * row.transpose();
+        b += row * y;
+    }
+    a.lu().solve(&b)
+}
+
+/// The top of the least-squares parabola through the points: its value, where it is (clamped
+/// to the points' range) and its curvature c₂ (negative for a maximum). `None` when the
+/// parabola is singular or flat.
+pub(crate) fn parabola_top(xs: &[f64], ys: &[f64]) -> Option<(f64, f64, f64)> {
+    let c = parabola(xs, ys)?;
+    if c[2] == 0.0 {
+        return None;
+    }
+    let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let x = (-c[1] / (2.0 * c[2])).clamp(lo, hi);
+    Some((c[0] + c[1] * x + c[2] * x * x, x, c[2]))
 }
 
 /// Predict an observation from extrinsics `e` and the gain of its amplitude group (ignored for
@@ -247,7 +366,20 @@ pub fn predict_with_path(
                     fringe_extremes_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)
                 })
             };
-            let (mid, before, after) = (extremes(at_display), extremes(&n.before_display), extremes(&n.after_display));
+            let (mid, before, after) = match &n.windows_display {
+                Some(w) => {
+                    // Power along the path through each window, its parabola's top: a maximum
+                    // is read into `.0`, a minimum into `.1`, as `extremes` gives them.
+                    let gap_tilt =
+                        |q: &[f64; 6]| cavity(&real(q, 1)).map(|c| (optical_gap_um(c.length_um, t_mid), c.tilt_rad));
+                    let read = |k: usize, max: bool| -> (f64, f64) {
+                        let v = windowed_top(fp, w[k], max, gap_tilt);
+                        (v, v)
+                    };
+                    (read(1, n.middle_is_max), read(0, !n.middle_is_max), read(2, !n.middle_is_max))
+                }
+                None => (extremes(at_display), extremes(&n.before_display), extremes(&n.after_display)),
+            };
             let combined =
                 if n.middle_is_max { mid.0 - 0.5 * (before.1 + after.1) } else { 0.5 * (before.0 + after.0) - mid.1 };
             gain * combined / 2.0
