@@ -214,16 +214,7 @@ fn a_hidden_reversal_error_is_seen_through_the_approach_directions() {
     use photorobot_core::identify::measurements::{observations_from_traces_with, ExtractOptions};
     use photorobot_core::identify::ObservationKind;
     use photorobot_core::model::effects::{real_joints, reversal_play, Effect};
-    let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
-    preset.detector.white_noise_rel_fringe = 0.0;
-    preset.detector.shot_noise_mw_at_1mw = 0.0;
-    preset.detector.adc_bits = 0;
-    preset.detector.gain_drift_per_hour = 0.0;
-    preset.laser.rin_rel = 0.0;
-    preset.stages.encoder_noise_nm = 0.0;
-    preset.stages.encoder_noise_urad = 0.0;
-    preset.stages.stage_noise_nm = 0.0;
-    preset.stages.stage_noise_urad = 0.0;
+    let mut preset = BenchPreset::resolve("table2-ideal").unwrap().without_noise();
     preset.effects = vec![Effect::ReversalError { joint: "q3".into(), step: 2.0 }];
     let plan = reversal_plan(40.0, 130.0);
     let traces = run(&preset, &plan, 3);

@@ -99,15 +99,7 @@ fn main() {
     }
     let mut base = BenchPreset::resolve("table2-ideal").expect("embedded preset");
     if noiseless {
-        base.laser.rin_rel = 0.0;
-        base.detector.white_noise_rel_fringe = 0.0;
-        base.detector.shot_noise_mw_at_1mw = 0.0;
-        base.detector.adc_bits = 32;
-        base.detector.gain_drift_per_hour = 0.0;
-        base.stages.encoder_noise_nm = 0.0;
-        base.stages.encoder_noise_urad = 0.0;
-        base.stages.stage_noise_nm = 0.0;
-        base.stages.stage_noise_urad = 0.0;
+        base = base.without_noise();
     }
     let model = PhaseModel::of_preset(&base, base.truth).expect("model");
     let without = observe(&base, &model, seed, "without", tracks);

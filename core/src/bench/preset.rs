@@ -147,6 +147,20 @@ impl BenchPreset {
         Ok(p)
     }
 
+    /// The same bench without any noise: no detector, shot or intensity noise, no ADC
+    /// quantisation, no gain drift, no encoder or stage noise. Hidden effects, drift and the
+    /// truth stay. For checks that a difference comes from the model, not the noise.
+    pub fn without_noise(mut self) -> Self {
+        self.laser.rin_rel = 0.0;
+        self.detector.white_noise_rel_fringe = 0.0;
+        self.detector.shot_noise_mw_at_1mw = 0.0;
+        self.detector.adc_bits = 0;
+        self.detector.gain_drift_per_hour = 0.0;
+        self.stages =
+            Stages { encoder_noise_nm: 0.0, encoder_noise_urad: 0.0, stage_noise_nm: 0.0, stage_noise_urad: 0.0 };
+        self
+    }
+
     /// The robot description (truth geometry before hidden effects).
     pub fn robot_description(&self) -> Result<RobotDescription, FileError> {
         match &self.robot {

@@ -522,38 +522,58 @@ mod tests {
     /// three extrema to the noise; the half peak-to-peak at the middle extremum alone misses the
     /// curvature of the fringe level and amplitude along the scan. The detector gain is fitted
     /// (one number, least squares) in both cases.
-    #[test]
-    fn amplitudes_with_their_neighbours_match_the_model_on_a_virtual_bench_tilt_scan() {
-        use crate::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
-        use crate::identify::predict;
-        use crate::model::optics::FabryPerot;
+    /// A ±4° tilt scan of revolute joint `joint` (3: q4, 4: q5) at q = 0 recorded on a virtual
+    /// bench of `preset` (seed 3), with the true model and its optics.
+    fn tilt_scan_at_zero(
+        preset: &crate::bench::BenchPreset,
+        joint: usize,
+    ) -> (crate::trace::Trace, PhaseModel, crate::model::optics::FabryPerot) {
+        use crate::bench::{run_plan, RunControl, VirtualBench};
         use crate::plan::{JointTarget, Plan, Segment};
-        let preset = BenchPreset::resolve("table2-ideal").unwrap();
-        let mut bench = VirtualBench::new(&preset, Some(3)).unwrap();
-        let mv = |to: [f64; 6], record: bool| Segment::Move {
-            to: JointTarget::all(to),
-            record,
-            label: if record { "tilt scan q5 at q = 0".into() } else { "setup".into() },
+        let mut bench = VirtualBench::new(preset, Some(3)).unwrap();
+        let label = format!("tilt scan q{} at q = 0", joint + 1);
+        let mv = |deg: f64, record: bool| {
+            let mut to = [0.0; 6];
+            to[joint] = deg;
+            Segment::Move {
+                to: JointTarget::all(to),
+                record,
+                label: if record { label.clone() } else { "setup".into() },
+            }
         };
         let plan = Plan {
             name: "tilt scan".into(),
             description: String::new(),
-            segments: vec![mv([0.0, 0.0, 0.0, 0.0, -4.0, 0.0], false), mv([0.0, 0.0, 0.0, 0.0, 4.0, 0.0], true)],
+            segments: vec![mv(-4.0, false), mv(4.0, true)],
         };
         let cancel = std::sync::atomic::AtomicBool::new(false);
         let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-        let run = run_plan(&mut bench, &plan, &mut control);
+        let mut run = run_plan(&mut bench, &plan, &mut control);
         run.outcome.unwrap();
-        let model = PhaseModel::of_preset(&preset, preset.truth).unwrap();
-        let fp = FabryPerot::new(&model.optics, preset.laser.wavelength_nm, model.n_air).unwrap();
+        let model = PhaseModel::of_preset(preset, preset.truth).unwrap();
+        let fp = crate::model::optics::FabryPerot::new(&model.optics, preset.laser.wavelength_nm, model.n_air).unwrap();
+        (run.traces.remove(0), model, fp)
+    }
+
+    /// The fringe amplitudes of a trace.
+    fn amplitudes_of(trace: &crate::trace::Trace, model: &PhaseModel, neighbours: bool) -> Vec<Observation> {
+        let options = ExtractOptions { amplitude_neighbours: neighbours, ..ExtractOptions::default() };
+        let obs: Vec<Observation> = observations_from_trace(trace, model, &options, 0)
+            .unwrap()
+            .into_iter()
+            .filter(|o| matches!(o.kind, ObservationKind::FringeAmplitude { .. }))
+            .collect();
+        assert!(obs.len() > 20, "{} amplitudes", obs.len());
+        obs
+    }
+
+    #[test]
+    fn amplitudes_with_their_neighbours_match_the_model_on_a_virtual_bench_tilt_scan() {
+        use crate::identify::predict;
+        let preset = crate::bench::BenchPreset::resolve("table2-ideal").unwrap();
+        let (trace, model, fp) = tilt_scan_at_zero(&preset, 4);
         let rms_after_gain = |neighbours: bool| {
-            let options = ExtractOptions { amplitude_neighbours: neighbours, ..ExtractOptions::default() };
-            let obs: Vec<Observation> = observations_from_trace(&run.traces[0], &model, &options, 0)
-                .unwrap()
-                .into_iter()
-                .filter(|o| matches!(o.kind, ObservationKind::FringeAmplitude { .. }))
-                .collect();
-            assert!(obs.len() > 20, "{} amplitudes", obs.len());
+            let obs = amplitudes_of(&trace, &model, neighbours);
             let (y, p): (Vec<f64>, Vec<f64>) = obs
                 .iter()
                 .map(|o| (o.value() / o.sigma, predict(&model, &fp, &preset.truth, o, 1.0) / o.sigma))
@@ -575,36 +595,12 @@ mod tests {
     /// the fixed-tilt fringe at the vertex misses by several times more.
     #[test]
     fn amplitudes_read_along_the_path_match_the_model_with_a_back_face() {
-        use crate::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
         use crate::identify::predict;
-        use crate::model::optics::{BackFace, FabryPerot};
-        use crate::plan::{JointTarget, Plan, Segment};
-        let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
+        use crate::model::optics::BackFace;
+        let mut preset = crate::bench::BenchPreset::resolve("table2-ideal").unwrap();
         preset.optics.back_face = Some(BackFace { reflectance: 0.04, ..BackFace::default() });
-        let mut bench = VirtualBench::new(&preset, Some(3)).unwrap();
-        let mv = |to: [f64; 6], record: bool| Segment::Move {
-            to: JointTarget::all(to),
-            record,
-            label: if record { "tilt scan q4 at q = 0".into() } else { "setup".into() },
-        };
-        let plan = Plan {
-            name: "tilt scan".into(),
-            description: String::new(),
-            segments: vec![mv([0.0, 0.0, 0.0, -4.0, 0.0, 0.0], false), mv([0.0, 0.0, 0.0, 4.0, 0.0, 0.0], true)],
-        };
-        let cancel = std::sync::atomic::AtomicBool::new(false);
-        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-        let run = run_plan(&mut bench, &plan, &mut control);
-        run.outcome.unwrap();
-        let model = PhaseModel::of_preset(&preset, preset.truth).unwrap();
-        let fp = FabryPerot::new(&model.optics, preset.laser.wavelength_nm, model.n_air).unwrap();
-        let options = ExtractOptions { amplitude_neighbours: true, ..ExtractOptions::default() };
-        let obs: Vec<Observation> = observations_from_trace(&run.traces[0], &model, &options, 0)
-            .unwrap()
-            .into_iter()
-            .filter(|o| matches!(o.kind, ObservationKind::FringeAmplitude { .. }))
-            .collect();
-        assert!(obs.len() > 20, "{} amplitudes", obs.len());
+        let (trace, model, fp) = tilt_scan_at_zero(&preset, 3);
+        let obs = amplitudes_of(&trace, &model, true);
         // The amplitude swings along the scan (the back face's fringe turns through the tilt).
         let (lo, hi) = obs.iter().fold((f64::INFINITY, 0f64), |(a, b), o| (a.min(o.value()), b.max(o.value())));
         assert!(hi > 1.3 * lo, "amplitudes {lo} to {hi} mW");
