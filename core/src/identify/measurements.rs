@@ -259,7 +259,8 @@ fn amplitudes(
                         windows_display,
                     }),
                 },
-                // The extremum values each carry the noise σ (plus the bias of sampling a peak).
+                // The single-sample noise σ for each extremum: conservative, a parabola averages
+                // its window (docs/diagnosis.md, "How an extremum is read").
                 sigma: sigma.max(1e-12) * std::f64::consts::FRAC_1_SQRT_2 * 2.0,
                 wavelength_nm,
                 time_s: [trace.t_s[mid]; 2],
@@ -288,6 +289,7 @@ fn vertex_value(v: &[f64], dl_nm: &[f64], e: &Extremum, half_fringe_nm: f64) -> 
     // The window is centred on the vertex, not on the extreme sample: that one jitters with
     // the noise along the flat top, and an off-centre window biases the parabola's top by an
     // amount that grows as the amplitude shrinks. Two re-centrings settle it.
+    let sign = if e.kind == ExtremumKind::Max { 1.0 } else { -1.0 };
     let mut best = raw;
     for _ in 0..3 {
         let i0 = (best.1.round() as usize).min(n - 1);
@@ -308,7 +310,6 @@ fn vertex_value(v: &[f64], dl_nm: &[f64], e: &Extremum, half_fringe_nm: f64) -> 
         let centre = lo as f64 + half;
         let xs: Vec<f64> = (lo..=hi).map(|i| (i as f64 - centre) / half).collect();
         let ys = &v[lo..=hi];
-        let sign = if e.kind == ExtremumKind::Max { 1.0 } else { -1.0 };
         let Some((value, x, _)) = parabola_top(&xs, ys).filter(|t| sign * t.2 < 0.0) else { return raw };
         best = (value, centre + x * half, Some((lo, hi)));
     }
@@ -474,54 +475,6 @@ mod tests {
     use crate::trace::TraceMeta;
     use rand::{rngs::StdRng, Rng, SeedableRng};
 
-    /// A tilt scan changes the fringe's mean level as well as its amplitude. Between two
-    /// neighbouring extrema, half the change of the mean level entered the half peak-to-peak,
-    /// with a sign that alternates along the scan (residuals of ±10σ on `table2-ideal`); three
-    /// extrema in a row cancel any linear change of level and amplitude.
-    #[test]
-    fn fringe_amplitudes_are_not_biased_by_a_moving_mean_level() {
-        let (wavelength_nm, half_fringe_nm) = (1560.0, 390.0);
-        let n = 40_000;
-        let mut rng = StdRng::seed_from_u64(3);
-        let mut trace =
-            Trace::with_capacity(TraceMeta { label: "tilt scan q4 at q = 0".into(), ..TraceMeta::default() }, n);
-        let mut dl = Vec::with_capacity(n);
-        // 10 fringes; the level rises by 5 % of the amplitude per fringe, the amplitude falls
-        // by 2 % per fringe; noise 1e-4 of the amplitude.
-        let amplitude = |fringes: f64| 1e-2 * (1.0 - 0.02 * fringes);
-        for k in 0..n {
-            let d = 10.0 * 2.0 * half_fringe_nm * k as f64 / n as f64;
-            let fringes = d / (2.0 * half_fringe_nm);
-            let level = 2e-2 + 5e-4 * fringes;
-            let phase = std::f64::consts::PI * d / half_fringe_nm;
-            let noise: f64 = 1e-6 * (rng.random::<f64>() - 0.5) * 12f64.sqrt();
-            let q4 = -4.0 + 8.0 * k as f64 / n as f64;
-            trace.push_sample(
-                k as f64 * 1e-4,
-                [0.0, 0.0, 0.0, q4, 0.0, 0.0],
-                wavelength_nm,
-                level + amplitude(fringes) * phase.cos() + noise,
-            );
-            dl.push(d);
-        }
-        let obs = amplitudes(&trace, &dl, half_fringe_nm, 0, wavelength_nm, true);
-        assert!(obs.len() >= 15, "{} amplitudes", obs.len());
-        let mut worst = 0f64;
-        for o in &obs {
-            let ObservationKind::FringeAmplitude { at_display, amplitude_mw, .. } = o.kind else { unreachable!() };
-            // The joint of the middle extremum gives where along the scan it is.
-            let fringes = (at_display[3] + 4.0) / 8.0 * 10.0;
-            worst = worst.max((amplitude_mw / amplitude(fringes) - 1.0).abs());
-        }
-        // Between two extrema the level moves by 2.5 % of the amplitude: the half peak-to-peak
-        // of a pair was off by 1.25 %.
-        assert!(worst < 1e-3, "worst relative amplitude error {worst:.2e}");
-    }
-    /// The model predicts what the extraction measures. On a virtual-bench tilt scan (truth
-    /// known), the amplitudes from three extrema match the model's same combination of the
-    /// three extrema to the noise; the half peak-to-peak at the middle extremum alone misses the
-    /// curvature of the fringe level and amplitude along the scan. The detector gain is fitted
-    /// (one number, least squares) in both cases.
     /// A ±4° tilt scan of revolute joint `joint` (3: q4, 4: q5) at q = 0 recorded on a virtual
     /// bench of `preset` (seed 3), with the true model and its optics.
     fn tilt_scan_at_zero(
@@ -567,6 +520,55 @@ mod tests {
         obs
     }
 
+    /// A tilt scan changes the fringe's mean level as well as its amplitude. Between two
+    /// neighbouring extrema, half the change of the mean level entered the half peak-to-peak,
+    /// with a sign that alternates along the scan (residuals of ±10σ on `table2-ideal`); three
+    /// extrema in a row cancel any linear change of level and amplitude.
+    #[test]
+    fn fringe_amplitudes_are_not_biased_by_a_moving_mean_level() {
+        let (wavelength_nm, half_fringe_nm) = (1560.0, 390.0);
+        let n = 40_000;
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut trace =
+            Trace::with_capacity(TraceMeta { label: "tilt scan q4 at q = 0".into(), ..TraceMeta::default() }, n);
+        let mut dl = Vec::with_capacity(n);
+        // 10 fringes; the level rises by 5 % of the amplitude per fringe, the amplitude falls
+        // by 2 % per fringe; noise 1e-4 of the amplitude.
+        let amplitude = |fringes: f64| 1e-2 * (1.0 - 0.02 * fringes);
+        for k in 0..n {
+            let d = 10.0 * 2.0 * half_fringe_nm * k as f64 / n as f64;
+            let fringes = d / (2.0 * half_fringe_nm);
+            let level = 2e-2 + 5e-4 * fringes;
+            let phase = std::f64::consts::PI * d / half_fringe_nm;
+            let noise: f64 = 1e-6 * (rng.random::<f64>() - 0.5) * 12f64.sqrt();
+            let q4 = -4.0 + 8.0 * k as f64 / n as f64;
+            trace.push_sample(
+                k as f64 * 1e-4,
+                [0.0, 0.0, 0.0, q4, 0.0, 0.0],
+                wavelength_nm,
+                level + amplitude(fringes) * phase.cos() + noise,
+            );
+            dl.push(d);
+        }
+        let obs = amplitudes(&trace, &dl, half_fringe_nm, 0, wavelength_nm, true);
+        assert!(obs.len() >= 15, "{} amplitudes", obs.len());
+        let mut worst = 0f64;
+        for o in &obs {
+            let ObservationKind::FringeAmplitude { at_display, amplitude_mw, .. } = o.kind else { unreachable!() };
+            // The joint of the middle extremum gives where along the scan it is.
+            let fringes = (at_display[3] + 4.0) / 8.0 * 10.0;
+            worst = worst.max((amplitude_mw / amplitude(fringes) - 1.0).abs());
+        }
+        // Between two extrema the level moves by 2.5 % of the amplitude: the half peak-to-peak
+        // of a pair was off by 1.25 %.
+        assert!(worst < 1e-3, "worst relative amplitude error {worst:.2e}");
+    }
+
+    /// The model predicts what the extraction measures. On a virtual-bench tilt scan (truth
+    /// known), the amplitudes from three extrema match the model's same combination of the
+    /// three extrema to the noise; the half peak-to-peak at the middle extremum alone misses the
+    /// curvature of the fringe level and amplitude along the scan. The detector gain is fitted
+    /// (one number, least squares) in both cases.
     #[test]
     fn amplitudes_with_their_neighbours_match_the_model_on_a_virtual_bench_tilt_scan() {
         use crate::identify::predict;

@@ -185,12 +185,11 @@ pub fn fringe_extremes_mw(fp: &FabryPerot, gap_um: f64, tilt_rad: f64) -> (f64, 
         // fringe within ±VERTEX_WINDOW_HALF_FRINGE of a half fringe (π) of it, the window
         // centred on that top (see `measurements::vertex_value`). Not the fringe's own
         // extreme: for a cosine 0.05 % of the amplitude lower, more as the harmonics grow.
-        const K: usize = 33;
         let w = VERTEX_WINDOW_HALF_FRINGE * std::f64::consts::PI;
+        let xs = unit_grid::<33>();
         let mut top = (deriv(x, 0), x);
         for _ in 0..3 {
-            let xs: Vec<f64> = (0..K).map(|i| -1.0 + 2.0 * i as f64 / (K - 1) as f64).collect();
-            let ys: Vec<f64> = xs.iter().map(|u| deriv(top.1 + u * w, 0)).collect();
+            let ys = xs.map(|u| deriv(top.1 + u * w, 0));
             match parabola_top(&xs, &ys) {
                 Some((value, u, curvature)) if sign * curvature < 0.0 => top = (value, top.1 + u * w),
                 _ => break,
@@ -219,7 +218,7 @@ fn windowed_top(
 ) -> f64 {
     const K: usize = 17;
     let sign = if max { 1.0 } else { -1.0 };
-    let xs: Vec<f64> = (0..K).map(|i| -1.0 + 2.0 * i as f64 / (K - 1) as f64).collect();
+    let xs = unit_grid::<K>();
     let Some(path) = xs
         .iter()
         .map(|x| {
@@ -232,7 +231,6 @@ fn windowed_top(
     };
     let period = fp.fringe_period_um();
     let half_width_um = VERTEX_WINDOW_HALF_FRINGE * period / 2.0;
-    let xs = &xs;
     // The gap runs the way the model moves it from window[0] to window[1] (a turning point
     // inside a window gives no amplitude): with the tilt moving too, the direction counts.
     let run = (path[K - 1].0 - path[0].0).signum();
@@ -241,21 +239,22 @@ fn windowed_top(
     // evenly over ±half_width_um.
     let (g_c, t_c) = path[K / 2];
     let phase_c = fp.fundamental_phase_rad(g_c, t_c);
-    let tilt_um: Vec<f64> = path
-        .iter()
-        .map(|(_, t)| (fp.fundamental_phase_rad(g_c, *t) - phase_c) * period / std::f64::consts::TAU)
-        .collect();
+    let tilt_um: [f64; K] =
+        std::array::from_fn(|k| (fp.fundamental_phase_rad(g_c, path[k].1) - phase_c) * period / std::f64::consts::TAU);
     let gap = |k: usize, shift_um: f64| g_c + shift_um + run * xs[k] * half_width_um - tilt_um[k];
     // Start from the fixed-tilt fringe's extreme nearest the centre, then move the fringe
     // until the parabola's top is at the centre.
     let mut shift_um = (0..32)
-        .map(|k| (k as f64 / 32.0 - 0.5) * period)
-        .max_by(|a, b| (sign * fp.power(gap(K / 2, *a), t_c)).total_cmp(&(sign * fp.power(gap(K / 2, *b), t_c))))
-        .unwrap_or(0.0);
+        .map(|k| {
+            let shift_um = (k as f64 / 32.0 - 0.5) * period;
+            (shift_um, sign * fp.power(gap(K / 2, shift_um), t_c))
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(0.0, |(shift_um, _)| shift_um);
     let mut value = f64::NAN;
     for _ in 0..4 {
-        let ys: Vec<f64> = path.iter().enumerate().map(|(k, (_, t))| fp.power(gap(k, shift_um), *t)).collect();
-        match parabola_top(xs, &ys) {
+        let ys: [f64; K] = std::array::from_fn(|k| fp.power(gap(k, shift_um), path[k].1));
+        match parabola_top(&xs, &ys) {
             Some((v, x, curvature)) if sign * curvature < 0.0 => {
                 value = v;
                 shift_um += run * x * half_width_um;
@@ -264,6 +263,11 @@ fn windowed_top(
         }
     }
     value
+}
+
+/// `K` points evenly spread over [−1, 1].
+fn unit_grid<const K: usize>() -> [f64; K] {
+    std::array::from_fn(|i| -1.0 + 2.0 * i as f64 / (K - 1) as f64)
 }
 
 /// Half-width of the window around an intensity extremum in which its value is read from a
@@ -361,27 +365,29 @@ pub fn predict_with_path(
         ObservationKind::FringeAmplitude { at_display, neighbours: None, .. } => cavity(&real(at_display, 1))
             .map_or(f64::NAN, |c| gain * half_peak_to_peak_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)),
         ObservationKind::FringeAmplitude { at_display, neighbours: Some(n), .. } => {
-            let extremes = |q: &[f64; 6]| {
-                cavity(&real(q, 1)).map_or((f64::NAN, f64::NAN), |c| {
-                    fringe_extremes_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)
-                })
-            };
-            let (mid, before, after) = match &n.windows_display {
-                Some(w) => {
-                    // Power along the path through each window, its parabola's top: a maximum
-                    // is read into `.0`, a minimum into `.1`, as `extremes` gives them.
-                    let gap_tilt =
-                        |q: &[f64; 6]| cavity(&real(q, 1)).map(|c| (optical_gap_um(c.length_um, t_mid), c.tilt_rad));
-                    let read = |k: usize, max: bool| -> (f64, f64) {
-                        let v = windowed_top(fp, w[k], max, gap_tilt);
-                        (v, v)
-                    };
-                    (read(1, n.middle_is_max), read(0, !n.middle_is_max), read(2, !n.middle_is_max))
+            let gap_tilt = |q: &[f64; 6]| cavity(&real(q, 1)).map(|c| (optical_gap_um(c.length_um, t_mid), c.tilt_rad));
+            // The value read at each extremum (middle, before, after): a maximum for the middle
+            // one when `middle_is_max`, minima for its neighbours, and the other way round.
+            let kinds = [n.middle_is_max, !n.middle_is_max, !n.middle_is_max];
+            let tops: [f64; 3] = match &n.windows_display {
+                // Windows are stored before, middle, after.
+                Some(w) => std::array::from_fn(|j| windowed_top(fp, w[[1, 0, 2][j]], kinds[j], gap_tilt)),
+                None => {
+                    let poses = [at_display, &n.before_display, &n.after_display];
+                    std::array::from_fn(|j| {
+                        gap_tilt(poses[j]).map_or(f64::NAN, |(gap_um, tilt_rad)| {
+                            let (max, min) = fringe_extremes_mw(fp, gap_um, tilt_rad);
+                            if kinds[j] {
+                                max
+                            } else {
+                                min
+                            }
+                        })
+                    })
                 }
-                None => (extremes(at_display), extremes(&n.before_display), extremes(&n.after_display)),
             };
             let combined =
-                if n.middle_is_max { mid.0 - 0.5 * (before.1 + after.1) } else { 0.5 * (before.0 + after.0) - mid.1 };
+                if n.middle_is_max { tops[0] - 0.5 * (tops[1] + tops[2]) } else { 0.5 * (tops[1] + tops[2]) - tops[0] };
             gain * combined / 2.0
         }
     }
