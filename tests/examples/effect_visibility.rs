@@ -6,7 +6,7 @@
 //! the model's (the predictor with − without it). A motion whose measured change misses the
 //! model's by several σ is one the workflow cannot use for that effect.
 //!
-//!     cargo run --release -p photorobot-e2e --example effect_visibility [-- INDEX...] [--seed N] [--all]
+//!     cargo run --release -p photorobot-e2e --example effect_visibility [-- INDEX...] [--seed N] [--all] [--tracks] [--hinted] [--profile] [--noiseless] [--amplitudes]
 //!
 //! INDEX as in `diagnose_scan`; `--all` prints every gap change, not only those where the
 //! effect or the mismatch exceeds 0.5σ. `--tracks` first prints, for every pool motion on the
@@ -14,7 +14,10 @@
 //! its error against the truth at the quarter points and the end, the tracker's σ of the
 //! end and its fitted hint scale (1 at the truth). Amplitudes are matched by their rank
 //! within a motion: where the two runs find different numbers of extrema a line says "no
-//! counterpart" and the amplitudes' sums mean little.
+//! counterpart" and the amplitudes' sums mean little. `--hinted` extracts the bench with the
+//! effect with a model that has it (as the diagnosis re-analyses its traces once the effect is
+//! named) and, with `--tracks`, prints its tracking too. `EV_DETAIL=<part of a label>` prints
+//! the tracking error along every tracked trace whose label contains it.
 
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::diagnose::candidates::library;
@@ -56,6 +59,18 @@ fn observe(preset: &BenchPreset, model: &PhaseModel, seed: u64, tag: &str, track
             m.track.hint_scale,
             m.track.hint_scale_sigma
         );
+        if std::env::var("EV_DETAIL").is_ok_and(|l| t.meta.label.contains(&l)) {
+            let y = &t.irradiance;
+            for i in (0..n).step_by((n / 200).max(1)) {
+                println!(
+                    "      {i:6} q {:?} truth {:9.2} err {:+7.2} y {:.5}",
+                    t.joints_display(i).map(|v| (v * 1000.0).round() / 1000.0),
+                    truth[i],
+                    err(i),
+                    y[i]
+                );
+            }
+        }
     }
     if let Ok(prefix) = std::env::var("EFFECT_VISIBILITY_DUMP") {
         for (i, t) in runner.traces.iter().enumerate() {
@@ -77,6 +92,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (mut seed, mut picks, mut all_rows, mut tracks, mut profile, mut noiseless, mut amplitude_rows) =
         (5u64, Vec::new(), false, false, false, false, false);
+    let mut hinted = false;
     let mut i = 0;
     while i < args.len() {
         match args[i].as_str() {
@@ -89,6 +105,7 @@ fn main() {
             "--profile" => profile = true,
             "--noiseless" => noiseless = true,
             "--amplitudes" => amplitude_rows = true,
+            "--hinted" => hinted = true,
             a => picks.push(a.parse::<usize>().expect("an effect index")),
         }
         i += 1;
@@ -107,7 +124,14 @@ fn main() {
         let (name, hidden, effects) = &all[k];
         let mut preset = base.clone();
         preset.effects = effects.clone();
-        let with = observe(&preset, &model, seed, &format!("with{k}"), false);
+        let analysis = if hinted {
+            let robot =
+                photorobot_core::model::effects::apply_all(effects, model.chain.description()).expect("effects");
+            PhaseModel { chain: photorobot_core::model::kinematics::Chain::new(robot), ..model.clone() }
+        } else {
+            model.clone()
+        };
+        let with = observe(&preset, &analysis, seed, &format!("with{k}"), tracks && hinted);
         let predictor = Predictor::new(&model, &with).expect("predictor");
         let gains = vec![1.0; 1000];
         let p1 = predictor.predict(&base.truth, effects, &gains, &with).expect("prediction");
