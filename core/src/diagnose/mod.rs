@@ -132,7 +132,8 @@ pub struct DiagnosisResult {
     /// data and every motion run, and that no designed motion would show either: not ruled
     /// out, only invisible at that size here (a larger one would be seen). On table2-ideal a
     /// 0.6 mrad tilt of the q4 goniometer's axis toward its link x changes no gap change of the
-    /// session or the pool by more than 0.3σ in all (`effect_visibility` example).
+    /// session or the pool by more than 0.3σ in all (`effect_visibility` example). Not the
+    /// candidates a named effect cannot be told from: those are in its `ambiguous_with`.
     #[serde(default)]
     pub not_detectable: Vec<String>,
     /// Candidates that no observation can see at any size, never named: those no observation
@@ -1033,6 +1034,9 @@ impl Diagnosis {
                     && !self.need_motions.contains(&s.name)
                     && !self.not_seen.contains(&s.name)
                     && !f.state.effects.iter().any(|(c, _)| c.name == s.name)
+                    // What a named effect cannot be told from is listed with it: the named one
+                    // took its signature, it is not invisible.
+                    && !self.added.iter().any(|e| e.ambiguous_with.contains(&s.name))
             })
             .map(|s| s.name.clone())
             .collect();

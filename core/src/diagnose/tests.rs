@@ -132,6 +132,14 @@ fn check_named(e: &Effect, r: &DiagnosisResult, first: Option<String>) {
         named.ambiguous_with
     );
     assert!(z.abs() <= 3.0, "{e:?}: estimate {} ± {sigma}", named.estimate);
+    // What it cannot be told from is listed with it, not reported as not detectable.
+    for other in &named.ambiguous_with {
+        assert!(
+            !r.not_detectable.contains(other),
+            "{e:?}: {other} both ambiguous with {} and not detectable",
+            named.name
+        );
+    }
     assert!(r.residual_rms_after_sigma <= NOISE_FLOOR_FACTOR, "{e:?}: {}", r.residual_rms_after_sigma);
     assert!(r.residual_rms_before_sigma > r.residual_rms_after_sigma);
 }
