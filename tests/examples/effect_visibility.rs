@@ -23,6 +23,7 @@ use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::diagnose::candidates::library;
 use photorobot_core::diagnose::fit::Predictor;
 use photorobot_core::diagnose::motions::{pool, BenchRunner, MotionRunner};
+use photorobot_core::diagnose::validation::extended_model;
 use photorobot_core::diagnose::EXTRACT_OPTIONS;
 use photorobot_core::identify::measurements::observations_from_traces;
 use photorobot_core::identify::{Observation, ObservationKind};
@@ -124,13 +125,8 @@ fn main() {
         let (name, hidden, effects) = &all[k];
         let mut preset = base.clone();
         preset.effects = effects.clone();
-        let analysis = if hinted {
-            let robot =
-                photorobot_core::model::effects::apply_all(effects, model.chain.description()).expect("effects");
-            PhaseModel { chain: photorobot_core::model::kinematics::Chain::new(robot), ..model.clone() }
-        } else {
-            model.clone()
-        };
+        let analysis =
+            if hinted { extended_model(&model, base.truth, effects).expect("effects") } else { model.clone() };
         let with = observe(&preset, &analysis, seed, &format!("with{k}"), tracks && hinted);
         let predictor = Predictor::new(&model, &with).expect("predictor");
         let gains = vec![1.0; 1000];

@@ -9,9 +9,8 @@
 use crate::diagnose::candidates::Candidate;
 use crate::identify::{parameter_scale, predict_with_path, Observation, ObservationKind, N_EXTRINSICS};
 use crate::measure::PhaseModel;
-use crate::model::effects::{apply_all, apply_optics, Effect, EffectError};
+use crate::model::effects::{apply_optics, Effect, EffectError};
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
-use crate::model::kinematics::Chain;
 use crate::model::optics::FabryPerot;
 use nalgebra::{DMatrix, DVector};
 
@@ -91,8 +90,7 @@ impl Predictor {
         gains: &[f64],
         obs: &[Observation],
     ) -> Result<Vec<f64>, EffectError> {
-        let robot = apply_all(effects, self.base.chain.description())?;
-        let model = PhaseModel { chain: Chain::new(robot), extrinsics: *e, ..self.base.clone() };
+        let model = crate::diagnose::validation::extended_model(&self.base, *e, effects)?;
         let path: Vec<Effect> = effects.iter().filter(|e| e.is_path()).cloned().collect();
         // Optical effects: the optics models rebuilt with them (cheap next to the predictions).
         let optical: Vec<(f64, FabryPerot)>;

@@ -829,14 +829,9 @@ impl Diagnosis {
     /// the fringe analysis), then refit and rescore. Nothing to do without traces.
     fn reanalyse<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
         let Some(f) = self.fit.clone() else { return Ok(()) };
-        let robot =
-            crate::model::effects::apply_all(&f.state.library_effects(), self.predictor.base().chain.description())
+        let analysis =
+            validation::extended_model(self.predictor.base(), f.state.extrinsics, &f.state.library_effects())
                 .map_err(|e| DiagnoseError::Model(e.to_string()))?;
-        let analysis = PhaseModel {
-            chain: crate::model::kinematics::Chain::new(robot),
-            extrinsics: f.state.extrinsics,
-            ..self.predictor.base().clone()
-        };
         let again = runner.and_then(|r| r.reanalyse(&analysis));
         if self.session_traces.is_empty() && again.is_none() {
             return Ok(());

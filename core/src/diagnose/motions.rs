@@ -638,12 +638,12 @@ mod tests {
         use crate::measure::{analyse, Measurement};
         let base = BenchPreset::resolve("table2-ideal").unwrap();
         let pivot = Effect::PivotOffset { joint: "q4".into(), offset_world_um: [0.0, 0.0, 20.0] };
-        let robot =
-            crate::model::effects::apply_all(std::slice::from_ref(&pivot), &base.robot_description().unwrap()).unwrap();
-        let model = PhaseModel {
-            chain: crate::model::kinematics::Chain::new(robot),
-            ..PhaseModel::of_preset(&base, base.truth).unwrap()
-        };
+        let model = crate::diagnose::validation::extended_model(
+            &PhaseModel::of_preset(&base, base.truth).unwrap(),
+            base.truth,
+            std::slice::from_ref(&pivot),
+        )
+        .unwrap();
         let label = "D q4 -4 -> +4° at q1 = 150, q3 = 0 µm";
         let motion = pool().into_iter().find(|m| m.label == label).unwrap();
         let mut preset = base.clone();
