@@ -321,6 +321,9 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
         w.state.diagnosis_validation.is_some()
     });
     eprintln!("diagnosed and validated after {:.1} s", t0.elapsed().as_secs_f64());
+    for (title, summary) in &h.state().state.diagnosis_steps {
+        eprintln!("{title}\n{summary}");
+    }
     for e in result.effects.iter().chain(&result.partial) {
         eprintln!("{:?}: {} = {:.3} {}", result.verdict, e.name, e.estimate, e.unit);
     }

@@ -241,7 +241,20 @@ pub struct AnalyseOptions {
     /// lateral offset (`PER_TRACE=1 cargo run --release -p photorobot-core --example
     /// calib_debug -- table2-ideal joint 1`, measured 2026-11-24).
     pub free_start: bool,
+    /// The phase free to leave the motion hint in time ([`FREE_PHASE_RAD_PER_SQRT_SAMPLE`]):
+    /// for a validation motion, planned so that the model's gap stands still, whose fringes
+    /// measure how far the real gap strays from that plan. With the default walk (1e-5 rad per
+    /// √sample, 0.5 nm over a 160 000-sample circle) the tracker shares a few nm of gap
+    /// change, which moves the intensity less than a fringe would, between the phase and the
+    /// envelope, and the validation figure comes out too small: a circle whose true gap
+    /// changed by 7.9 nm was tracked 3.9 nm; free, 8.3 nm (test
+    /// `validate::tests::a_validation_circle_...`).
+    pub free_phase: bool,
 }
+
+/// The phase's random walk in time of [`AnalyseOptions::free_phase`], rad per √sample: 0.03
+/// rad (4 nm) over a 100 000-sample motion. 1e-4 and 1e-3 tracked that circle alike (8.3 nm).
+pub const FREE_PHASE_RAD_PER_SQRT_SAMPLE: f64 = 1e-4;
 
 /// Analyse a trace with the phase model ([`analyse_with`], default options).
 pub fn analyse(trace: &Trace, model: &PhaseModel) -> Result<Measurement, MeasureError> {
@@ -277,6 +290,11 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         envelope_walk_per_sqrt_fringe: 0.003,
         phase_walk_rad_per_sqrt_fringe: 0.005,
         start_walk_rad: if free_start { START_WALK_RAD } else { 0.0 },
+        phase_noise_rad_per_sqrt_sample: if options.free_phase {
+            FREE_PHASE_RAD_PER_SQRT_SAMPLE
+        } else {
+            TrackConfig::default().phase_noise_rad_per_sqrt_sample
+        },
         ..TrackConfig::default()
     };
     // The harmonics are estimated along the path, not taken from the optics model: the

@@ -418,7 +418,7 @@ pub fn observations_from_traces_with(
     // trace order.
     let results: Vec<Result<Traced, MeasureError>> = traces
         .par_iter()
-        .map(|t| traced(t, model, options, 0, &AnalyseOptions { free_start: free_start(t) }))
+        .map(|t| traced(t, model, options, 0, &AnalyseOptions { free_start: free_start(t), ..Default::default() }))
         .collect();
     let mut out = Extracted::default();
     let mut group = 0;
