@@ -246,9 +246,10 @@ pub struct AnalyseOptions {
     /// measure how far the real gap strays from that plan. With the default walk (1e-5 rad per
     /// √sample, 0.5 nm over a 160 000-sample circle) the tracker shares a few nm of gap
     /// change, which moves the intensity less than a fringe would, between the phase and the
-    /// envelope, and the validation figure comes out too small: a circle whose true gap
-    /// changed by 7.9 nm was tracked 3.9 nm; free, 8.3 nm (test
-    /// `validate::tests::a_validation_circle_...`).
+    /// envelope, and the validation figure comes out too small: a circle whose real gap
+    /// moved by 8.1 nm read 3.9 nm, free 8.4 nm (`validation_truth` example; test
+    /// `validate::tests::a_validation_circle_tracks_its_small_gap_change`). Used by
+    /// [`crate::validate`] on motions whose model gap moves under [`SHORT_MOTION_FRINGES`].
     pub free_phase: bool,
 }
 
