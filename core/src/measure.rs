@@ -251,6 +251,9 @@ pub struct AnalyseOptions {
     /// `validate::tests::a_validation_circle_tracks_its_small_gap_change`). Used by
     /// [`crate::validate`] on motions whose model gap moves under [`SHORT_MOTION_FRINGES`].
     pub free_phase: bool,
+    /// Track with the model's fringe shape at every sample (`fringes::track_phase_shaped`
+    /// with [`PhaseModel::fringe_shape`]) instead of a harmonic profile estimated from the data.
+    pub shaped: bool,
 }
 
 /// The phase's random walk in time of [`AnalyseOptions::free_phase`], rad per √sample: 0.03
@@ -298,15 +301,24 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         },
         ..TrackConfig::default()
     };
-    // The harmonics are estimated along the path, not taken from the optics model: the
+    // By default the harmonics are estimated along the path, not taken from the optics model: the
     // shaped tracker (`fringes::track_phase_shaped` with `PhaseModel::fringe_shape`) is far
     // better when the model is right (table2-ideal, tracked dL against the truth: rotations
     // 2.3 → 0.18 nm rms, tilt scans 9.6 → 0.06 nm), but fragile when it is not: with the
     // design extrinsics the modelled tilt is off by ~1°, the 2nd harmonic's phase (it turns by
     // 2k·θ²·L) by radians, and lateral moves came out 4 nm off instead of 0.07 nm; on the
     // hidden-pivot diagnosis the discriminating rotations went wrong. See issue notes.
-    let track = fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
-        .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
+    // `AnalyseOptions::shaped` is for a model already fitted (the diagnosis's re-analysis,
+    // `diagnose::REANALYSE_OPTIONS`).
+    let track = if options.shaped {
+        let shape = model
+            .fringe_shape(trace, wavelength_nm)
+            .map_err(|problem| MeasureError::Trace { label: label.clone(), problem })?;
+        fringes::track_phase_shaped(&trace.irradiance, &hint, &shape.as_model(), wavelength_nm, model.n_air, &track_cfg)
+    } else {
+        fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
+    }
+    .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
     let count = fringes::count_extrema(
         &trace.irradiance,
         CountDirection::Hint(&hint),

@@ -482,11 +482,11 @@ impl<'a> BenchRunner<'a> {
 
     /// Observations of the traces from index `from` on, the earlier ones giving the stages'
     /// approach directions.
-    fn extract(&self, from: usize, analysis: &PhaseModel) -> Vec<Observation> {
+    fn extract(&self, from: usize, analysis: &PhaseModel, options: &ExtractOptions) -> Vec<Observation> {
         let (earlier, traces) = self.traces.split_at(from);
         let labels = &self.free_start;
         let free = |t: &crate::trace::Trace| labels.contains(&t.meta.label);
-        let mut obs = observations_from_traces_with(earlier, traces, analysis, &self.options, &free).observations;
+        let mut obs = observations_from_traces_with(earlier, traces, analysis, options, &free).observations;
         for o in &mut obs {
             o.time_s = [o.time_s[0] + self.time_offset_s, o.time_s[1] + self.time_offset_s];
         }
@@ -560,11 +560,12 @@ impl MotionRunner for BenchRunner<'_> {
         self.free_start.extend(motions.iter().filter(|m| m.free_start).map(|m| m.label.clone()));
         let from = self.traces.len();
         self.traces.extend(run.traces);
-        Ok(self.extract(from, analysis))
+        Ok(self.extract(from, analysis, &self.options))
     }
 
     fn reanalyse(&self, analysis: &PhaseModel) -> Option<Vec<Observation>> {
-        Some(self.extract(0, analysis))
+        // Shaped, as the diagnosis re-analyses its session ([`crate::diagnose::REANALYSE_OPTIONS`]).
+        Some(self.extract(0, analysis, &ExtractOptions { shaped: true, ..self.options }))
     }
 }
 

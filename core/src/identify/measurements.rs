@@ -17,7 +17,7 @@ pub struct ExtractOptions {
     /// Floor of the gap-change σ (nm) on motions that turn a revolute joint: the fringe
     /// harmonics change along a rotation faster than the tracker's harmonic profile follows,
     /// which leaves a few nm (2.2 nm rms on the virtual bench's rotations, `calib_debug`; the
-    /// shaped tracker, not yet used here, leaves 0.18 nm).
+    /// shaped tracker, used only in the diagnosis's re-analysis, leaves 0.18 nm).
     pub rotation_sigma_floor_nm: f64,
     /// Floor of the absolute-gap σ (µm): wavelength calibration and model limits.
     pub gap_sigma_floor_um: f64,
@@ -38,6 +38,8 @@ pub struct ExtractOptions {
     /// still trace cannot be tracked (its motion hint never changes), a pause between two
     /// tracked motions can.
     pub gap_across_pauses: bool,
+    /// Track motions with the model's fringe shape ([`AnalyseOptions::shaped`]).
+    pub shaped: bool,
 }
 
 /// Shortest pause between two motions at the same pose that gives a gap change across it (s):
@@ -54,6 +56,7 @@ impl Default for ExtractOptions {
             amplitudes_from_rotations: false,
             amplitude_neighbours: false,
             gap_across_pauses: false,
+            shaped: false,
         }
     }
 }
@@ -418,7 +421,10 @@ pub fn observations_from_traces_with(
     // trace order.
     let results: Vec<Result<Traced, MeasureError>> = traces
         .par_iter()
-        .map(|t| traced(t, model, options, 0, &AnalyseOptions { free_start: free_start(t), ..Default::default() }))
+        .map(|t| {
+            let analyse = AnalyseOptions { free_start: free_start(t), shaped: options.shaped, ..Default::default() };
+            traced(t, model, options, 0, &analyse)
+        })
         .collect();
     let mut out = Extracted::default();
     let mut group = 0;
