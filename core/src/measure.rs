@@ -241,22 +241,24 @@ pub struct AnalyseOptions {
     /// lateral offset (`PER_TRACE=1 cargo run --release -p photorobot-core --example
     /// calib_debug -- table2-ideal joint 1`, measured 2026-11-24).
     pub free_start: bool,
-    /// The phase free to leave the motion hint in time ([`FREE_PHASE_RAD_PER_SQRT_SAMPLE`]):
-    /// for a validation motion, planned so that the model's gap stands still, whose fringes
-    /// measure how far the real gap strays from that plan. With the default walk (1e-5 rad per
+    /// `Some(k)`: the phase free to leave the motion hint in time
+    /// ([`FREE_PHASE_RAD_PER_SQRT_SAMPLE`]) when the hint travels under
+    /// [`SHORT_MOTION_FRINGES`] from sample `k` on: for a validation motion (after its
+    /// envelope dither), planned so that the model's gap stands still, whose fringes measure
+    /// how far the real gap strays from that plan. With the default walk (1e-5 rad per
     /// √sample, 0.5 nm over a 160 000-sample circle) the tracker shares a few nm of gap
     /// change, which moves the intensity less than a fringe would, between the phase and the
     /// envelope, and the validation figure comes out too small: a circle whose real gap
     /// moved by 8.1 nm read 3.9 nm, free 8.4 nm (`validation_truth` example; test
-    /// `validate::tests::a_validation_circle_tracks_its_small_gap_change`). Used by
-    /// [`crate::validate`] on motions whose model gap moves under [`SHORT_MOTION_FRINGES`].
-    pub free_phase: bool,
+    /// `validate::tests::a_validation_circle_tracks_its_small_gap_change`). A motion whose
+    /// hint moves by more keeps the default: its fringes pin the phase (see [`crate::validate`]).
+    pub free_phase_after: Option<usize>,
     /// Track with the model's fringe shape at every sample (`fringes::track_phase_shaped`
     /// with [`PhaseModel::fringe_shape`]) instead of a harmonic profile estimated from the data.
     pub shaped: bool,
 }
 
-/// The phase's random walk in time of [`AnalyseOptions::free_phase`], rad per √sample: 0.03
+/// The phase's random walk in time of [`AnalyseOptions::free_phase_after`], rad per √sample: 0.03
 /// rad (4 nm) over a 100 000-sample motion. 1e-4 and 1e-3 tracked that circle alike (8.3 nm).
 pub const FREE_PHASE_RAD_PER_SQRT_SAMPLE: f64 = 1e-4;
 
@@ -287,14 +289,19 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
     // phase and the envelope relative to it track best (measured on the virtual bench with a
     // hint from extrinsics 20 % off: strategy 2 rms 1.9 nm vs 5.8 nm with the defaults).
     let fringe_nm = wavelength_nm / (2.0 * model.n_air);
-    let travel_nm = hint.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>();
-    let free_start = options.free_start || travel_nm < SHORT_MOTION_FRINGES * fringe_nm;
+    // Whether the hint travels under SHORT_MOTION_FRINGES from sample k on.
+    let short_from = |k: usize| {
+        let travel_nm: f64 = hint.get(k..).unwrap_or(&[]).windows(2).map(|w| (w[1] - w[0]).abs()).sum();
+        travel_nm < SHORT_MOTION_FRINGES * fringe_nm
+    };
+    let free_start = options.free_start || short_from(0);
+    let free_phase = options.free_phase_after.is_some_and(short_from);
     let track_cfg = TrackConfig {
         per_sample_sigma: true,
         envelope_walk_per_sqrt_fringe: 0.003,
         phase_walk_rad_per_sqrt_fringe: 0.005,
         start_walk_rad: if free_start { START_WALK_RAD } else { 0.0 },
-        phase_noise_rad_per_sqrt_sample: if options.free_phase {
+        phase_noise_rad_per_sqrt_sample: if free_phase {
             FREE_PHASE_RAD_PER_SQRT_SAMPLE
         } else {
             TrackConfig::default().phase_noise_rad_per_sqrt_sample

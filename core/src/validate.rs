@@ -245,23 +245,14 @@ pub fn run_validation_planned(
         let dither = join(&run.traces.iter().filter(|t| t.meta.label == ENVELOPE_DITHER).cloned().collect::<Vec<_>>());
         dither.map_or(0, |d| d.len())
     };
-    // A motion whose model gap moves less than a few fringes after the dither (the circle, the
+    // A motion whose model gap moves less than two fringes after the dither (the circle, the
     // rotation about the optical axis) is tracked with the phase free of the hint in time: its
     // own fringes do not pin the phase, and the default walk pulls it toward the plan
-    // ([`measure::AnalyseOptions::free_phase`]). The rotations about X_f and Z_f, whose gap
-    // moves by 3-6 fringes, track closer to the truth with the default: on the hidden-pivot
+    // ([`measure::AnalyseOptions::free_phase_after`]). The rotations about X_f and Z_f, whose
+    // gap moves by 3-6 fringes, track closer to the truth with the default: on the hidden-pivot
     // diagnosis's model (`validation_truth` example) 12.3 and 9.4 nm at worst, 14.4 and 11.5
     // nm free; the circle 4.1 nm default, 0.5 nm free; the optical axis 1.3 and 0.8 nm.
-    let wavelength_nm = trace.wavelength_nm.first().copied().unwrap_or(1560.0);
-    let hint = analysis
-        .hint_nm(&trace, wavelength_nm)
-        .map_err(|problem| ValidationError::Run { motion: motion.name(), problem })?;
-    let travel_nm: f64 = hint.get(dither_end..).unwrap_or(&[]).windows(2).map(|w| (w[1] - w[0]).abs()).sum();
-    let fringe_nm = wavelength_nm / (2.0 * analysis.n_air);
-    let options = measure::AnalyseOptions {
-        free_phase: travel_nm < measure::SHORT_MOTION_FRINGES * fringe_nm,
-        ..Default::default()
-    };
+    let options = measure::AnalyseOptions { free_phase_after: Some(dither_end), ..Default::default() };
     let Measurement::Motion(m) = measure::analyse_with(&trace, analysis, &options)
         .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?
     else {
