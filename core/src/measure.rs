@@ -179,6 +179,12 @@ pub struct MotionMeasurement {
     /// Whether the start phase came from the samples ([`AnalyseOptions::free_start`], or a
     /// motion shorter than [`SHORT_MOTION_FRINGES`]).
     pub free_start: bool,
+    /// Whether the phase was tracked with the model's fringe shape ([`AnalyseOptions::shaped`]);
+    /// false when it was not asked for, or when the model's shape could not be computed along
+    /// the trace or tracked and the harmonic profile estimated from the data was used instead.
+    pub shaped: bool,
+    /// Why the shaped tracking was not used, when it was asked for and failed.
+    pub shaped_fallback: Option<String>,
 }
 
 /// Motions shorter than this many fringes of hint travel are tracked with the free start
@@ -317,15 +323,22 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
     // hidden-pivot diagnosis the discriminating rotations went wrong. See issue notes.
     // `AnalyseOptions::shaped` is for a model already fitted (the diagnosis's re-analysis,
     // `diagnose::REANALYSE_OPTIONS`).
-    let track = if options.shaped {
-        let shape = model
-            .fringe_shape(trace, wavelength_nm)
-            .map_err(|problem| MeasureError::Trace { label: label.clone(), problem })?;
+    // A trace the model's shape cannot be computed on (the beam misses the lamella at some
+    // sample) or the shaped tracker fails on is tracked the default way: the caller asked for
+    // the better estimate, not for losing the trace.
+    let shaped_track = options.shaped.then(|| {
+        let shape = model.fringe_shape(trace, wavelength_nm)?;
         fringes::track_phase_shaped(&trace.irradiance, &hint, &shape.as_model(), wavelength_nm, model.n_air, &track_cfg)
-    } else {
-        fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
-    }
-    .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
+            .map_err(|e| e.to_string())
+    });
+    let (track, shaped, shaped_fallback) = match shaped_track {
+        Some(Ok(track)) => (track, true, None),
+        other => {
+            let track = fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
+                .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
+            (track, false, other.and_then(Result::err))
+        }
+    };
     let count = fringes::count_extrema(
         &trace.irradiance,
         CountDirection::Hint(&hint),
@@ -341,6 +354,8 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         wavelength_nm,
         n_air: model.n_air,
         free_start,
+        shaped,
+        shaped_fallback,
     }))
 }
 

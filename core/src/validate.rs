@@ -189,6 +189,33 @@ pub struct ValidationFigure {
     /// Its σ (nm), per sample.
     #[serde(skip)]
     pub tracked_sigma_nm: Vec<f64>,
+    /// Whether the fringes were tracked with the analysis model's fringe shape; false when it
+    /// could not be tracked on and the profile estimated from the data was used (the reason in
+    /// `shape_fallback`).
+    pub tracked_with_model_shape: bool,
+    /// Why the model's fringe shape was not used.
+    pub shape_fallback: Option<String>,
+}
+
+impl ValidationFigure {
+    /// A line for a report when the fringes were not tracked with the model's fringe shape.
+    pub fn tracking_note(&self) -> Option<String> {
+        self.shape_fallback.as_ref().map(|why| {
+            format!("{}: tracked with the fringe profile estimated from the data ({why})", self.motion.name())
+        })
+    }
+}
+
+/// Why a validation pair's figures are missing or were measured the less precise way: the
+/// first error, else the first tracking note.
+pub fn pair_note(
+    a: &Result<ValidationFigure, ValidationError>,
+    b: &Result<ValidationFigure, ValidationError>,
+) -> Option<String> {
+    match (a, b) {
+        (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
+        (Ok(a), Ok(b)) => a.tracking_note().or_else(|| b.tracking_note()),
+    }
 }
 
 /// Join the recorded traces of a plan run into one.
@@ -250,9 +277,20 @@ pub fn run_validation_planned(
     // own fringes do not pin the phase, and the default walk pulls it toward the plan
     // ([`measure::AnalyseOptions::free_phase_after`]). The rotations about X_f and Z_f, whose
     // gap moves by 3-6 fringes, track closer to the truth with the default: on the hidden-pivot
-    // diagnosis's model (`validation_truth` example) 12.3 and 9.4 nm at worst, 14.4 and 11.5
-    // nm free; the circle 4.1 nm default, 0.5 nm free; the optical axis 1.3 and 0.8 nm.
-    let options = measure::AnalyseOptions { free_phase_after: Some(dither_end), ..Default::default() };
+    // diagnosis's model (`validation_truth` example, tracked with the data's harmonic profile)
+    // 12.3 and 9.4 nm at worst, 14.4 and 11.5 nm free; the circle 4.1 nm default, 0.5 nm free;
+    // the optical axis 1.3 and 0.8 nm. With the model's fringe shape (below) the circle still
+    // needs it: 4.2 nm off the truth with the default walk, 0.1 nm free.
+    //
+    // Every validation motion is tracked with the analysis model's fringe shape: that model is
+    // a fitted one (the calibrated or the diagnosed model), which is what the shaped tracker
+    // needs, and the rotations' tilt changes the fringe's contrast about fivefold, which the
+    // harmonic profile estimated from the data follows late. On the `validation_truth`
+    // example the rotations about X_f and Z_f tracked 0.2 and 0.3 nm off the truth at worst
+    // (12.3 and 9.4 nm with the estimated profile); the circle 0.1 nm, the optical axis 0.0 nm
+    // (test `validation_rotations_track_their_gap_within_a_nanometre`). A trace the model's
+    // shape cannot be tracked on falls back to the estimated profile (`analyse_with`).
+    let options = measure::AnalyseOptions { free_phase_after: Some(dither_end), shaped: true, ..Default::default() };
     let Measurement::Motion(m) = measure::analyse_with(&trace, analysis, &options)
         .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?
     else {
@@ -280,6 +318,8 @@ pub fn run_validation_planned(
         motion_start: dither_end,
         tracked_dl_nm: m.track.dl_nm,
         tracked_sigma_nm: m.track.sigma_dl_nm,
+        tracked_with_model_shape: m.shaped,
+        shape_fallback: m.shaped_fallback,
     })
 }
 
@@ -305,17 +345,17 @@ mod tests {
         assert!((p - 3330.0).abs() < 40.0, "{p} nm");
     }
 
-    /// With perfect extrinsics every motion is flat to the fringe-tracking error: the circle to
-    /// the noise, the rotations (whose tilt sweep changes the fringe envelope about fivefold)
-    /// within 20 nm (paper: 390 nm, 1.56 µm, 0.858 µm).
+    /// With perfect extrinsics every motion is flat to the fringe-tracking error, under 2 nm
+    /// (paper: 390 nm, 1.56 µm, 0.858 µm). The rotations' tilt sweep changes the fringe's
+    /// contrast about fivefold: tracked with a profile estimated from the data they read up to
+    /// 20 nm, with the model's fringe shape 0.18 and 0.25 nm (seed 2).
     #[test]
     fn with_the_true_extrinsics_validation_motions_are_flat_to_the_tracking_error() {
         let t = Extrinsics::table2();
         for m in ValidationMotion::ALL {
             let p = figure(t, t, m);
             eprintln!("{}: {p:.2} nm (paper after calibration: {} nm)", m.name(), m.paper_after_nm());
-            let bound = if m == ValidationMotion::Circle { 10.0 } else { 20.0 };
-            assert!(p < bound, "{}: {p} nm", m.name());
+            assert!(p < 2.0, "{}: {p} nm", m.name());
         }
     }
 
@@ -350,6 +390,56 @@ mod tests {
             assert!(hi - lo > 5.0, "the real gap must move: {} nm", hi - lo);
             assert!(worst < 1.5, "seed {seed}: tracked {worst:.2} nm off the real gap");
             assert!((f.peak_to_peak_nm - (hi - lo)).abs() < 2.0, "seed {seed}: {} nm", f.peak_to_peak_nm);
+        }
+    }
+
+    /// The rotations about the fiber's transverse axes move the phase-equivalent gap by 3-6
+    /// fringes (the tilt term) while the real |L| should stand still: the validation figure is
+    /// the small difference of two large ones. Tracked with a harmonic profile estimated from
+    /// the data (the default tracker), whose envelope lags the tilt's fivefold change of the
+    /// fringe's contrast, the tracked gap was 9-12 nm off the truth at worst and the
+    /// calibration's rotations read 14 nm; tracked with the calibrated model's fringe shape,
+    /// under a nanometre. Planned and measured with the lamella's tilt off by +0.0025° (the
+    /// calibrated model is never exact): the tracked phase-equivalent gap against the bench's
+    /// own at the recorded joints, and the figure against the one perfect tracking would give
+    /// (the real gap change less the analysis model's tilt term, which carries the model's
+    /// own error: a few nm here, where the real |L| moves by 0.02 nm).
+    #[test]
+    fn validation_rotations_track_their_gap_within_a_nanometre() {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let truth = PhaseModel::of_preset(&preset, preset.truth).unwrap();
+        let planned = Extrinsics { beta_et_deg: preset.truth.beta_et_deg + 0.0025, ..preset.truth };
+        let model = PhaseModel { extrinsics: planned, ..truth.clone() };
+        let desc = model.chain.description();
+        for motion in [ValidationMotion::RotationXf, ValidationMotion::RotationZf] {
+            let mut bench = VirtualBench::new(&preset, Some(4)).unwrap();
+            let f = run_validation(&mut bench, &model, &planned, motion, [0.0; 6]).unwrap();
+            let wavelength_nm = f.trace.wavelength_nm[0];
+            let real = truth.hint_nm(&f.trace, wavelength_nm).unwrap();
+            let modelled = model.hint_nm(&f.trace, wavelength_nm).unwrap();
+            let l_nm = |i: usize| {
+                let q = desc.q_from_display(&f.trace.joints_display(i));
+                planned.cavity(&model.chain.end_effector(&q)).unwrap().length_um.abs() * 1e3
+            };
+            let (s, n) = (f.motion_start, f.trace.len());
+            let l_s = l_nm(s);
+            let mut worst = 0.0f64;
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for i in s..n {
+                worst = worst.max((f.tracked_dl_nm[i] - f.tracked_dl_nm[s] - (real[i] - real[s])).abs());
+                let ideal = real[i] - real[s] - (modelled[i] - modelled[s] - (l_nm(i) - l_s));
+                (lo, hi) = (lo.min(ideal), hi.max(ideal));
+            }
+            eprintln!(
+                "{}: tracked at worst {worst:.2} nm off the real phase-equivalent gap; figure {:.2} nm, \
+                 {:.2} nm with perfect tracking",
+                motion.name(),
+                f.peak_to_peak_nm,
+                hi - lo
+            );
+            assert!(f.tracked_with_model_shape, "{:?}", f.shape_fallback);
+            assert!(worst < 1.0, "{}: tracked {worst:.2} nm off the real gap", motion.name());
+            assert!((f.peak_to_peak_nm - (hi - lo)).abs() < 1.0, "{}: {} nm", motion.name(), f.peak_to_peak_nm);
         }
     }
 

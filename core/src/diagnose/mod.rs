@@ -842,10 +842,9 @@ impl Diagnosis {
     fn reanalyse<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
         let Some(f) = self.fit.clone() else { return Ok(()) };
         let effects = f.state.library_effects();
-        let mut analysis = validation::extended_model(self.predictor.base(), f.state.extrinsics, &effects)
-            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
         // The fringe's shape follows the optical effects too (a back face, the Gouy phase).
-        analysis.optics = crate::model::effects::apply_optics(&effects, &analysis.optics);
+        let analysis = validation::extended_model(self.predictor.base(), f.state.extrinsics, &effects)
+            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
         let again = runner.and_then(|r| r.reanalyse(&analysis));
         if self.session_traces.is_empty() && again.is_none() {
             return Ok(());

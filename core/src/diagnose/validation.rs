@@ -7,7 +7,7 @@
 use crate::bench::Bench;
 use crate::identify::calibration::{thin, CURVE_POINTS};
 use crate::measure::PhaseModel;
-use crate::model::effects::{apply_all, Effect, EffectError};
+use crate::model::effects::{apply_all, apply_optics, Effect, EffectError};
 use crate::model::extrinsics::Extrinsics;
 use crate::validate::{run_validation_planned, ValidationMotion};
 use serde::{Deserialize, Serialize};
@@ -32,15 +32,23 @@ pub struct EffectValidationRow {
     pub with_curve_nm: Vec<f64>,
 }
 
-/// The model with the geometric effects applied to its robot and the given extrinsics. Path
-/// effects (drift, path scale) do not change where the IGM sends the robot; they are left out.
+/// The model with the geometric effects applied to its robot, the optical ones (a back face,
+/// the Gouy phase) to its optics, and the given extrinsics. The optics set the fringe's shape
+/// that the validation measurement and the diagnosis's re-analysis track with. Path effects
+/// (drift, path scale) do not change where the IGM sends the robot nor the fringe's shape;
+/// they are left out.
 pub fn extended_model(
     base: &PhaseModel,
     extrinsics: Extrinsics,
     effects: &[Effect],
 ) -> Result<PhaseModel, EffectError> {
     let robot = apply_all(effects, base.chain.description())?;
-    Ok(PhaseModel { chain: crate::model::kinematics::Chain::new(robot), extrinsics, ..base.clone() })
+    Ok(PhaseModel {
+        chain: crate::model::kinematics::Chain::new(robot),
+        extrinsics,
+        optics: apply_optics(effects, &base.optics),
+        ..base.clone()
+    })
 }
 
 /// Run every validation motion twice on `bench`: planned with `base` (the nominal robot) and the
@@ -60,10 +68,7 @@ pub fn validate_with_effects(
         .map(|&m| {
             let a = run_validation_planned(bench, &plain, without, &extended, m, [0.0; 6]);
             let b = run_validation_planned(bench, &extended, with, &extended, m, [0.0; 6]);
-            let note = match (&a, &b) {
-                (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
-                _ => None,
-            };
+            let note = crate::validate::pair_note(&a, &b);
             let curve = |v: &[f64]| thin(v, CURVE_POINTS);
             EffectValidationRow {
                 motion: m.name().to_string(),

@@ -414,10 +414,7 @@ pub fn validation_rows(bench: &mut dyn Bench, nominal: &PhaseModel, identified: 
         .map(|&m| {
             let before = run_validation(bench, &after_model, &nominal.extrinsics, m, [0.0; 6]);
             let after = run_validation(bench, &after_model, identified, m, [0.0; 6]);
-            let note = match (&before, &after) {
-                (Err(e), _) | (_, Err(e)) => Some(e.to_string()),
-                _ => None,
-            };
+            let note = crate::validate::pair_note(&before, &after);
             ValidationRow {
                 motion: m.name().to_string(),
                 before_nm: before.as_ref().ok().map(|f| f.peak_to_peak_nm),
