@@ -88,30 +88,7 @@ pub struct VirtualBench {
     /// Evaluate every sample on the exact path.
     exact: bool,
     /// Where each stage sits in its play (hidden reversal errors).
-    play: PlayState,
-}
-
-/// The stages' play (a hidden reversal error): each stage sits `offset` from its command
-/// (display units), within ± half its play, dragged by the command like a backlash: after a
-/// move longer than the play the stage lags the command by half of it.
-#[derive(Debug, Clone, Copy, Default)]
-struct PlayState {
-    offset: [f64; 6],
-    command: [f64; 6],
-}
-
-impl PlayState {
-    /// Follow the command to `q` (a straight move), for stages of play `width`.
-    #[inline]
-    fn follow(&mut self, q: &[f64; 6], width: &[f64; 6]) {
-        for j in 0..6 {
-            if width[j] != 0.0 {
-                let half = 0.5 * width[j].abs();
-                self.offset[j] = (self.offset[j] - (q[j] - self.command[j])).clamp(-half, half);
-            }
-            self.command[j] = q[j];
-        }
-    }
+    play: effects::Backlash,
 }
 
 /// The hidden part.
@@ -453,7 +430,7 @@ impl VirtualBench {
             q_display: [0.0; 6],
             wavelength_nm: preset.laser.wavelength_nm,
             exact: false,
-            play: PlayState::default(),
+            play: effects::Backlash::default(),
         })
     }
 

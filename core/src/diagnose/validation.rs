@@ -2,14 +2,16 @@
 //! the effect"): the validation motions are planned through the IGM of the calibrated model
 //! (the nominal robot and the calibrated extrinsics) and through the IGM of the extended model
 //! (the robot with the geometric effects the diagnosis added, and the extrinsics refitted with
-//! them), run on the bench, and both measured with the extended model.
+//! them), run on the bench, and both measured with the extended model. The extended model's
+//! reversal errors are compensated in its plan: its commands lead the wanted poses by half of
+//! each stage's play in its direction of travel ([`crate::validate::plan_with_play`]).
 
 use crate::bench::Bench;
 use crate::identify::calibration::{thin, CURVE_POINTS};
 use crate::measure::PhaseModel;
-use crate::model::effects::{apply_all, apply_optics, Effect, EffectError};
+use crate::model::effects::{apply_all, apply_optics, reversal_play, Effect, EffectError};
 use crate::model::extrinsics::Extrinsics;
-use crate::validate::{run_validation_planned, ValidationMotion};
+use crate::validate::{run_validation_planned, run_validation_with_play, ValidationMotion};
 use serde::{Deserialize, Serialize};
 
 /// One validation motion run with the model without and with the effects.
@@ -62,12 +64,14 @@ pub fn validate_with_effects(
     effects: &[Effect],
 ) -> Result<Vec<EffectValidationRow>, EffectError> {
     let extended = extended_model(base, *with, effects)?;
+    // The extended model's reversal errors: its plan compensates the stages' play.
+    let play = reversal_play(effects, base.chain.description());
     let plain = PhaseModel { extrinsics: *without, ..base.clone() };
     Ok(ValidationMotion::ALL
         .iter()
         .map(|&m| {
             let a = run_validation_planned(bench, &plain, without, &extended, m, [0.0; 6]);
-            let b = run_validation_planned(bench, &extended, with, &extended, m, [0.0; 6]);
+            let b = run_validation_with_play(bench, &extended, with, &extended, m, [0.0; 6], &play);
             let note = crate::validate::pair_note(&a, &b);
             let curve = |v: &[f64]| thin(v, CURVE_POINTS);
             EffectValidationRow {

@@ -274,6 +274,37 @@ impl Effect {
     }
 }
 
+/// Stages with play (reversal errors) as a backlash: each stage sits `offset` from its command
+/// (display units), within ± half its play, dragged by the command: after a move longer than
+/// the play the stage lags the command by half of it. The virtual bench moves its hidden
+/// stages so; the validation plans its commands and models its traces' real joints with it.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Backlash {
+    /// Where each stage sits relative to its command (display units).
+    pub offset: [f64; 6],
+    /// The last command followed (display units).
+    pub command: [f64; 6],
+}
+
+impl Backlash {
+    /// Follow the command to `q` (a straight move), for stages of play `width` (display units).
+    #[inline]
+    pub fn follow(&mut self, q: &[f64; 6], width: &[f64; 6]) {
+        for j in 0..6 {
+            if width[j] != 0.0 {
+                let half = 0.5 * width[j].abs();
+                self.offset[j] = (self.offset[j] - (q[j] - self.command[j])).clamp(-half, half);
+            }
+            self.command[j] = q[j];
+        }
+    }
+
+    /// Where the stages are: the command plus the offset.
+    pub fn real(&self) -> [f64; 6] {
+        std::array::from_fn(|j| self.command[j] + self.offset[j])
+    }
+}
+
 /// The play of each joint of `robot` (display units, µm or °) from the reversal errors of a
 /// list; joints the robot does not have are ignored ([`Effect::apply_to_robot`] refuses them).
 pub fn reversal_play(effects: &[Effect], robot: &RobotDescription) -> [f64; 6] {
