@@ -150,8 +150,8 @@ pub fn apply(s: &mut AppState, loaded: Loaded, dir: &Path) {
     s.notes = loaded.session.notes;
     s.analyses.clear();
     s.validation = None;
-    // The session's diagnosis record is kept for the next save, not shown (it is a summary,
-    // not a result the view can draw).
+    // The session's diagnosis record is kept for the next save and shown as a record by the
+    // Diagnosis view (it is a summary, not a result: no steps, no residuals to draw).
     s.clear_diagnosis();
     s.loaded_diagnosis = loaded.session.diagnosis;
     s.session_dir = Some(dir.to_path_buf());

@@ -394,6 +394,26 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     h.state_mut().request(photorobot_app::gui::Pending::Open(saved.clone()));
     h.run_steps(2);
     assert!(h.state().state.diagnosis.is_none(), "a session's record is not a result to draw");
+    // The Diagnosis view shows the record: the verdict, the effect, the validation figures.
+    open(&mut h, Tab::Diagnosis);
+    h.get_by_label("Diagnosis saved with this session");
+    h.get_by_label_contains(&format!("Verdict: {}", record.verdict));
+    h.get_by_label(&first.name);
+    h.get_by_label(&format!("{:.4} {}", first.estimate, first.unit));
+    for e in &record.model_effects {
+        h.get_by_label(&format!("{e:?}"));
+    }
+    h.get_by_label_contains("extrinsics refitted with them: beta_et = ");
+    h.get_by_label("Validation with and without the added effects (saved)");
+    for r in &rows {
+        if let (Some(without), Some(with)) = (r.without_effect_nm, r.with_effect_nm) {
+            assert!(shown(&h, &format!("{without:.1}")), "{r:?}");
+            assert!(shown(&h, &format!("{with:.1}")), "{r:?}");
+        }
+    }
+    h.get_by_label("Diagnosis saved with this session").scroll_to_me();
+    h.run_steps(6);
+    screenshot(&mut h, "diagnosis-saved");
     let again = tmp.path().join("again");
     h.state_mut().state.dialogs =
         Box::new(ScriptedDialogs { folders: vec![Some(again.clone())], ..Default::default() });

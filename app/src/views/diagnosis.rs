@@ -42,6 +42,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
     }
     if s.steps.iter().all(|st| st.traces.is_empty()) {
         ui.label("no recorded trace yet: run the wizard's steps first");
+        saved_diagnosis(ui, s);
         return;
     }
     let idle = s.busy.is_none() && s.running.is_none();
@@ -62,6 +63,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
     egui::ScrollArea::vertical().id_salt("diagnosis").show(ui, |ui| {
         workflow(ui, s);
         effect_validation(ui, s);
+        saved_diagnosis(ui, s);
         ui.separator();
         residuals(ui, s);
     });
@@ -231,8 +233,18 @@ fn effect_validation(ui: &mut egui::Ui, s: &AppState) {
             rows
         }
     };
+    validation_table(ui, "effect validation", rows);
+    bar_chart(ui, rows, without_name, &with_name);
+    ui.label(format!(
+        "bars: the {without_name} (left) and the model {with_name} (right), per validation motion; the \
+         smaller, the better the model plans motions that must keep the gap"
+    ));
+}
+
+/// The validation rows without and with the effects, and the notes of the rows that have one.
+fn validation_table(ui: &mut egui::Ui, id: &str, rows: &[EffectValidationRow]) {
     let nm = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.1}"));
-    egui::Grid::new("effect validation").striped(true).show(ui, |ui| {
+    egui::Grid::new(id).striped(true).show(ui, |ui| {
         for h in ["motion", "without the effect (nm)", "with the effect (nm)", "improvement (×)"] {
             ui.strong(h);
         }
@@ -248,11 +260,59 @@ fn effect_validation(ui: &mut egui::Ui, s: &AppState) {
     for n in rows.iter().filter_map(|r| r.note.as_ref()) {
         ui.colored_label(ui.visuals().warn_fg_color, drawable(n));
     }
-    bar_chart(ui, rows, without_name, &with_name);
-    ui.label(format!(
-        "bars: the {without_name} (left) and the model {with_name} (right), per validation motion; the \
-         smaller, the better the model plans motions that must keep the gap"
-    ));
+}
+
+/// The diagnosis an opened session carries (`session.ron`, written by this view or by
+/// `photorobot diagnose`), when no diagnosis was run since: its verdict, the effects it named
+/// with their scores, the extended model (the effects' values and the refitted extrinsics) and
+/// the validation without and with them. A record, not a result: the steps and the residual
+/// plots are not in it; running the diagnosis again replaces it.
+fn saved_diagnosis(ui: &mut egui::Ui, s: &AppState) {
+    let (None, Some(d)) = (&s.diagnosis, &s.loaded_diagnosis) else { return };
+    ui.add_space(8.0);
+    ui.label(RichText::new("Diagnosis saved with this session").size(16.0).strong());
+    ui.label(
+        "as recorded when the session was saved (running the diagnosis again replaces it; the steps and the \
+         discriminating motions' traces are not in the record)",
+    );
+    ui.label(RichText::new(format!("Verdict: {}", drawable(&d.verdict))).size(18.0).strong());
+    if !d.effects.is_empty() {
+        egui::Grid::new("saved effects").striped(true).show(ui, |ui| {
+            for h in ["effect", "estimate", "σ", "score", "absorbed by extrinsics", "note"] {
+                ui.strong(h);
+            }
+            ui.end_row();
+            for e in &d.effects {
+                ui.label(drawable(&e.name));
+                ui.monospace(format!("{:.4} {}", e.estimate, e.unit));
+                ui.monospace(e.sigma.map_or("–".into(), |v| format!("{v:.4} {}", e.unit)));
+                ui.monospace(format!("{:.1} ({})", e.score, e.score_kind));
+                ui.monospace(e.absorbed_fraction.map_or("–".into(), |f| format!("{:.1} %", f * 100.0)));
+                ui.label(drawable(&e.note));
+                ui.end_row();
+            }
+        });
+    }
+    if !d.model_effects.is_empty() {
+        ui.label(RichText::new("Extended model").strong());
+        for e in &d.model_effects {
+            ui.monospace(drawable(&format!("{e:?}")));
+        }
+    }
+    if let Some(x) = &d.extrinsics {
+        let values = x.to_array();
+        let text: Vec<String> = photorobot_core::model::extrinsics::PARAMETER_NAMES
+            .iter()
+            .zip(values)
+            .map(|((name, unit), v)| format!("{name} = {v:.4} {unit}"))
+            .collect();
+        ui.label(format!("extrinsics refitted with them: {}", text.join(", ")));
+    }
+    if !d.validation.is_empty() {
+        ui.label(RichText::new("Validation with and without the added effects (saved)").strong());
+        validation_table(ui, "saved effect validation", &d.validation);
+        bar_chart(ui, &d.validation, "without the effects", "with the effects");
+    }
 }
 
 /// Without over with (how many times smaller the variation is with the effect), when both ran.
