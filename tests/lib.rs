@@ -68,5 +68,13 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
             },
         ),
         one("fringe nonlinearity cos φ", 2.0, Effect::FringeNonlinearity { in_phase_nm: 2.0, quadrature_nm: 0.0 }),
+        // The observable direction of the q4 axis tilt (toward link x it turns the lamella about
+        // the beam, row 6), and a q4 reversal 2.5× row 8's (still µrad-level, SPEC section 9).
+        one("axis tilt q4 toward link y", 0.6, Effect::AxisTilt { joint: "q4".into(), tilt_mrad: [0.0, 0.6] }),
+        one(
+            "reversal error q4",
+            50e-6f64.to_degrees(),
+            Effect::ReversalError { joint: "q4".into(), step: 50e-6f64.to_degrees() },
+        ),
     ]
 }
