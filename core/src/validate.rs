@@ -314,28 +314,16 @@ pub fn run_validation(
     motion: ValidationMotion,
     start: [f64; 6],
 ) -> Result<ValidationFigure, ValidationError> {
-    run_validation_planned(bench, analysis, planned_with, analysis, motion, start)
+    run_validation_planned(bench, analysis, planned_with, analysis, motion, start, &[0.0; 6])
 }
 
 /// [`run_validation`] with the motion planned through the IGM of `planning` (its robot chain:
 /// e.g. the nominal robot, or the robot with the effects a diagnosis added) and measured with
-/// `analysis`.
+/// `analysis`, for stages with play `play` (display units: the reversal errors of the
+/// extended model, [`crate::model::effects::reversal_play`]; zero for none): the commands
+/// compensate it ([`plan_with_play`]) and the analysis models the stages' real joints along
+/// the trace ([`modelled_real_joints`]).
 pub fn run_validation_planned(
-    bench: &mut dyn Bench,
-    planning: &PhaseModel,
-    planned_with: &Extrinsics,
-    analysis: &PhaseModel,
-    motion: ValidationMotion,
-    start: [f64; 6],
-) -> Result<ValidationFigure, ValidationError> {
-    run_validation_with_play(bench, planning, planned_with, analysis, motion, start, &[0.0; 6])
-}
-
-/// [`run_validation_planned`] for stages with play `play` (display units: the reversal errors
-/// of the extended model, [`crate::model::effects::reversal_play`]): the commands compensate
-/// it ([`plan_with_play`]) and the analysis models the stages' real joints along the trace
-/// ([`modelled_real_joints`]).
-pub fn run_validation_with_play(
     bench: &mut dyn Bench,
     planning: &PhaseModel,
     planned_with: &Extrinsics,
@@ -601,7 +589,7 @@ mod tests {
             let t = preset.truth;
             let mut bench = VirtualBench::new(&preset, Some(3)).unwrap();
             let without = run_validation(&mut bench, &model, &t, motion, [0.0; 6]).unwrap().peak_to_peak_nm;
-            let with = run_validation_with_play(&mut bench, &model, &t, &model, motion, [0.0; 6], &play)
+            let with = run_validation_planned(&mut bench, &model, &t, &model, motion, [0.0; 6], &play)
                 .unwrap()
                 .peak_to_peak_nm;
             eprintln!("{}: {without:.2} nm without the play, {with:.2} nm with it", motion.name());

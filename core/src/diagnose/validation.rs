@@ -11,7 +11,7 @@ use crate::identify::calibration::{thin, CURVE_POINTS};
 use crate::measure::PhaseModel;
 use crate::model::effects::{apply_all, apply_optics, reversal_play, Effect, EffectError};
 use crate::model::extrinsics::Extrinsics;
-use crate::validate::{run_validation_planned, run_validation_with_play, ValidationMotion};
+use crate::validate::{run_validation_planned, ValidationMotion};
 use serde::{Deserialize, Serialize};
 
 /// One validation motion run with the model without and with the effects.
@@ -70,8 +70,8 @@ pub fn validate_with_effects(
     Ok(ValidationMotion::ALL
         .iter()
         .map(|&m| {
-            let a = run_validation_planned(bench, &plain, without, &extended, m, [0.0; 6]);
-            let b = run_validation_with_play(bench, &extended, with, &extended, m, [0.0; 6], &play);
+            let a = run_validation_planned(bench, &plain, without, &extended, m, [0.0; 6], &[0.0; 6]);
+            let b = run_validation_planned(bench, &extended, with, &extended, m, [0.0; 6], &play);
             let note = crate::validate::pair_note(&a, &b);
             let curve = |v: &[f64]| thin(v, CURVE_POINTS);
             EffectValidationRow {
