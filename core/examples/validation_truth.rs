@@ -38,7 +38,8 @@ fn main() {
     let truth = extended_model(&base, preset.truth, &preset.effects).unwrap();
     for motion in ValidationMotion::ALL {
         let mut bench = VirtualBench::new(&preset, Some(7)).unwrap();
-        let f = run_validation_planned(&mut bench, &model, &diagnosed, &model, motion, [0.0; 6], &[0.0; 6]).unwrap();
+        let f = run_validation_planned(&mut bench, &model, &diagnosed, &model, motion, [0.0; 6], &Default::default())
+            .unwrap();
         let t = &f.trace;
         let true_dl = truth.hint_nm(t, t.wavelength_nm[0]).unwrap();
         let model_dl = model.hint_nm(t, t.wavelength_nm[0]).unwrap();

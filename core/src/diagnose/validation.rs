@@ -9,9 +9,9 @@
 use crate::bench::Bench;
 use crate::identify::calibration::{thin, CURVE_POINTS};
 use crate::measure::PhaseModel;
-use crate::model::effects::{apply_all, apply_optics, reversal_play, Effect, EffectError};
+use crate::model::effects::{apply_all, apply_optics, Effect, EffectError};
 use crate::model::extrinsics::Extrinsics;
-use crate::validate::{run_validation_planned, ValidationMotion};
+use crate::validate::{run_validation_planned, Compensation, ValidationMotion};
 use serde::{Deserialize, Serialize};
 
 /// One validation motion run with the model without and with the effects.
@@ -64,14 +64,14 @@ pub fn validate_with_effects(
     effects: &[Effect],
 ) -> Result<Vec<EffectValidationRow>, EffectError> {
     let extended = extended_model(base, *with, effects)?;
-    // The extended model's reversal errors: its plan compensates the stages' play.
-    let play = reversal_play(effects, base.chain.description());
+    // The extended model's reversal errors and drift: its plan compensates them.
+    let compensation = Compensation::of_effects(effects, base.chain.description());
     let plain = PhaseModel { extrinsics: *without, ..base.clone() };
     Ok(ValidationMotion::ALL
         .iter()
         .map(|&m| {
-            let a = run_validation_planned(bench, &plain, without, &extended, m, [0.0; 6], &[0.0; 6]);
-            let b = run_validation_planned(bench, &extended, with, &extended, m, [0.0; 6], &play);
+            let a = run_validation_planned(bench, &plain, without, &extended, m, [0.0; 6], &Compensation::default());
+            let b = run_validation_planned(bench, &extended, with, &extended, m, [0.0; 6], &compensation);
             let note = crate::validate::pair_note(&a, &b);
             let curve = |v: &[f64]| thin(v, CURVE_POINTS);
             EffectValidationRow {
