@@ -3,8 +3,10 @@
 //! (the nominal robot and the calibrated extrinsics) and through the IGM of the extended model
 //! (the robot with the geometric effects the diagnosis added, and the extrinsics refitted with
 //! them), run on the bench, and both measured with the extended model. The extended model's
-//! reversal errors are compensated in its plan: its commands lead the wanted poses by half of
-//! each stage's play in its direction of travel ([`crate::validate::plan_with_play`]).
+//! reversal errors and drift are compensated in its plan ([`crate::validate::Compensation`]):
+//! its commands lead the wanted poses by half of each stage's play in its direction of travel
+//! ([`crate::validate::plan_with_play`]), and its waypoints move along the beam against the
+//! drift expected when the bench reaches them.
 
 use crate::bench::Bench;
 use crate::identify::calibration::{thin, CURVE_POINTS};
