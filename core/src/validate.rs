@@ -179,25 +179,20 @@ pub fn waypoints_shifted(
 /// calibration the motion itself shows no fringe, so the envelope is measured on the dither.
 pub const ENVELOPE_DITHER: &str = "envelope dither";
 
-/// The plan of a validation motion: an unrecorded move to the first waypoint, a recorded axial
-/// dither of 1 µm out and back (the fringe envelope), then recorded moves through the waypoints.
-pub fn plan(motion: ValidationMotion, waypoints: &[[f64; 6]]) -> Plan {
-    plan_with_play(motion, waypoints, &[0.0; 6]).0
-}
-
 /// Joint moves smaller than this (display units) set no direction of travel: the IGM's
 /// round-off, not a reversal.
 const REVERSAL_EPS: f64 = 1e-9;
 
-/// [`plan`] for stages with play (reversal errors of width `play`, display units; the
-/// extended model's [`crate::model::effects::reversal_play`]): the commands lead the wanted
+/// The plan of a validation motion: an unrecorded move to the first waypoint, a recorded axial
+/// dither of 1 µm out and back (the fringe envelope), then recorded moves through the waypoints.
+/// For stages with play (reversal errors of width `play`, display units, zero for none; the
+/// extended model's [`crate::model::effects::reversal_play`]) the commands lead the wanted
 /// poses by half the play in each joint's direction of travel, so that the stages go through
 /// the waypoints. Before the first recorded move every stage with play is loaded from the
 /// side opposite its first travel (an unrecorded move of 1.5 plays back, then forward), so its
 /// state is known whatever it did before; where a joint reverses, a recorded take-up move
 /// carries its command across the play while the stage stands still. Returns the plan and the
-/// stages' state at its first recorded sample (for [`modelled_real_joints`]). With no play it
-/// is [`plan`]'s.
+/// stages' state at its first recorded sample (for [`modelled_real_joints`]).
 pub fn plan_with_play(motion: ValidationMotion, waypoints: &[[f64; 6]], play: &[f64; 6]) -> (Plan, Backlash) {
     let (plan, state, _) = plan_reaching(motion, waypoints, play);
     (plan, state)
@@ -262,14 +257,12 @@ fn plan_reaching(motion: ValidationMotion, waypoints: &[[f64; 6]], play: &[f64; 
 
 /// What a validation plan compensates from the extended model: the stages' play (reversal
 /// errors, display units) and the gap's drift in time. Default: nothing.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Compensation {
     /// Play of each stage (display units, µm or °): [`crate::model::effects::reversal_play`].
     pub play: [f64; 6],
-    /// Drift of the gap (nm/s): [`crate::model::effects::Effect::ThermalDrift`].
-    pub drift_nm_per_s: f64,
-    /// Its change (nm/s²).
-    pub drift_nm_per_s2: f64,
+    /// The effects that drift the gap in time ([`crate::model::effects::Effect::ThermalDrift`]).
+    pub drift: Vec<crate::model::effects::Effect>,
 }
 
 impl Compensation {
@@ -278,20 +271,19 @@ impl Compensation {
         effects: &[crate::model::effects::Effect],
         robot: &crate::model::robot::RobotDescription,
     ) -> Self {
-        let mut c =
-            Compensation { play: crate::model::effects::reversal_play(effects, robot), ..Compensation::default() };
-        for e in effects {
-            if let crate::model::effects::Effect::ThermalDrift { nm_per_s, nm_per_s2 } = e {
-                c.drift_nm_per_s += nm_per_s;
-                c.drift_nm_per_s2 += nm_per_s2;
-            }
+        Compensation {
+            play: crate::model::effects::reversal_play(effects, robot),
+            drift: effects
+                .iter()
+                .filter(|e| matches!(e, crate::model::effects::Effect::ThermalDrift { .. }))
+                .cloned()
+                .collect(),
         }
-        c
     }
 
     /// The gap's drift (nm) at bench time `t_s` (s).
     fn drift_nm(&self, t_s: f64) -> f64 {
-        self.drift_nm_per_s * t_s + 0.5 * self.drift_nm_per_s2 * t_s * t_s
+        self.drift.iter().map(|e| e.gap_change_nm(t_s, 0.0)).sum()
     }
 }
 
@@ -303,7 +295,7 @@ pub fn modelled_real_joints(trace: &Trace, play: &[f64; 6], mut state: Backlash)
     for i in 0..trace.len() {
         let q = trace.joints_display(i);
         state.follow(&q, play);
-        let real: [f64; 6] = std::array::from_fn(|j| if play[j] == 0.0 { q[j] } else { q[j] + state.offset[j] });
+        let real = state.real();
         out.q1_um[i] = real[0];
         out.q2_um[i] = real[1];
         out.q3_um[i] = real[2];
@@ -417,7 +409,7 @@ pub fn run_validation_planned(
     let play = &compensation.play;
     let mut w = waypoints(planning, planned_with, motion, start, count)?;
     let (mut p, mut state, reaching) = plan_reaching(motion, &w, play);
-    if compensation.drift_nm_per_s != 0.0 || compensation.drift_nm_per_s2 != 0.0 {
+    if !compensation.drift.is_empty() {
         let run_error = |e: String| ValidationError::Run { motion: motion.name(), problem: e };
         let timed = p
             .expand(bench.robot(), bench.position_display(), bench.motion_limits())
