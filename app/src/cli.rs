@@ -184,6 +184,25 @@ pub enum CliError {
     /// Output could not be written.
     #[error("cannot write output: {0}")]
     Output(#[from] std::io::Error),
+    /// The run finished and its session was written, but it is not a calibration (the model does
+    /// not fit the data, branches tie, or the solver did not converge).
+    #[error("not a calibration: {problem} (session written to {})", session.display())]
+    NotACalibration {
+        /// Where the session was written.
+        session: std::path::PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+impl CliError {
+    /// The process exit code: 1 for a run that finished without a result, 2 otherwise.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            CliError::NotACalibration { .. } => 1,
+            _ => 2,
+        }
+    }
 }
 
 /// Parse `args` (including the program name) and run the command, writing to `out`.

@@ -15,6 +15,8 @@ use photorobot_core::files::{save_ron, write_atomic};
 use photorobot_core::identify::calibration::{
     plan_durations, plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
 };
+use photorobot_core::identify::signs::{SignSource, TranslationSign};
+use photorobot_core::identify::verdict::{FitCheck, Verdict};
 use photorobot_core::import::{read_folder, ColumnMapping};
 use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::Extrinsics;
@@ -181,7 +183,16 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         print_report(&report, out)?;
         writeln!(out, "\nsession written to {}", a.out.display())?;
     }
-    Ok(())
+    match &report.fit {
+        Some(fit) if fit.verdict != Verdict::Fits => {
+            Err(CliError::NotACalibration { session: a.out.clone(), problem: fit.summary.clone() })
+        }
+        _ if !report.converged => Err(CliError::NotACalibration {
+            session: a.out.clone(),
+            problem: format!("the solver did not converge ({})", report.termination),
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// Duration of a trace (s).
@@ -212,6 +223,9 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
         )?;
     }
     writeln!(out, "solver: {} ({})", if r.converged { "converged" } else { "NOT CONVERGED" }, r.termination)?;
+    if let Some(fit) = &r.fit {
+        print_fit(fit, out)?;
+    }
     writeln!(out, "\n{:<10} {:>14} {:<4} {:>12}  determined", "parameter", "value", "unit", "σ")?;
     for p in &r.parameters {
         let sigma = p.sigma.map_or("-".to_string(), |s| format!("{s:.5}"));
@@ -283,8 +297,65 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
             v.note.as_ref().map_or(String::new(), |n| format!("  ({n})"))
         )?;
     }
+    print_signs(&r.translation_signs, out)?;
     for w in &r.warnings {
         writeln!(out, "warning: {w}")?;
+    }
+    Ok(())
+}
+
+/// The verdict on the fit: its word, the branches run and, when it fails, the worst traces.
+fn print_fit(fit: &FitCheck, out: &mut dyn Write) -> std::io::Result<()> {
+    let word = match fit.verdict {
+        Verdict::Fits => "FITS",
+        Verdict::DoesNotFit => "DOES NOT FIT",
+        Verdict::Ambiguous => "AMBIGUOUS",
+    };
+    writeln!(out, "fit: {word}: {}", fit.summary)?;
+    for (k, b) in fit.branches.iter().enumerate() {
+        let tag = if k == 0 {
+            "chosen"
+        } else if fit.tied_branches.contains(&k) {
+            "TIED"
+        } else {
+            "worse"
+        };
+        writeln!(
+            out,
+            "  branch from {:<16} χ² {:>12.1}  rms {:>7.2} σ  {:<6} (β_et {:.4}°, θ_et {:.4}°, β_wf {:.4}°, θ_wf {:.4}°)",
+            b.start,
+            b.chi2,
+            b.rms_sigma,
+            tag,
+            b.extrinsics.beta_et_deg,
+            b.extrinsics.theta_et_deg,
+            b.extrinsics.beta_wf_deg,
+            b.extrinsics.theta_wf_deg
+        )?;
+    }
+    if fit.verdict == Verdict::DoesNotFit {
+        writeln!(out, "  worst traces:")?;
+        for t in &fit.worst_traces {
+            writeln!(out, "    {:>8.2} σ rms over {:>3} observations  {}", t.rms_sigma, t.observations, t.label)?;
+        }
+    }
+    Ok(())
+}
+
+/// The sign of each translation and what fixed it.
+fn print_signs(signs: &[TranslationSign], out: &mut dyn Write) -> std::io::Result<()> {
+    if signs.is_empty() {
+        return Ok(());
+    }
+    writeln!(out, "\nsign of each translation's gap change:")?;
+    for s in signs {
+        let source = match s.fixed_by {
+            Some(SignSource::SweepsBeforeAndAfter) => "sweeps before and after",
+            Some(SignSource::FittedModel) => "the model fitted to all the data",
+            None => "nothing: too small to sign, or no source",
+        };
+        let agree = if s.agrees { "" } else { "  DISAGREES with another source" };
+        writeln!(out, "  {:>+10.1} nm  fixed by {source:<34}{agree}  {}", s.dl_nm, s.label)?;
     }
     Ok(())
 }

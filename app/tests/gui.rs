@@ -238,6 +238,54 @@ fn sessions_autosave_save_open_recover_and_export_through_the_file_menu() {
     assert!(h.state().state.steps[1].traces.is_empty() && !h.state().state.dirty);
 }
 
+/// A virtual bench whose goniometer pivots sit 150-200 µm off the model's: no extrinsics explain
+/// its rotations. Written as a preset file in `dir`.
+fn off_pivot_preset(dir: &std::path::Path) -> String {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/benches/table2-ideal.ron"))
+        .unwrap()
+        .replace("name: \"table2-ideal\"", "name: \"off-pivot\"")
+        .replacen(
+            "effects: [],",
+            "effects: [PivotOffset(joint: \"q4\", offset_world_um: (0.0, 200.0, 150.0)), \
+             PivotOffset(joint: \"q5\", offset_world_um: (150.0, 200.0, 0.0))],",
+            1,
+        );
+    assert!(text.contains("PivotOffset"));
+    let path = dir.join("off-pivot.ron");
+    std::fs::write(&path, text).unwrap();
+    path.display().to_string()
+}
+
+/// Identify on a bench the model cannot fit: the Results view shows an error, the residual
+/// against its threshold and the worst traces, and no table of numbers.
+#[test]
+fn results_view_refuses_a_fit_the_model_cannot_explain() {
+    let dir = tempfile::tempdir().unwrap();
+    let settings = Settings { preset: off_pivot_preset(dir.path()), ..Settings::default() };
+    let dialogs = ScriptedDialogs { opens: vec![], saves: vec![], folders: vec![] };
+    let mut h = harness(workbench(settings, dialogs));
+    h.state_mut().state.session_dir = Some(dir.path().join("session"));
+    open(&mut h, Tab::Wizard);
+    for step in 0..3 {
+        h.get_by_label(&format!("Run step {} (F5)", step + 1)).click();
+        wait_until(&mut h, "a step", Duration::from_secs(300), |w| w.state.steps[step].state == StepState::Done);
+    }
+    h.get_by_label("Identify").click();
+    wait_until(&mut h, "the identification", Duration::from_secs(600), |w| {
+        w.state.report.is_some() || w.state.identify_error.is_some()
+    });
+    let report = h.state().state.report.clone().expect("a report, even of a failed fit");
+    let fit = report.fit.clone().expect("the verdict");
+    assert_eq!(fit.verdict, photorobot_core::identify::verdict::Verdict::DoesNotFit, "{}", fit.summary);
+    open(&mut h, Tab::Results);
+    h.get_by_label_contains("NOT A CALIBRATION");
+    h.get_by_label_contains("Traces with the largest residual");
+    h.get_by_label(&fit.worst_traces[0].label);
+    assert!(h.query_all_by_label("yes").next().is_none(), "no parameter shown as determined");
+    assert!(h.query_all_by_label("β_et").next().is_none(), "no table of numbers");
+    screenshot(&mut h, "results-does-not-fit");
+}
+
 /// The discrepancy workflow from the GUI on strategy 2's traces: every step is shown, then the
 /// verdict with the residual before and after.
 #[test]

@@ -102,6 +102,17 @@ fn summary(h: &mut String, c: &CalibrationReport) {
         },
         c.residual_rms_sigma
     );
+    if let Some(fit) = &c.fit {
+        let class = if fit.verdict == crate::identify::verdict::Verdict::Fits { "yes" } else { "no" };
+        let _ = writeln!(h, "<p>Fit: <span class=\"{class}\"><b>{}</b></span></p>", escape(&fit.summary));
+        if fit.verdict == crate::identify::verdict::Verdict::DoesNotFit {
+            let _ = writeln!(h, "<p>Traces with the largest residual:</p>\n<ul>");
+            for t in &fit.worst_traces {
+                let _ = writeln!(h, "<li>{} ({:.2} σ rms)</li>", escape(&t.label), t.rms_sigma);
+            }
+            let _ = writeln!(h, "</ul>");
+        }
+    }
 }
 
 /// A number with `digits` significant digits after the decimal point chosen from σ.

@@ -6,6 +6,7 @@ use crate::state::AppState;
 use egui::{Color32, RichText};
 use egui_plot::{Legend, Plot, PlotPoints, Points};
 use photorobot_core::identify::calibration::CalibrationReport;
+use photorobot_core::identify::verdict::{FitCheck, Verdict};
 
 /// The equation (measurement kind) a residual belongs to, from its unit and trace label: an
 /// absolute gap, a fringe amplitude, or the gap change of a motion of joint q1..q6 (the joint
@@ -53,6 +54,17 @@ fn report(ui: &mut egui::Ui, r: &CalibrationReport) {
         r.residual_rms_sigma,
         r.measurement_duration_s / 60.0
     ));
+    if let Some(fit) = &r.fit {
+        if fit.verdict == Verdict::DoesNotFit {
+            does_not_fit(ui, fit);
+            ui.separator();
+            residual_plot(ui, r);
+            return;
+        }
+        if fit.verdict == Verdict::Ambiguous {
+            ambiguous(ui, fit);
+        }
+    }
     egui::Grid::new("parameters").striped(true).num_columns(5).show(ui, |ui| {
         for h in ["parameter", "value", "unit", "σ", "determined"] {
             ui.strong(h);
@@ -104,6 +116,61 @@ fn report(ui: &mut egui::Ui, r: &CalibrationReport) {
     ui.columns(2, |cols| {
         residual_plot(&mut cols[0], r);
         heat_map(&mut cols[1], r);
+    });
+}
+
+/// A fit the model cannot explain: an error with the residual, the threshold and the worst
+/// traces, and no table of numbers.
+fn does_not_fit(ui: &mut egui::Ui, fit: &FitCheck) {
+    let red = Color32::from_rgb(220, 60, 60);
+    ui.label(RichText::new("NOT A CALIBRATION: the model does not fit these data").color(red).strong().size(18.0));
+    ui.colored_label(red, &fit.summary);
+    ui.label(format!(
+        "residual {:.2} σ RMS; noise and the analysis's σ allow at most {:.2} σ",
+        fit.rms_sigma, fit.threshold_sigma
+    ));
+    ui.label(RichText::new("Traces with the largest residual").strong());
+    egui::Grid::new("worst traces").striped(true).num_columns(3).show(ui, |ui| {
+        for h in ["trace", "residual (σ RMS)", "observations"] {
+            ui.strong(h);
+        }
+        ui.end_row();
+        for t in &fit.worst_traces {
+            ui.label(&t.label);
+            ui.monospace(format!("{:.2}", t.rms_sigma));
+            ui.monospace(t.observations.to_string());
+            ui.end_row();
+        }
+    });
+    branches(ui, fit);
+}
+
+/// Branches that fit equally well: which, and what they disagree on.
+fn ambiguous(ui: &mut egui::Ui, fit: &FitCheck) {
+    ui.colored_label(ui.visuals().warn_fg_color, RichText::new(&fit.summary).strong());
+    branches(ui, fit);
+}
+
+fn branches(ui: &mut egui::Ui, fit: &FitCheck) {
+    ui.label(RichText::new("Starts tried (the identification keeps the branch with the lowest χ²)").strong());
+    egui::Grid::new("branches").striped(true).num_columns(4).show(ui, |ui| {
+        for h in ["start", "χ²", "residual (σ RMS)", ""] {
+            ui.strong(h);
+        }
+        ui.end_row();
+        for (k, b) in fit.branches.iter().enumerate() {
+            ui.label(&b.start);
+            ui.monospace(format!("{:.1}", b.chi2));
+            ui.monospace(format!("{:.2}", b.rms_sigma));
+            ui.label(if k == 0 {
+                "kept"
+            } else if fit.tied_branches.contains(&k) {
+                "TIED"
+            } else {
+                "worse"
+            });
+            ui.end_row();
+        }
     });
 }
 

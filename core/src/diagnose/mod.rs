@@ -56,6 +56,7 @@ pub const EXTRACT_OPTIONS: crate::identify::measurements::ExtractOptions =
         amplitude_neighbours: true,
         gap_across_pauses: true,
         shaped: false,
+        max_amplitudes_per_trace: None,
     };
 /// How the diagnosis analyses the traces again once an effect is named ([`EXTRACT_OPTIONS`],
 /// tracked with the model's fringe shape). The first extraction estimates the fringe's shape

@@ -1,17 +1,19 @@
 //! A whole calibration: run the measurement plans on a bench, turn traces into observations, identify
 //! (paper mode or joint estimate), report uncertainties and validate. Owns the order of those steps and the report.
 //!
-//! The motion hint of the fringe analysis needs a rough model first: lateral moves show no
-//! fringes in a model with square lamella and fiber. The wavelength sweeps measure absolute
-//! gaps at many poses, and gap differences between poses give the lamella normal n_t, so the
-//! first estimate comes from the sweeps alone (a bootstrap); the traces are then analysed
-//! with it, the full estimate made, and the traces analysed once more with that estimate.
+//! The identification itself (starts, passes, the choice of branch) is
+//! [`crate::identify::multistart`]; this module adds the verdict on the fit as a whole
+//! ([`crate::identify::verdict`]), the Table II-style rows and the validation.
 
 use crate::bench::{run_plan, Bench, RunControl};
-use crate::identify::joint::{self, JointEstimate, JointOptions};
-use crate::identify::measurements::{observations_from_traces, ExtractOptions};
+use crate::identify::joint::JointEstimate;
+pub use crate::identify::multistart::{identify, Identification, Mode};
 use crate::identify::observability::IdentifiabilityReport;
-use crate::identify::{paper, Observation, ObservationKind, N_EXTRINSICS};
+use crate::identify::signs::{translation_signs, TranslationSign};
+use crate::identify::verdict::{
+    differing_parameters, jackknife_sigma, rms_threshold, worst_traces, FitCheck, Verdict, WORST_TRACES,
+};
+use crate::identify::N_EXTRINSICS;
 use crate::measure::PhaseModel;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::plan::Plan;
@@ -19,16 +21,6 @@ use crate::trace::Trace;
 use crate::validate::{run_validation, ValidationMotion};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
-
-/// Which identifier.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Mode {
-    /// The paper's steps A, B, C on strategies 1 and 2.
-    Paper,
-    /// Every parameter from every measurement at once, with tilt scans and absolute gaps.
-    Joint,
-}
 
 /// One row of the Table II-style result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -45,6 +37,10 @@ pub struct ParameterRow {
     pub determined: bool,
     /// Why not, when not.
     pub reason: Option<String>,
+    /// The σ is the spread of the estimate over the traces (jackknife), larger than the σ the
+    /// noise model gives: the traces disagree beyond their noise.
+    #[serde(default)]
+    pub sigma_from_jackknife: bool,
 }
 
 /// One validation result.
@@ -115,6 +111,13 @@ pub struct CalibrationReport {
     pub observations: usize,
     /// Sentences for the user.
     pub warnings: Vec<String>,
+    /// The verdict on the fit as a whole (does the model fit, is the branch unique); `None` in
+    /// reports written before it was made.
+    #[serde(default)]
+    pub fit: Option<FitCheck>,
+    /// The sign of each translation's gap change and the sources that fix it.
+    #[serde(default)]
+    pub translation_signs: Vec<TranslationSign>,
     /// The identified extrinsics.
     pub extrinsics: Extrinsics,
     /// The recorded traces.
@@ -177,118 +180,6 @@ fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
     PhaseModel { extrinsics: e, ..base.clone() }
 }
 
-/// Identify from recorded traces. `nominal` is the model before calibration (design
-/// extrinsics); it also supplies the robot, optics and air.
-pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Identification, String> {
-    let opts = ExtractOptions::default();
-    // The motion traces need the model's motion hint, so they are analysed again with each
-    // better model. The sweeps depend on the model only through the small tilt correction of
-    // the phase: the nominal analysis serves the bootstrap and the first pass, and they are
-    // analysed again with the first estimate for the final pass.
-    let (sweeps, motions): (Vec<Trace>, Vec<Trace>) = traces.iter().cloned().partition(crate::measure::is_sweep);
-    let mut swept = observations_from_traces(&sweeps, nominal, &opts);
-    if swept.observations.len() < 3 {
-        return Err(format!(
-            "{} usable absolute-gap sweeps (at least 3 at different poses are needed to start the identification)",
-            swept.observations.len()
-        ));
-    }
-    // Bootstrap from the absolute gaps: the lamella normal and the gap.
-    let boot_opts = JointOptions { free: [true, true, false, false, false, false, true, false], ..Default::default() };
-    let boot = joint::estimate(nominal, &swept.observations, &nominal.extrinsics, &boot_opts);
-    let mut current = boot.extrinsics;
-    let mut last = None;
-    // Paper mode analyses the traces once, with the bootstrap model: its steps leave the
-    // fiber direction and the gap split undetermined, so its estimate is no better model for
-    // the motion hints than the bootstrap.
-    let passes = match mode {
-        Mode::Joint => 2,
-        Mode::Paper => 1,
-    };
-    for pass in 0..passes {
-        if pass > 0 {
-            swept = observations_from_traces(&sweeps, &model_with(nominal, current), &opts);
-        }
-        let model = model_with(nominal, current);
-        let mut extracted = observations_from_traces(&motions, &model, &opts);
-        extracted.skipped.extend(swept.skipped.iter().cloned());
-        let mut obs = swept.observations.clone();
-        obs.append(&mut extracted.observations);
-        let (est, step_a, obs) = match mode {
-            Mode::Joint => (joint::estimate(nominal, &obs, &current, &JointOptions::default()), None, obs),
-            Mode::Paper => {
-                let translations: Vec<Observation> = obs.iter().filter(|o| is_translation(o)).cloned().collect();
-                let rotations: Vec<Observation> = obs.iter().filter(|o| is_rotation(o)).cloned().collect();
-                let a = paper::step_a_with(&nominal.chain, &translations, &current, true);
-                let b = paper::step_b(&nominal.chain, &rotations, a.angles_deg);
-                let e = Extrinsics {
-                    beta_et_deg: a.angles_deg[0],
-                    theta_et_deg: a.angles_deg[1],
-                    beta_wf_deg: a.angles_deg[2],
-                    theta_wf_deg: a.angles_deg[3],
-                    z_et_um: b.origins_um[0],
-                    x_wf_um: b.origins_um[1],
-                    y_wf_um: b.origins_um[2],
-                    z_wf_um: b.origins_um[3],
-                };
-                // Uncertainties of the paper's result: the joint machinery evaluated at it,
-                // on the paper's data only (one evaluation, no move).
-                // Step A's data only: step B reads the fringes as the change of L along the beam
-                // where they measure the perpendicular distance (a bias of |L|·(1 − cos γ), µm
-                // over the 4° rotations), so its residuals say nothing about the noise, and the
-                // origins stay undetermined by the data the method can trust.
-                // Evaluated with the bootstrap's origins (translations barely depend on them),
-                // then the step B origins put back for the report.
-                let at = Extrinsics {
-                    z_et_um: current.z_et_um,
-                    x_wf_um: current.x_wf_um,
-                    y_wf_um: current.y_wf_um,
-                    z_wf_um: current.z_wf_um,
-                    ..e
-                };
-                let mut est = joint::evaluate(nominal, &translations, &at, &JointOptions::default());
-                est.extrinsics = e;
-                est.converged = a.converged;
-                est.termination = format!("step A: {}", if a.converged { "converged" } else { "did not converge" });
-                (est, Some(a), translations)
-            }
-        };
-        current = est.extrinsics;
-        last = Some(Identification { estimate: est, observations: obs, step_a, skipped: extracted.skipped });
-    }
-    last.ok_or_else(|| "no identification pass ran".to_string())
-}
-
-/// What [`identify`] found.
-#[derive(Debug, Clone)]
-pub struct Identification {
-    /// The estimate with its Jacobian and residuals.
-    pub estimate: JointEstimate,
-    /// The observations it used.
-    pub observations: Vec<Observation>,
-    /// Paper mode: step A's details.
-    pub step_a: Option<paper::StepA>,
-    /// Traces that gave no observation (label, why).
-    pub skipped: Vec<(String, String)>,
-}
-
-fn joints_changed(o: &Observation) -> Option<[bool; 6]> {
-    match o.kind {
-        ObservationKind::GapChange { from_display, to_display, .. } => {
-            Some(std::array::from_fn(|i| (from_display[i] - to_display[i]).abs() > 1e-9))
-        }
-        _ => None,
-    }
-}
-
-fn is_translation(o: &Observation) -> bool {
-    joints_changed(o).is_some_and(|c| c[..3].iter().any(|&x| x) && !c[3..].iter().any(|&x| x))
-}
-
-fn is_rotation(o: &Observation) -> bool {
-    joints_changed(o).is_some_and(|c| c[3..].iter().any(|&x| x) && !c[..3].iter().any(|&x| x))
-}
-
 /// The identifiability report of a joint estimate: its weighted Jacobian and residuals, the
 /// free extrinsics with their useful bounds, and the detector gains as nuisance parameters.
 pub fn analyse_estimate(est: &JointEstimate) -> IdentifiabilityReport {
@@ -342,6 +233,7 @@ pub fn parameter_rows(e: &Extrinsics, report: &IdentifiabilityReport) -> Vec<Par
                     Some(u) => u.reason.clone(),
                     None => Some("held fixed (masked)".into()),
                 },
+                sigma_from_jackknife: false,
             }
         })
         .collect()
@@ -368,9 +260,21 @@ pub fn report_from_traces(
     mode: Mode,
 ) -> Result<CalibrationReport, String> {
     let id = identify(&traces, nominal, mode)?;
-    let (est, obs) = (id.estimate, id.observations);
-    let report = analyse_estimate(&est);
+    let report = analyse_estimate(&id.estimate);
+    let fit = fit_check(&id, &report);
+    let mut parameters = parameter_rows(&id.estimate.extrinsics, &report);
+    widen_to_jackknife(&mut parameters, &id);
+    withhold_undetermined(&mut parameters, &fit);
+    let (est, obs) = (&id.estimate, &id.observations);
     let mut warnings = report.warnings.clone();
+    if fit.verdict != Verdict::Fits {
+        warnings.insert(0, fit.summary.clone());
+    }
+    for (label, factor) in &id.downweighted {
+        warnings.push(format!(
+            "trace `{label}`: residual {factor:.1}σ rms, an outlier: its σ multiplied by {factor:.1} in the estimate"
+        ));
+    }
     for (label, why) in &id.skipped {
         warnings.push(format!("trace `{label}` not used: {why}"));
     }
@@ -378,17 +282,23 @@ pub fn report_from_traces(
         warnings
             .push(format!("the solver did not converge ({}): the values below are not a calibration", est.termination));
     }
-    let rms = (est.normalised_residuals.iter().map(|r| r * r).sum::<f64>()
-        / est.normalised_residuals.len().max(1) as f64)
-        .sqrt();
+    let signs = translation_signs(obs, est);
+    for s in signs.iter().filter(|s| !s.agrees) {
+        warnings.push(format!(
+            "translation `{}`: its measured gap change ({:+.1} nm) disagrees in sign with {}",
+            s.label,
+            s.dl_nm,
+            s.evidence.iter().map(|e| format!("{:?}", e.source)).collect::<Vec<_>>().join(", ")
+        ));
+    }
     Ok(CalibrationReport {
         mode,
         bench: bench_name,
-        parameters: parameter_rows(&est.extrinsics, &report),
+        parameters,
         identifiability: report,
         converged: est.converged,
         termination: est.termination.clone(),
-        residual_rms_sigma: rms,
+        residual_rms_sigma: fit.rms_sigma,
         residuals: obs
             .iter()
             .zip(&est.residuals)
@@ -400,9 +310,119 @@ pub fn report_from_traces(
         plan_durations: Vec::new(),
         observations: obs.len(),
         warnings,
+        fit: Some(fit),
+        translation_signs: signs,
         extrinsics: est.extrinsics,
         traces,
     })
+}
+
+/// The verdict on the identification's fit: its residual against [`rms_threshold`], the worst
+/// traces, and the branches that tie with it.
+pub fn fit_check(id: &Identification, report: &IdentifiabilityReport) -> FitCheck {
+    let est = &id.estimate;
+    let r = &id.raw_normalised_residuals();
+    let rms_sigma = (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
+    let threshold_sigma = rms_threshold(r.len(), est.weighted_jacobian.ncols());
+    let labels: Vec<String> = id.observations.iter().map(|o| o.label.clone()).collect();
+    let sigma: Vec<Option<f64>> = PARAMETER_NAMES
+        .iter()
+        .map(|(name, _)| report.parameters.iter().find(|p| p.name == *name).and_then(|p| p.sigma))
+        .collect();
+    let mut ambiguous_parameters: Vec<String> = Vec::new();
+    for &t in &id.tied {
+        for p in differing_parameters(&est.extrinsics, &id.branches[t].extrinsics, &sigma, 3.0) {
+            if !ambiguous_parameters.contains(&p) {
+                ambiguous_parameters.push(p);
+            }
+        }
+    }
+    let (verdict, summary) = if rms_sigma > threshold_sigma || !rms_sigma.is_finite() {
+        (
+            Verdict::DoesNotFit,
+            format!(
+                "the model does not fit these data: residual {rms_sigma:.2}σ rms, above the {threshold_sigma:.2}σ that \
+                 noise allows for {} observations; no parameter is determined (worst traces listed)",
+                r.len()
+            ),
+        )
+    } else if !ambiguous_parameters.is_empty() {
+        (
+            Verdict::Ambiguous,
+            format!(
+                "{} branches fit these data equally well; they differ in {}, which are not determined",
+                id.tied.len() + 1,
+                ambiguous_parameters.join(", ")
+            ),
+        )
+    } else {
+        (Verdict::Fits, format!("the model fits: residual {rms_sigma:.2}σ rms (threshold {threshold_sigma:.2}σ)"))
+    };
+    FitCheck {
+        verdict,
+        rms_sigma,
+        threshold_sigma,
+        worst_traces: worst_traces(&labels, r, WORST_TRACES),
+        branches: id.branches.clone(),
+        tied_branches: id.tied.clone(),
+        ambiguous_parameters,
+        summary,
+    }
+}
+
+/// Each determined parameter's σ raised to the jackknife σ over the traces where that is larger
+/// ([`jackknife_sigma`]); a parameter whose jackknife σ exceeds its useful bound is not
+/// determined.
+fn widen_to_jackknife(rows: &mut [ParameterRow], id: &Identification) {
+    use crate::identify::observability::{DEFAULT_USEFUL_ANGLE_DEG, DEFAULT_USEFUL_LENGTH_UM};
+    let est = &id.estimate;
+    let m = id.observations.len().min(est.weighted_jacobian.nrows());
+    let labels: Vec<String> = id.observations.iter().take(m).map(|o| o.label.clone()).collect();
+    let jacobian = est.weighted_jacobian.rows(0, m).into_owned();
+    let Some(jack) = jackknife_sigma(&jacobian, &est.normalised_residuals[..m], &labels) else { return };
+    for row in rows.iter_mut().filter(|r| r.determined) {
+        let Some(i) = PARAMETER_NAMES.iter().position(|(n, _)| *n == row.name) else { continue };
+        let Some(c) = est.column_parameter.iter().position(|p| *p == Some(i)) else { continue };
+        let sigma = jack[c] * crate::identify::parameter_scale(i);
+        if row.sigma.is_some_and(|s| sigma > s) {
+            row.sigma = Some(sigma);
+            row.sigma_from_jackknife = true;
+            let bound = if row.unit == "°" { DEFAULT_USEFUL_ANGLE_DEG } else { DEFAULT_USEFUL_LENGTH_UM };
+            if sigma > bound {
+                row.determined = false;
+                row.reason =
+                    Some(format!("the traces disagree: σ over the traces {sigma:.3} {} (jackknife)", row.unit));
+                row.sigma = None;
+            }
+        }
+    }
+}
+
+/// No parameter is determined by a fit that does not fit, nor one that tied branches disagree on.
+fn withhold_undetermined(rows: &mut [ParameterRow], fit: &FitCheck) {
+    for row in rows.iter_mut() {
+        let reason = match fit.verdict {
+            Verdict::DoesNotFit => Some(format!(
+                "the model does not fit these data ({:.2}σ rms > {:.2}σ)",
+                fit.rms_sigma, fit.threshold_sigma
+            )),
+            Verdict::Ambiguous if fit.ambiguous_parameters.contains(&row.name) => {
+                let i = PARAMETER_NAMES.iter().position(|(n, _)| *n == row.name).unwrap_or(0);
+                let values: Vec<String> = std::iter::once(0)
+                    .chain(fit.tied_branches.iter().copied())
+                    .filter_map(|b| fit.branches.get(b))
+                    .map(|b| format!("{:.4}", b.extrinsics.to_array()[i]))
+                    .collect();
+                Some(format!("tied branches disagree: {} {}", values.join(" or "), row.unit))
+            }
+            _ => None,
+        };
+        if let Some(reason) = reason {
+            row.determined = false;
+            row.sigma = None;
+            row.reason = Some(reason);
+        }
+    }
 }
 
 /// The validation motions planned with the nominal extrinsics (before) and with `identified`

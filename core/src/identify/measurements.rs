@@ -40,6 +40,10 @@ pub struct ExtractOptions {
     pub gap_across_pauses: bool,
     /// Track motions with the model's fringe shape ([`AnalyseOptions::shaped`]).
     pub shaped: bool,
+    /// At most this many fringe amplitudes per trace, evenly spread along it (`None`: all). A
+    /// rotation about the beam at a lateral offset runs through hundreds of fringes at an
+    /// almost constant tilt: its amplitudes add little and cost the fit a power model each.
+    pub max_amplitudes_per_trace: Option<usize>,
 }
 
 /// Shortest pause between two motions at the same pose that gives a gap change across it (s):
@@ -57,6 +61,7 @@ impl Default for ExtractOptions {
             amplitude_neighbours: false,
             gap_across_pauses: false,
             shaped: false,
+            max_amplitudes_per_trace: None,
         }
     }
 }
@@ -196,18 +201,31 @@ fn traced(
             }
             if label.starts_with("tilt scan") || (options.amplitudes_from_rotations && turns) {
                 let half_fringe_nm = wavelength_nm / (4.0 * model.n_air);
-                out.extend(amplitudes(
+                let found = amplitudes(
                     trace,
                     &m.track.dl_nm,
                     half_fringe_nm,
                     group,
                     wavelength_nm,
                     options.amplitude_neighbours,
-                ));
+                );
+                out.extend(evenly_thinned(found, options.max_amplitudes_per_trace));
             }
         }
     }
     Ok(Traced { observations: out, free_start, ends })
+}
+
+/// At most `max` of `v`, evenly spread (the first and the last kept).
+fn evenly_thinned<T>(v: Vec<T>, max: Option<usize>) -> Vec<T> {
+    match max {
+        Some(m) if v.len() > m && m >= 2 => {
+            let n = v.len();
+            let keep: Vec<usize> = (0..m).map(|k| k * (n - 1) / (m - 1)).collect();
+            v.into_iter().enumerate().filter(|(i, _)| keep.contains(i)).map(|(_, x)| x).collect()
+        }
+        _ => v,
+    }
 }
 
 /// Fringe amplitude (half peak-to-peak between neighbouring extrema) along a trace, at the

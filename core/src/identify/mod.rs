@@ -9,8 +9,12 @@ pub mod calibration;
 pub mod design;
 pub mod joint;
 pub mod measurements;
+pub mod multistart;
 pub mod observability;
 pub mod paper;
+pub mod signs;
+pub mod start;
+pub mod verdict;
 
 use crate::measure::PhaseModel;
 use crate::model::effects::Effect;

@@ -12,6 +12,8 @@
 //! nm, seconds. The shipped plans ([`STRATEGY1_RON`], [`STRATEGY2_RON`]) are the paper's two
 //! measurement strategies (SPEC section 4).
 
+pub mod random;
+
 use crate::files::{self, FileError};
 use crate::model::kinematics::{Chain, LimitViolation};
 use crate::model::robot::{JointType, RobotDescription};
@@ -20,15 +22,15 @@ use std::fmt;
 use std::path::Path;
 
 /// The paper's strategy 1 (translations only), embedded.
-pub const STRATEGY1_RON: &str = include_str!("../../assets/plans/strategy1.ron");
+pub const STRATEGY1_RON: &str = include_str!("../../../assets/plans/strategy1.ron");
 /// The paper's strategy 2 (rotations q4, q5), embedded.
-pub const STRATEGY2_RON: &str = include_str!("../../assets/plans/strategy2.ron");
+pub const STRATEGY2_RON: &str = include_str!("../../../assets/plans/strategy2.ron");
 /// The measurements the paper lacks (tilt scans, absolute gaps at several poses, rotations at
 /// other gaps), for the joint estimate.
-pub const JOINT_EXTRAS_RON: &str = include_str!("../../assets/plans/joint-extras.ron");
+pub const JOINT_EXTRAS_RON: &str = include_str!("../../../assets/plans/joint-extras.ron");
 /// The plan chosen by the experiment design ([`crate::identify::design`]) for the joint
 /// estimate on `table2-ideal` (its header says how it was generated).
-pub const OPTIMISED_RON: &str = include_str!("../../assets/plans/optimised.ron");
+pub const OPTIMISED_RON: &str = include_str!("../../../assets/plans/optimised.ron");
 
 /// Names of the six joint fields, in order, with their units (as in the trace CSV header).
 pub const JOINT_FIELDS: [&str; 6] = ["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"];

@@ -1,0 +1,357 @@
+//! The identification from every start the data allow: the bootstrap from absolute gaps at
+//! lateral poses, and the minima of the sign-free start fit ([`crate::identify::start`]). Owns the
+//! passes (analyse the traces with a model, estimate, analyse again) and the choice of branch.
+//!
+//! The fringe analysis needs a model: its motion hint gives each trace's direction (intensity is
+//! unchanged when the phase runs backwards), so a wrong start can analyse every trace into
+//! observations that a wrong estimate then fits. Each start is therefore carried through a whole
+//! pass, and the branch whose estimate explains its own observations best wins; branches whose
+//! χ² tie are reported, not silently dropped.
+
+use crate::identify::joint::{self, JointEstimate, JointOptions};
+use crate::identify::measurements::{observations_from_traces, ExtractOptions, Extracted};
+use crate::identify::start::{same_branch, start_branches, travels};
+use crate::identify::verdict::{BranchSummary, TIE_DELTA_CHI2};
+use crate::identify::{paper, Observation, ObservationKind};
+use crate::measure::PhaseModel;
+use crate::model::extrinsics::Extrinsics;
+use crate::trace::Trace;
+
+/// Which identifier.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// The paper's steps A, B, C on strategies 1 and 2.
+    Paper,
+    /// Every parameter from every measurement at once, with tilt scans and absolute gaps.
+    Joint,
+}
+
+/// A start of the identification.
+#[derive(Debug, Clone)]
+pub struct Start {
+    /// Where it comes from ("absolute gaps", "fringe travel 1", …).
+    pub name: String,
+    /// The extrinsics to analyse the traces with first.
+    pub extrinsics: Extrinsics,
+}
+
+/// Start-fit minima carried into a pass: at most this many, and only those whose cost is within
+/// [`START_KEEP_FACTOR`] of the best (plus [`START_KEEP_MARGIN`]).
+const MAX_TRAVEL_STARTS: usize = 6;
+const START_KEEP_FACTOR: f64 = 3.0;
+const START_KEEP_MARGIN: f64 = 30.0;
+
+/// Cost added per trace a branch cannot analyse (the beam misses the lamella in its model): a
+/// branch must not win by dropping the data it cannot explain.
+const SKIPPED_TRACE_COST: f64 = 100.0;
+
+/// The starts the data allow, without duplicates: the bootstrap from at least three absolute
+/// gaps (the lamella normal from gap differences between poses, and the gap), then the minima
+/// of the sign-free start fit.
+pub fn starting_points(nominal: &PhaseModel, motions: &[Trace], gaps: &[Observation]) -> Vec<Start> {
+    let mut starts: Vec<Start> = Vec::new();
+    if gaps.len() >= 3 {
+        let boot = JointOptions { free: [true, true, false, false, false, false, true, false], ..Default::default() };
+        let est = joint::estimate(nominal, gaps, &nominal.extrinsics, &boot);
+        if est.converged {
+            starts.push(Start { name: "absolute gaps".into(), extrinsics: est.extrinsics });
+        }
+    }
+    let wavelength_nm = motions.iter().find_map(|t| t.wavelength_nm.first().copied()).unwrap_or(1560.0);
+    let branches = start_branches(nominal, &travels(motions, nominal.n_air), gaps, wavelength_nm);
+    if let Some(best) = branches.first().map(|b| b.chi2) {
+        let keep = START_KEEP_FACTOR * best + START_KEEP_MARGIN;
+        for b in branches.iter().filter(|b| b.chi2 <= keep).take(MAX_TRAVEL_STARTS) {
+            if !starts.iter().any(|s| same_branch(&s.extrinsics, &b.extrinsics)) {
+                let name = format!("fringe travel {}", starts.len() + 1);
+                starts.push(Start { name, extrinsics: b.extrinsics });
+            }
+        }
+    }
+    if starts.is_empty() {
+        starts.push(Start { name: "nominal design".into(), extrinsics: nominal.extrinsics });
+    }
+    starts
+}
+
+/// What one branch of [`identify`] found.
+#[derive(Debug, Clone)]
+pub struct Identification {
+    /// The estimate with its Jacobian and residuals.
+    pub estimate: JointEstimate,
+    /// The observations it used.
+    pub observations: Vec<Observation>,
+    /// Paper mode: step A's details.
+    pub step_a: Option<paper::StepA>,
+    /// Traces that gave no observation (label, why).
+    pub skipped: Vec<(String, String)>,
+    /// Every branch run, best first (the chosen one first).
+    pub branches: Vec<BranchSummary>,
+    /// The branches whose χ² ties with the chosen one's (indices into `branches`, never 0).
+    pub tied: Vec<usize>,
+    /// Traces whose observations were weighted down as outliers, with the factor their σ were
+    /// multiplied by ([`downweight_outliers`]).
+    pub downweighted: Vec<(String, f64)>,
+}
+
+impl Identification {
+    /// The normalised residuals with every observation's σ as the analysis gave it (before any
+    /// outlier was weighted down): what the verdict on the fit reads.
+    pub fn raw_normalised_residuals(&self) -> Vec<f64> {
+        self.observations
+            .iter()
+            .zip(&self.estimate.residuals)
+            .map(|(o, r)| {
+                let f = self.downweighted.iter().find(|d| d.0 == o.label).map_or(1.0, |d| d.1);
+                r / (o.sigma / f)
+            })
+            .collect()
+    }
+}
+
+impl Identification {
+    /// χ² of the branch, with [`SKIPPED_TRACE_COST`] per trace it could not analyse.
+    fn cost(&self) -> f64 {
+        self.estimate.normalised_residuals.iter().map(|r| r * r).sum::<f64>()
+            + SKIPPED_TRACE_COST * self.skipped.len() as f64
+    }
+
+    fn summary(&self, start: &str) -> BranchSummary {
+        let n = self.estimate.normalised_residuals.len().max(1);
+        let chi2: f64 = self.estimate.normalised_residuals.iter().map(|r| r * r).sum();
+        BranchSummary {
+            start: start.to_string(),
+            extrinsics: self.estimate.extrinsics,
+            chi2,
+            rms_sigma: (chi2 / n as f64).sqrt(),
+            skipped_traces: self.skipped.len(),
+        }
+    }
+}
+
+/// Fringe amplitudes kept per rotation: a ±4° tilt scan has about 30.
+const AMPLITUDES_PER_TRACE: usize = 40;
+
+/// How the identification reads traces: every rotation is also a tilt scan (its fringe
+/// amplitudes, from three extrema in a row, locate where the lamella faces the fiber), whatever
+/// its label says: a recording from elsewhere names its motions as it likes.
+pub fn extract_options() -> ExtractOptions {
+    ExtractOptions {
+        amplitudes_from_rotations: true,
+        amplitude_neighbours: true,
+        max_amplitudes_per_trace: Some(AMPLITUDES_PER_TRACE),
+        ..ExtractOptions::default()
+    }
+}
+
+/// A trace whose observations' residual rms exceeds this (σ) is an outlier: its tracking
+/// slipped or its motion is one the model cannot follow.
+pub const OUTLIER_TRACE_SIGMA: f64 = 1.5;
+
+/// The estimate again with each outlier trace's σ multiplied by its residual rms, so that one
+/// trace the analysis got wrong (a fringe slipped at a turning point, a motion in the dark)
+/// cannot drag the parameters while claiming its nominal σ. The verdict still reads the
+/// residuals at the analysis's σ ([`Identification::raw_normalised_residuals`]).
+fn downweight_outliers(nominal: &PhaseModel, id: Identification) -> Identification {
+    let labels: Vec<String> = id.observations.iter().map(|o| o.label.clone()).collect();
+    let per_trace = crate::identify::verdict::worst_traces(&labels, &id.estimate.normalised_residuals, usize::MAX);
+    let downweighted: Vec<(String, f64)> =
+        per_trace.into_iter().filter(|t| t.rms_sigma > OUTLIER_TRACE_SIGMA).map(|t| (t.label, t.rms_sigma)).collect();
+    if downweighted.is_empty() {
+        return id;
+    }
+    let mut observations = id.observations.clone();
+    for o in &mut observations {
+        if let Some(d) = downweighted.iter().find(|d| d.0 == o.label) {
+            o.sigma *= d.1;
+        }
+    }
+    let estimate = joint::estimate(nominal, &observations, &id.estimate.extrinsics, &JointOptions::default());
+    Identification { estimate, observations, downweighted, ..id }
+}
+
+fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
+    PhaseModel { extrinsics: e, ..base.clone() }
+}
+
+/// Identify from recorded traces. `nominal` is the model before calibration (design
+/// extrinsics); it also supplies the robot, optics and air. Every start of
+/// [`starting_points`] is carried through a first pass; in joint mode the branches whose χ²
+/// stays within reach of the best ([`PRUNE_FACTOR`]) get a second pass with their own
+/// estimate. The branch with the lowest χ² is returned, the others are kept in
+/// [`Identification::branches`].
+pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Identification, String> {
+    use rayon::prelude::*;
+    let (sweeps, motions): (Vec<Trace>, Vec<Trace>) = traces.iter().cloned().partition(crate::measure::is_sweep);
+    let swept = observations_from_traces(&sweeps, nominal, &extract_options());
+    if motions.is_empty() && swept.observations.is_empty() {
+        return Err("no trace could be analysed: nothing to identify from".into());
+    }
+    let starts = starting_points(nominal, &motions, &swept.observations);
+    // The first pass reads the sweeps as the nominal model analyses them: a sweep's gap depends
+    // on the tilt the model puts the lamella at in its pose (up to 0.3 µm between a square
+    // model and Table II's 1.1°), so there they count with that much uncertainty.
+    let loose = loosen(&swept, FIRST_PASS_GAP_SIGMA_UM);
+    let mut runs: Vec<(String, Identification)> =
+        starts.par_iter().map(|s| (s.name.clone(), one_pass(mode, nominal, &loose, &motions, s.extrinsics))).collect();
+    runs.sort_by(|a, b| a.1.cost().total_cmp(&b.1.cost()));
+    if mode == Mode::Joint {
+        let reach = PRUNE_FACTOR * runs[0].1.cost() + PRUNE_MARGIN;
+        runs = runs
+            .into_par_iter()
+            .map(|(name, first)| {
+                if first.cost() > reach {
+                    return (name, first);
+                }
+                // Second pass: sweeps and motions analysed with the first pass's estimate.
+                let e = first.estimate.extrinsics;
+                let swept = observations_from_traces(&sweeps, &model_with(nominal, e), &extract_options());
+                (name, one_pass(mode, nominal, &swept, &motions, e))
+            })
+            .collect();
+        runs.sort_by(|a, b| a.1.cost().total_cmp(&b.1.cost()));
+    }
+    let (best_name, mut best) = runs.remove(0);
+    let best_cost = best.cost();
+    let mut branches = vec![best.summary(&best_name)];
+    if mode == Mode::Joint {
+        best = downweight_outliers(nominal, best);
+    }
+    let mut tied = Vec::new();
+    for (name, run) in &runs {
+        let s = run.summary(name);
+        if run.cost() - best_cost < TIE_DELTA_CHI2
+            && !same_branch(&s.extrinsics, &branches[0].extrinsics)
+            && ties_on_the_same_data(nominal, &best, &run.estimate.extrinsics)
+        {
+            tied.push(branches.len());
+        }
+        branches.push(s);
+    }
+    best.branches = branches;
+    best.tied = tied;
+    Ok(best)
+}
+
+/// Whether `other` fits the chosen branch's own observations within [`TIE_DELTA_CHI2`] of its
+/// estimate. Each branch analyses the traces with its own model, so two χ² of different
+/// branches are of different data: a runner-up that fits its own analysis as well as the best
+/// fits its own may still be far from the best's data.
+fn ties_on_the_same_data(nominal: &PhaseModel, best: &Identification, other: &Extrinsics) -> bool {
+    let cross = joint::evaluate(nominal, &best.observations, other, &JointOptions::default());
+    let chi2: f64 = cross.normalised_residuals.iter().map(|r| r * r).sum();
+    let own: f64 = best.estimate.normalised_residuals.iter().map(|r| r * r).sum();
+    chi2 - own < TIE_DELTA_CHI2
+}
+
+/// σ floor of the absolute gaps in the first pass (µm): what the nominal model's tilt can move
+/// a sweep's analysis by.
+const FIRST_PASS_GAP_SIGMA_UM: f64 = 0.5;
+
+/// Branches whose first-pass cost exceeds `PRUNE_FACTOR · best + PRUNE_MARGIN` get no second
+/// pass: their start led the analysis astray.
+const PRUNE_FACTOR: f64 = 3.0;
+const PRUNE_MARGIN: f64 = 100.0;
+
+/// The observations with each absolute gap's σ raised to at least `floor_um`.
+fn loosen(swept: &Extracted, floor_um: f64) -> Extracted {
+    let mut out = swept.clone();
+    for o in &mut out.observations {
+        if matches!(o.kind, ObservationKind::AbsoluteGap { .. }) {
+            o.sigma = o.sigma.hypot(floor_um);
+        }
+    }
+    out
+}
+
+/// One pass from `current`: the motions analysed with its model, then the mode's estimate from
+/// the sweeps' and the motions' observations.
+fn one_pass(
+    mode: Mode,
+    nominal: &PhaseModel,
+    swept: &Extracted,
+    motions: &[Trace],
+    current: Extrinsics,
+) -> Identification {
+    let model = model_with(nominal, current);
+    let mut extracted = observations_from_traces(motions, &model, &extract_options());
+    extracted.skipped.extend(swept.skipped.iter().cloned());
+    let mut obs = swept.observations.clone();
+    obs.append(&mut extracted.observations);
+    let (estimate, step_a, observations) = match mode {
+        Mode::Joint => (joint::estimate(nominal, &obs, &current, &JointOptions::default()), None, obs),
+        Mode::Paper => {
+            let (est, a, translations) = paper_estimate(nominal, &obs, &current);
+            (est, Some(a), translations)
+        }
+    };
+    Identification {
+        estimate,
+        observations,
+        step_a,
+        skipped: extracted.skipped,
+        branches: vec![],
+        tied: vec![],
+        downweighted: vec![],
+    }
+}
+
+/// The paper's steps A and B on the translations and rotations of `obs`, with the joint
+/// machinery's uncertainties evaluated at the result on step A's data.
+fn paper_estimate(
+    nominal: &PhaseModel,
+    obs: &[Observation],
+    current: &Extrinsics,
+) -> (JointEstimate, paper::StepA, Vec<Observation>) {
+    let translations: Vec<Observation> = obs.iter().filter(|o| is_translation(o)).cloned().collect();
+    let rotations: Vec<Observation> = obs.iter().filter(|o| is_rotation(o)).cloned().collect();
+    let a = paper::step_a_with(&nominal.chain, &translations, current, true);
+    let b = paper::step_b(&nominal.chain, &rotations, a.angles_deg);
+    let e = Extrinsics {
+        beta_et_deg: a.angles_deg[0],
+        theta_et_deg: a.angles_deg[1],
+        beta_wf_deg: a.angles_deg[2],
+        theta_wf_deg: a.angles_deg[3],
+        z_et_um: b.origins_um[0],
+        x_wf_um: b.origins_um[1],
+        y_wf_um: b.origins_um[2],
+        z_wf_um: b.origins_um[3],
+    };
+    // Step A's data only: step B reads the fringes as the change of L along the beam where
+    // they measure the perpendicular distance (a bias of |L|·(1 − cos γ), µm over the 4°
+    // rotations), so its residuals say nothing about the noise, and the origins stay
+    // undetermined by the data the method can trust. Evaluated with the start's origins
+    // (translations barely depend on them), then the step B origins put back for the report.
+    let at = Extrinsics {
+        z_et_um: current.z_et_um,
+        x_wf_um: current.x_wf_um,
+        y_wf_um: current.y_wf_um,
+        z_wf_um: current.z_wf_um,
+        ..e
+    };
+    let mut est = joint::evaluate(nominal, &translations, &at, &JointOptions::default());
+    est.extrinsics = e;
+    est.converged = a.converged;
+    est.termination = format!("step A: {}", if a.converged { "converged" } else { "did not converge" });
+    (est, a, translations)
+}
+
+fn joints_changed(o: &Observation) -> Option<[bool; 6]> {
+    match o.kind {
+        ObservationKind::GapChange { from_display, to_display, .. } => {
+            Some(std::array::from_fn(|i| (from_display[i] - to_display[i]).abs() > 1e-9))
+        }
+        _ => None,
+    }
+}
+
+/// A gap change over a translation: only prismatic joints moved.
+pub fn is_translation(o: &Observation) -> bool {
+    joints_changed(o).is_some_and(|c| c[..3].iter().any(|&x| x) && !c[3..].iter().any(|&x| x))
+}
+
+/// A gap change over a rotation: only revolute joints moved.
+pub fn is_rotation(o: &Observation) -> bool {
+    joints_changed(o).is_some_and(|c| c[3..].iter().any(|&x| x) && !c[..3].iter().any(|&x| x))
+}

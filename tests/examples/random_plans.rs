@@ -1,0 +1,93 @@
+//! Random plans through `simulate` then `calibrate --traces`: the success rate, the error of each
+//! determined parameter in σ, the validation on the true bench.
+//!
+//!     cargo run --release -p photorobot-e2e --example random_plans -- [PLANS] [--validate]
+//!
+//! PLANS random plans (default 50) cycle through the plan families, on table2-ideal and on
+//! femto-lab with its hidden effects switched off (its noise kept) alternately, plan seeds from 1000 on and bench seeds from 1 on.
+//!
+//!     cargo run --release -p photorobot-e2e --example random_plans -- write FAMILY SEED FILE
+//!
+//! writes one random plan (family `pool`, `paper-one-sweep`, `other-offsets`, `rotations-only`,
+//! `chained`) to a plan file, to run with `photorobot simulate --plan FILE`.
+
+use photorobot_core::model::extrinsics::PARAMETER_NAMES;
+use photorobot_core::plan::random::Family;
+use photorobot_e2e::random::{outcome_line, run_random_plan, PlanOutcome};
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("write") {
+        write_plan(&args[1..]);
+        return;
+    }
+    let plans: usize = args.iter().find_map(|a| a.parse().ok()).unwrap_or(50);
+    let validate = args.iter().any(|a| a == "--validate");
+    let mut outcomes: Vec<PlanOutcome> = Vec::new();
+    for k in 0..plans {
+        let family = Family::ALL[k % Family::ALL.len()];
+        let bench = if (k / Family::ALL.len()) % 2 == 0 { "table2-ideal" } else { "femto-lab-clean" };
+        let t0 = std::time::Instant::now();
+        let o = run_random_plan(bench, family, 1000 + k as u64, 1 + k as u64, validate);
+        println!("{}  ({:.0} s)", outcome_line(&o), t0.elapsed().as_secs_f64());
+        outcomes.push(o);
+    }
+    summary(&outcomes);
+}
+
+fn write_plan(args: &[String]) {
+    let [family, seed, file] = args else {
+        eprintln!("usage: random_plans write FAMILY SEED FILE");
+        std::process::exit(2);
+    };
+    let Some(family) = Family::ALL.into_iter().find(|f| f.name() == family) else {
+        eprintln!("unknown family {family}");
+        std::process::exit(2);
+    };
+    let robot = photorobot_core::model::robot::RobotDescription::femto_6dof();
+    let pool =
+        photorobot_core::identify::design::candidate_pool(&robot, &photorobot_core::plan::MotionLimits::default());
+    let plan = photorobot_core::plan::random::random_plan(family, seed.parse().expect("a seed"), &pool);
+    plan.save(std::path::Path::new(file)).expect("the plan written");
+}
+
+fn summary(outcomes: &[PlanOutcome]) {
+    let n = outcomes.len();
+    let count = |v: &str| outcomes.iter().filter(|o| o.verdict == v).count();
+    let wrong = outcomes.iter().filter(|o| o.confidently_wrong()).count();
+    println!("\n{n} random plans:");
+    println!(
+        "  fits (a calibration):           {:>3} ({:.0} %)",
+        count("fits"),
+        100.0 * count("fits") as f64 / n as f64
+    );
+    println!("  does not fit (refused):         {:>3}", count("does_not_fit"));
+    println!("  ambiguous (ties reported):      {:>3}", count("ambiguous"));
+    println!(
+        "  no report:                      {:>3}",
+        outcomes.iter().filter(|o| o.verdict.starts_with("error")).count()
+    );
+    println!("  confidently wrong (determined, beyond 3σ): {wrong}");
+    println!("\nerror of the determined parameters, in σ (over the plans that determine them):");
+    for (name, _) in PARAMETER_NAMES {
+        let e: Vec<f64> =
+            outcomes.iter().flat_map(|o| o.errors_sigma.iter().filter(|x| x.0 == name).map(|x| x.1)).collect();
+        if e.is_empty() {
+            println!("  {name:<9} never determined");
+            continue;
+        }
+        let rms = (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+        let worst = e.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        println!("  {name:<9} determined in {:>3} plans, rms {rms:.2}σ, worst {worst:.2}σ", e.len());
+    }
+    let mut by_motion: Vec<(String, f64)> = Vec::new();
+    for (m, v) in outcomes.iter().flat_map(|o| o.validation_nm.iter()) {
+        match by_motion.iter_mut().find(|x| &x.0 == m) {
+            Some(x) => x.1 = x.1.max(*v),
+            None => by_motion.push((m.clone(), *v)),
+        }
+    }
+    for (m, v) in by_motion {
+        println!("  validation {m:<28} worst {v:.1} nm over the accepted plans");
+    }
+}
