@@ -1,10 +1,11 @@
 //! Random plans through `simulate` then `calibrate --traces`: the success rate, the error of each
 //! determined parameter in σ, the validation on the true bench.
 //!
-//!     cargo run --release -p photorobot-e2e --example random_plans -- [PLANS] [--validate]
+//!     cargo run --release -p photorobot-e2e --example random_plans -- [PLANS] [--from K] [--validate]
 //!
-//! PLANS random plans (default 50) cycle through the plan families, on table2-ideal and on
-//! femto-lab with its hidden effects switched off (its noise kept) alternately, plan seeds from 1000 on and bench seeds from 1 on.
+//! PLANS random plans (default 50; from the K-th with --from) cycle through the plan families,
+//! on table2-ideal and on femto-lab with its hidden effects switched off (its noise kept)
+//! alternately, plan seeds from 1000 on and bench seeds from 1 on.
 //!
 //!     cargo run --release -p photorobot-e2e --example random_plans -- write FAMILY SEED FILE
 //!
@@ -21,10 +22,16 @@ fn main() {
         write_plan(&args[1..]);
         return;
     }
-    let plans: usize = args.iter().find_map(|a| a.parse().ok()).unwrap_or(50);
+    let from: usize = args.iter().position(|a| a == "--from").and_then(|i| args.get(i + 1)?.parse().ok()).unwrap_or(0);
+    let plans: usize = args
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i == 0 || args[i - 1] != "--from")
+        .find_map(|(_, a)| a.parse().ok())
+        .unwrap_or(50);
     let validate = args.iter().any(|a| a == "--validate");
     let mut outcomes: Vec<PlanOutcome> = Vec::new();
-    for k in 0..plans {
+    for k in from..from + plans {
         let family = Family::ALL[k % Family::ALL.len()];
         let bench = if (k / Family::ALL.len()) % 2 == 0 { "table2-ideal" } else { "femto-lab-clean" };
         let t0 = std::time::Instant::now();
