@@ -77,7 +77,7 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
     let e = Extrinsics::load(&dir.path().join("extrinsics.ron")).unwrap();
     assert!((e.beta_et_deg - value("beta_et")).abs() < 1e-12);
     assert!(dir.path().join("report.json").exists());
-    // The session file (issue 7): every trace referenced and checked, the calibration as printed.
+    // The session file: every trace referenced and checked, the calibration as printed.
     let session = photorobot_core::session::Session::load(dir.path()).unwrap();
     assert!(session.measured());
     assert_eq!(session.plans.len(), 3);

@@ -91,14 +91,13 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
     assert!(class.contains(&name), "{name}");
     let est = first["estimate"].as_f64().unwrap();
     assert!((est.abs() - 20.0).abs() < 5.0, "{name} = {est} µm");
-    // And nothing else: until the re-analysis tracked with the model's fringe shape (stop 23),
-    // a spurious joint scale error q1 of ~500 ppm followed the pivot here (1290 ppm before stop
-    // 22): the data-estimated fringe shape left the q4 rotation at q1 = 150 µm 7-9.5 nm off.
+    // And nothing else: without the re-analysis tracked with the model's fringe shape, a
+    // spurious joint scale error q1 of ~500 ppm followed the pivot here: the data-estimated
+    // fringe shape left the q4 rotation at q1 = 150 µm 7-9.5 nm off.
     let names: Vec<&str> = v["effects"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
     assert_eq!(names, [name], "only the pivot");
     // The residual falls by more than a factor of 5 (the verdict itself is not asserted: the
-    // absolute gaps of the virtual bench's sweeps keep a few-σ residual that the model lacks;
-    // see the report of issue 6).
+    // absolute gaps of the virtual bench's sweeps keep a few-σ residual that the model lacks).
     let (before, after) = (v["residual_rms_before_nm"].as_f64().unwrap(), v["residual_rms_after_nm"].as_f64().unwrap());
     assert!(after * 5.0 < before, "{before} → {after} nm");
     // The extended model in use: the validation motions planned through the IGM with the effect

@@ -1,4 +1,4 @@
-//! End to end (issue 7): traces written by the virtual bench identify through `photorobot
+//! End to end: traces written by the virtual bench identify through `photorobot
 //! calibrate --traces` into a session; the session loads and re-identifies to identical results;
 //! the same traces renamed and re-mapped into another acquisition system's columns and units
 //! identify to the same results; `photorobot report` turns the session into one self-contained
