@@ -1,8 +1,8 @@
 //! Validation with and without the named effects: the validation motions are planned through
 //! the IGM of the calibrated model (the nominal robot and the calibrated extrinsics) and through
 //! the IGM of the extended model (the robot with the geometric effects the diagnosis added, and
-//! the extrinsics refitted with them), run on the bench, and both measured with the extended model. The extended model's
-//! reversal errors and drift are compensated in its plan ([`crate::validate::Compensation`]):
+//! the extrinsics refitted with them), run on the bench, and both measured with the extended
+//! model. The extended model's reversal errors and drift are compensated in its plan ([`crate::validate::Compensation`]):
 //! its commands lead the wanted poses by half of each stage's play in its direction of travel
 //! ([`crate::validate::plan_with_play`]), and its waypoints move along the beam against the
 //! drift expected when the bench reaches them.
