@@ -7,6 +7,7 @@
 
 use crate::bench::{run_plan, Bench, RunControl};
 use crate::identify::joint::JointEstimate;
+use crate::identify::multistart::model_with;
 pub use crate::identify::multistart::{identify, Identification, Mode};
 use crate::identify::observability::IdentifiabilityReport;
 use crate::identify::signs::{translation_signs, TranslationSign};
@@ -174,10 +175,6 @@ pub fn measure(bench: &mut dyn Bench, plans: &[Plan]) -> Result<(Vec<Trace>, f64
         run.outcome.map_err(|e| format!("plan {}: {e}", p.name))?;
     }
     Ok((traces, duration))
-}
-
-fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
-    PhaseModel { extrinsics: e, ..base.clone() }
 }
 
 /// The identifiability report of a joint estimate: its weighted Jacobian and residuals, the

@@ -171,7 +171,8 @@ fn downweight_outliers(nominal: &PhaseModel, id: Identification) -> Identificati
     Identification { estimate, observations, downweighted, ..id }
 }
 
-fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
+/// `base` with extrinsics `e`.
+pub(crate) fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
     PhaseModel { extrinsics: e, ..base.clone() }
 }
 
