@@ -89,6 +89,17 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
     }
     assert_eq!(calibration.extrinsics, e);
 
+    // The diagnosis of this clean session, as a user runs it: nothing named, and the residual
+    // before and after computed on the same analysis of the same traces.
+    let mut out = Vec::new();
+    let argv = ["photorobot", "diagnose", dir.path().to_str().unwrap(), "--json"];
+    run(argv, &mut out).unwrap();
+    let diagnosis: Value = serde_json::from_slice(&out).unwrap();
+    eprintln!("diagnosis: {} {}", diagnosis["verdict"], diagnosis["effects"]);
+    assert_eq!(diagnosis["verdict"], "none", "{}", diagnosis["steps"]);
+    assert_eq!(diagnosis["effects"].as_array().map(Vec::len), Some(0));
+    assert_eq!(diagnosis["residual_rms_before_nm"], diagnosis["residual_rms_after_nm"]);
+
     // Paper mode on the same bench's strategy 1 and 2 traces (identification only): the lamella
     // angles within 3σ, and what the paper's data cannot determine flagged (SPEC 6.4).
     let s12 = tempfile::tempdir().unwrap();

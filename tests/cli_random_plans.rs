@@ -10,10 +10,12 @@ use photorobot_core::plan::random::Family;
 use photorobot_e2e::random::{outcome_line, run_random_plan};
 use serde_json::Value;
 
-/// Plans of four families on both benches: right or refused, never confidently wrong; on
-/// table2-ideal the accepted ones validate on the true bench within 10 nm (circle) and 20 nm
-/// (rotations). On femto-lab (its hidden effects off) the stage and goniometer noise put the
-/// validation floor near 30 nm, so only the values are scored there.
+/// Plans of four families on both benches: right or refused, never confidently wrong. Every
+/// validation motion the report's forecast promises (95 % bound within 10 nm for the circle,
+/// 20 nm for the rotations) keeps the true gap within its target; on table2-ideal the fringes
+/// show it too (on femto-lab, its hidden effects off, the stage and goniometer noise put the
+/// fringes' floor near 30 nm). A motion the forecast does not promise is the report saying the
+/// data cannot tell.
 #[test]
 fn random_plans_are_right_or_refused() {
     let cases = [
@@ -26,16 +28,20 @@ fn random_plans_are_right_or_refused() {
     let mut accepted = 0;
     for (bench, family, seed) in cases {
         let bench_seed = seed - 999;
-        let o = run_random_plan(bench, family, seed, bench_seed, bench == "table2-ideal");
+        let o = run_random_plan(bench, family, seed, bench_seed, true);
         eprintln!("{}", outcome_line(&o));
         assert!(!o.confidently_wrong(), "{}", outcome_line(&o));
         assert!(!o.verdict.starts_with("error"), "{}", outcome_line(&o));
         assert_eq!(o.succeeded, o.verdict == "fits", "exit status and verdict: {}", outcome_line(&o));
         if o.verdict == "fits" {
             accepted += 1;
-            for (motion, nm) in &o.validation_nm {
+            assert!(o.validation_wrongly_promised().is_empty(), "{}", outcome_line(&o));
+            for (motion, figure_nm, _) in &o.validation_nm {
                 let limit = if motion.starts_with("circle") { 10.0 } else { 20.0 };
-                assert!(*nm <= limit, "{motion}: {nm} nm: {}", outcome_line(&o));
+                let promised = o.forecast_nm.iter().any(|f| &f.0 == motion && f.1 <= f.2);
+                if promised && bench == "table2-ideal" {
+                    assert!(*figure_nm <= limit, "{motion}: {figure_nm} nm: {}", outcome_line(&o));
+                }
             }
         }
     }

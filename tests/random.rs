@@ -5,11 +5,11 @@
 
 use photorobot_app::cli::run;
 use photorobot_core::bench::{BenchPreset, VirtualBench};
-use photorobot_core::identify::calibration::validation_rows;
 use photorobot_core::identify::design::candidate_pool;
 use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use photorobot_core::plan::random::{random_plan, Family};
+use photorobot_core::validate::{run_validation, waypoints, ValidationMotion};
 use serde_json::Value;
 
 /// How a random plan's calibration came out.
@@ -32,12 +32,30 @@ pub struct PlanOutcome {
     pub errors_sigma: Vec<(String, f64)>,
     /// Determined parameters more than 3σ from the truth.
     pub wrong: Vec<String>,
-    /// Peak-to-peak gap variation (nm) of the validation motions planned with the result, run on
-    /// the true bench, when asked for and the fit was accepted.
-    pub validation_nm: Vec<(String, f64)>,
+    /// Per validation motion planned with the result and run on the true bench (when asked for
+    /// and the fit was accepted): (motion, the figure the fringes give, the true gap's peak to
+    /// peak along the planned joints, nm). The second is what the calibration leaves; the first
+    /// adds the stage noise and the tracking's floor.
+    pub validation_nm: Vec<(String, f64, f64)>,
+    /// The report's validation forecast: (motion, 95 % bound on the true gap's peak to peak,
+    /// target, nm).
+    pub forecast_nm: Vec<(String, f64, f64)>,
 }
 
 impl PlanOutcome {
+    /// Validation motions whose true gap went beyond the target although the forecast said the
+    /// extrinsics were good enough for it: a validation promised and not kept.
+    pub fn validation_wrongly_promised(&self) -> Vec<String> {
+        self.validation_nm
+            .iter()
+            .filter(|(m, _, true_nm)| {
+                let f = self.forecast_nm.iter().find(|f| &f.0 == m);
+                f.is_some_and(|f| *true_nm > f.2 && f.1 <= f.2) || (f.is_none() && true_nm.is_finite())
+            })
+            .map(|(m, _, t)| format!("{m}: true gap {t:.1} nm"))
+            .collect()
+    }
+
     /// Confidently wrong: a parameter reported determined lies beyond 3σ of the truth.
     pub fn confidently_wrong(&self) -> bool {
         !self.wrong.is_empty()
@@ -103,6 +121,7 @@ pub fn run_random_plan(bench: &str, family: Family, plan_seed: u64, bench_seed: 
         errors_sigma: vec![],
         wrong: vec![],
         validation_nm: vec![],
+        forecast_nm: vec![],
     };
     let Ok(doc) = serde_json::from_str::<Value>(&text) else {
         outcome.verdict = format!("error: {}", text.lines().last().unwrap_or("no output"));
@@ -110,6 +129,10 @@ pub fn run_random_plan(bench: &str, family: Family, plan_seed: u64, bench_seed: 
     };
     outcome.verdict = doc["fit"]["verdict"].as_str().unwrap_or("missing").to_string();
     outcome.rms_sigma = doc["residual_rms_sigma"].as_f64().unwrap_or(f64::NAN);
+    for f in doc["validation_forecast"].as_array().into_iter().flatten() {
+        let nm = |k: &str| f[k].as_f64().unwrap_or(f64::NAN);
+        outcome.forecast_nm.push((f["motion"].as_str().unwrap_or("?").to_string(), nm("expected_nm"), nm("target_nm")));
+    }
     outcome.observations = doc["observations"].as_u64().unwrap_or(0) as usize;
     let truth = preset.truth.to_array();
     for (i, (name, _)) in PARAMETER_NAMES.iter().enumerate() {
@@ -131,17 +154,50 @@ pub fn run_random_plan(bench: &str, family: Family, plan_seed: u64, bench_seed: 
         let identified: Extrinsics = serde_json::from_value(doc["extrinsics"].clone()).expect("the extrinsics");
         let nominal = PhaseModel::of_preset(&preset, Extrinsics::nominal_design()).expect("the nominal model");
         let mut bench = VirtualBench::new(&preset, Some(bench_seed + 1000)).expect("the true bench");
-        for row in validation_rows(&mut bench, &nominal, &identified) {
-            outcome.validation_nm.push((row.motion, row.after_nm.unwrap_or(f64::NAN)));
+        let analysis = PhaseModel { extrinsics: identified, ..nominal };
+        let truth = PhaseModel::of_preset(&preset, preset.truth).expect("the true model");
+        for m in ValidationMotion::ALL {
+            let figure =
+                run_validation(&mut bench, &analysis, &identified, m, [0.0; 6]).map_or(f64::NAN, |f| f.peak_to_peak_nm);
+            let true_nm = true_peak_to_peak_nm(&truth, &analysis, &identified, m);
+            outcome.validation_nm.push((m.name().to_string(), figure, true_nm));
         }
     }
     outcome
 }
 
+/// Peak to peak (nm) of the true cavity length along validation motion `m` as planned with
+/// `identified` (its waypoints, and 8 points on each straight joint segment between them): what
+/// the calibration leaves on a robot without stage noise, which the fringe figure adds.
+fn true_peak_to_peak_nm(
+    truth: &PhaseModel,
+    planning: &PhaseModel,
+    identified: &Extrinsics,
+    m: ValidationMotion,
+) -> f64 {
+    let Ok(w) = waypoints(planning, identified, m, [0.0; 6], m.waypoint_count()) else { return f64::NAN };
+    let mut lengths_um = Vec::new();
+    for pair in w.windows(2) {
+        for k in 0..8 {
+            let f = k as f64 / 8.0;
+            let q: [f64; 6] = std::array::from_fn(|j| pair[0][j] + f * (pair[1][j] - pair[0][j]));
+            lengths_um.push(truth.gap_and_tilt(&q).map_or(f64::NAN, |g| g.0));
+        }
+    }
+    lengths_um.extend(w.last().and_then(|q| truth.gap_and_tilt(q)).map(|g| g.0));
+    let (lo, hi) = lengths_um.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    (hi - lo) * 1e3
+}
+
 /// One line of a table of outcomes.
 pub fn outcome_line(o: &PlanOutcome) -> String {
     let worst = o.errors_sigma.iter().map(|e| e.1.abs()).fold(0.0, f64::max);
-    let validation: Vec<String> = o.validation_nm.iter().map(|(m, v)| format!("{m} {v:.1}")).collect();
+    let forecast = |m: &str| o.forecast_nm.iter().find(|f| f.0 == m).map_or(f64::NAN, |f| f.1);
+    let validation: Vec<String> = o
+        .validation_nm
+        .iter()
+        .map(|(m, v, t)| format!("{m} {v:.1} (true gap {t:.1}, forecast ≤ {:.1})", forecast(m)))
+        .collect();
     format!(
         "{:<12} {:<16} plan {:>3} bench {:>3}  {:<13} {:>7.2}σ  {} determined, worst {:.1}σ{}{}",
         o.bench,

@@ -297,6 +297,13 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
             v.note.as_ref().map_or(String::new(), |n| format!("  ({n})"))
         )?;
     }
+    if !r.validation_forecast.is_empty() {
+        writeln!(out, "\nvalidation forecast (true gap, peak to peak, 95 % from the extrinsics' uncertainty):")?;
+        for f in &r.validation_forecast {
+            let word = if f.within_target() { "within" } else { "ABOVE" };
+            writeln!(out, "  {:<52} {:>8.1} nm  {word} its {:.0} nm target", f.motion, f.expected_nm, f.target_nm)?;
+        }
+    }
     print_signs(&r.translation_signs, out)?;
     for w in &r.warnings {
         writeln!(out, "warning: {w}")?;

@@ -95,7 +95,7 @@ impl PhaseModel {
 
     /// |L| (µm) and the tilt (rad) of the cavity at joints `q_display` (µm, °); None when the
     /// beam misses the lamella.
-    fn gap_and_tilt(&self, q_display: &[f64; 6]) -> Option<(f64, f64)> {
+    pub fn gap_and_tilt(&self, q_display: &[f64; 6]) -> Option<(f64, f64)> {
         let q = self.chain.description().q_from_display(q_display);
         let c = self.extrinsics.cavity(&self.chain.end_effector(&q)).ok()?;
         Some((c.length_um.abs(), c.tilt_rad))

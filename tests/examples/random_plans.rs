@@ -87,14 +87,47 @@ fn summary(outcomes: &[PlanOutcome]) {
         let worst = e.iter().map(|v| v.abs()).fold(0.0, f64::max);
         println!("  {name:<9} determined in {:>3} plans, rms {rms:.2}σ, worst {worst:.2}σ", e.len());
     }
-    let mut by_motion: Vec<(String, f64)> = Vec::new();
-    for (m, v) in outcomes.iter().flat_map(|o| o.validation_nm.iter()) {
-        match by_motion.iter_mut().find(|x| &x.0 == m) {
-            Some(x) => x.1 = x.1.max(*v),
-            None => by_motion.push((m.clone(), *v)),
+    let scored: usize = outcomes.iter().map(|o| o.errors_sigma.len()).sum();
+    let beyond = |k: f64| outcomes.iter().flat_map(|o| &o.errors_sigma).filter(|e| e.1.abs() > k).count();
+    println!(
+        "  {scored} determined parameters scored: {} beyond 3σ (a Gaussian puts {:.1} there), {} beyond 4σ",
+        beyond(3.0),
+        0.0027 * scored as f64,
+        beyond(4.0)
+    );
+    // Every validation run: (true gap, forecast, target), nm.
+    let runs: Vec<(f64, f64, f64)> = outcomes
+        .iter()
+        .flat_map(|o| {
+            o.validation_nm.iter().map(move |(m, _, t)| {
+                let f = o.forecast_nm.iter().find(|f| &f.0 == m);
+                (*t, f.map_or(f64::NAN, |f| f.1), f.map_or(f64::NAN, |f| f.2))
+            })
+        })
+        .collect();
+    let count = |keep: &dyn Fn(&(f64, f64, f64)) -> bool| runs.iter().filter(|r| keep(r)).count();
+    println!(
+        "\nvalidation motions run on the accepted plans: {}; promised by the forecast {}, of which kept {}; \
+         true gap beyond target {}, of which forecast beyond target {}",
+        runs.len(),
+        count(&|r| r.1 <= r.2),
+        count(&|r| r.1 <= r.2 && r.0 <= r.2),
+        count(&|r| r.0 > r.2),
+        count(&|r| r.0 > r.2 && r.1 > r.2)
+    );
+    let wrongly: Vec<String> = outcomes.iter().flat_map(|o| o.validation_wrongly_promised()).collect();
+    println!("  promised and not kept: {}", if wrongly.is_empty() { "none".to_string() } else { wrongly.join("; ") });
+    println!("\nvalidation on the true bench, worst over the accepted plans (fringe figure / true gap, nm):");
+    for bench in ["table2-ideal", "femto-lab"] {
+        let mut by_motion: Vec<(String, f64, f64)> = Vec::new();
+        for (m, v, t) in outcomes.iter().filter(|o| o.bench.starts_with(bench)).flat_map(|o| o.validation_nm.iter()) {
+            match by_motion.iter_mut().find(|x| &x.0 == m) {
+                Some(x) => (x.1, x.2) = (x.1.max(*v), x.2.max(*t)),
+                None => by_motion.push((m.clone(), *v, *t)),
+            }
         }
-    }
-    for (m, v) in by_motion {
-        println!("  validation {m:<28} worst {v:.1} nm over the accepted plans");
+        for (m, v, t) in by_motion {
+            println!("  {bench:<13} {m:<52} {v:6.1} / {t:5.1}");
+        }
     }
 }

@@ -121,7 +121,8 @@ pub struct DiagnosisResult {
     pub verdict: Verdict,
     /// The named effects with their estimates (empty unless the verdict is `named`).
     pub effects: Vec<NamedEffect>,
-    /// RMS of the gap-change residuals with the baseline model (nm).
+    /// RMS of the gap-change residuals with the baseline model (extrinsics refitted, no
+    /// effect) on the final analysis of the data, the one "after" is computed on (nm).
     pub residual_rms_before_nm: f64,
     /// RMS of the gap-change residuals with the final model (nm).
     pub residual_rms_after_nm: f64,
@@ -218,13 +219,17 @@ pub enum Step {
         /// it beyond [`REMOVE_BELOW_SIGMA`].
         confirmed: bool,
     },
-    /// An effect added earlier removed: refitted with the effects added after it, its estimate
-    /// is within [`REMOVE_BELOW_SIGMA`] of neutral.
+    /// An added effect removed: tested again on the final analysis of the data, the model
+    /// does not need it (estimate within [`REMOVE_BELOW_SIGMA`] of neutral, χ² not lower by the
+    /// BIC margin, or the held-out motions worse with it).
     Removed {
         /// The effect, with its estimate and σ in the fit that included it last.
         effect: NamedEffect,
         /// Whitened rms with it and without it.
         rms_sigma: [f64; 2],
+        /// Why the model does not need it.
+        #[serde(default)]
+        reason: String,
     },
     /// The verdict.
     Finished {
@@ -241,7 +246,7 @@ impl Step {
             Step::Scored { .. } => "2. candidates scored",
             Step::Designed { .. } => "3. discriminating motions",
             Step::Added { .. } => "4. effect added, refitted, checked on held-out motions",
-            Step::Removed { .. } => "4. effect removed: a later one explains it",
+            Step::Removed { .. } => "4. effect removed: the final model does not need it",
             Step::Finished { .. } => "5. verdict",
         }
     }
@@ -322,8 +327,8 @@ impl Step {
                 held_out_rms_sigma[1],
                 if *confirmed { "confirmed" } else { "NOT confirmed (removed)" }
             ),
-            Step::Removed { effect, rms_sigma } => format!(
-                "{} = {:+.4} ± {} {} with the effects added after it: within {REMOVE_BELOW_SIGMA}σ of none\nrms {:.2}σ with it, {:.2}σ without",
+            Step::Removed { effect, rms_sigma, reason } => format!(
+                "{} = {:+.4} ± {} {} on the final analysis: {reason}\nrms {:.2}σ with it, {:.2}σ without",
                 effect.name,
                 effect.estimate,
                 effect.sigma.map_or("undetermined".into(), |s| format!("{s:.4}")),
@@ -378,7 +383,6 @@ pub struct Diagnosis {
     excluded: Vec<usize>,
     start: Extrinsics,
     fit: Option<Fit>,
-    baseline: Option<(f64, f64, f64)>,
     scores: Vec<CandidateScore>,
     projected: Vec<DVector<f64>>,
     added: Vec<NamedEffect>,
@@ -456,7 +460,6 @@ impl Diagnosis {
             excluded: Vec::new(),
             start: extrinsics,
             fit: None,
-            baseline: None,
             scores: Vec::new(),
             projected: Vec::new(),
             added: Vec::new(),
@@ -606,8 +609,6 @@ impl Diagnosis {
         self.excluded.extend((0..self.candidates.len()).filter(|&k| self.not_seen.contains(&self.candidates[k].name)));
         self.not_seen = invisible.clone();
         let rms_nm = obs_rms_nm(&obs, &f.residuals);
-        let held = self.held_rms(&f.state)?;
-        self.baseline = Some((f.rms(), rms_nm, held));
         self.steps.push(Step::Baseline {
             fitted: obs.len(),
             held_out: self.held_out.iter().filter(|h| **h).count(),
@@ -775,10 +776,6 @@ impl Diagnosis {
             (Some(r), false) => {
                 added = self.run_motions(r, &motions)?;
                 ran_on = Some(r.name());
-                let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
-                let obs = self.fit_set();
-                let held = self.held_rms(&f.state)?;
-                self.baseline = Some((f.rms(), obs_rms_nm(&obs, &f.residuals), held));
             }
             (None, false) => {
                 self.need_motions = seen_with_motions;
@@ -944,17 +941,13 @@ impl Diagnosis {
             }
         }
         let held = [self.held_rms(&f.state)?, self.held_rms(&nf.state)?];
-        // Confirmed unless the held-out motions get worse by more than their noise allows. When
-        // they already miss the model by more than their σ (errors the analysis does not see),
-        // the allowance scales with that misfit, as σ would after a Birge-ratio correction.
-        let n_held = self.held_out.iter().filter(|h| **h).count().max(1) as f64;
+        // Confirmed unless the held-out motions get worse by more than their noise allows.
         let k = nf.state.effects.len() - 1;
         // And the refit must keep the effect: an estimate within REMOVE_BELOW_SIGMA of neutral
         // after the refit is not an effect the data need (the linearised score chose it, the
         // extrinsics refitted with it took the rest).
         let kept = nf.effect_z(k) >= REMOVE_BELOW_SIGMA;
-        let confirmed =
-            kept && held[1] * held[1] <= held[0] * held[0] + 3.0 * (2.0 / n_held).sqrt() * (held[0] * held[0]).max(1.0);
+        let confirmed = kept && self.held_out_allows(held);
         let effect = NamedEffect {
             name: sc.name.clone(),
             estimate: nf.state.effects[k].1,
@@ -975,8 +968,15 @@ impl Diagnosis {
             self.added.push(effect);
             self.fit = Some(nf);
             self.rescore()?;
-            self.reanalyse(runner)?;
-            self.remove_explained()?;
+            // The data analysed with the new model are the data every added effect must explain:
+            // each is tested again on them, and the traces analysed again while any is removed.
+            self.reanalyse(runner.as_deref_mut())?;
+            for _ in 0..MAX_EFFECTS {
+                if !self.remove_unneeded()? {
+                    break;
+                }
+                self.reanalyse(runner.as_deref_mut())?;
+            }
         } else {
             self.excluded.push(best);
             self.rescore()?;
@@ -993,46 +993,90 @@ impl Diagnosis {
         Ok(())
     }
 
-    /// Backward elimination: an effect added before the last one whose estimate, refitted with
-    /// the later ones, is within [`REMOVE_BELOW_SIGMA`] of neutral is removed (the first such,
-    /// weakest first, one at a time) and not proposed again. The pivot offsets of joint 6 along
-    /// X_w and Z_w both take up most of a hidden joint-4 pivot on the pool's motions; the one
-    /// named first can end at 1σ once the other is added.
-    fn remove_explained(&mut self) -> Result<(), DiagnoseError> {
+    /// Every added effect tested again on the final analysis of the data: it stays only if
+    /// its estimate is at least [`REMOVE_BELOW_SIGMA`] from neutral, removing it raises χ² by
+    /// more than the BIC margin (ln N for one parameter), and the held-out motions are not
+    /// worse with it. The failing effect with the weakest estimate is removed (one at a time,
+    /// never proposed again), with the reason in the step list. Returns whether any was removed.
+    /// The pivot offsets of joint 6 along X_w and Z_w both take up most of a hidden joint-4
+    /// pivot on the pool's motions: the one named first can end at 1σ once the other is added;
+    /// and an effect chosen while some motions were still tracked from the hint can be at 0σ
+    /// once they are tracked from their samples.
+    fn remove_unneeded(&mut self) -> Result<bool, DiagnoseError> {
+        let mut removed_any = false;
         loop {
-            let Some(f) = self.fit.clone() else { return Ok(()) };
-            let n = f.state.effects.len();
-            let weakest = (0..n.saturating_sub(1))
-                .map(|k| (k, f.effect_z(k)))
-                .filter(|&(_, z)| z < REMOVE_BELOW_SIGMA)
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            let Some((k, _)) = weakest else { return Ok(()) };
-            let (cand, estimate) = f.state.effects[k].clone();
-            let mut start = f.state.clone();
-            start.effects.remove(k);
-            let nf = self.refit(&start)?;
-            let removed = match self.added.iter().position(|e| e.name == cand.name) {
-                Some(i) => {
-                    let mut e = self.added.remove(i);
-                    e.estimate = estimate;
-                    e.sigma = f.effect_sigma[k];
-                    e
+            let Some(f) = self.fit.clone() else { return Ok(removed_any) };
+            let mut failing: Vec<(usize, f64, String, Fit)> = Vec::new();
+            for k in 0..f.state.effects.len() {
+                let mut without = f.state.clone();
+                without.effects.remove(k);
+                let nf = self.refit(&without)?;
+                if let Some(reason) = self.unneeded_because(&f, &nf, k)? {
+                    failing.push((k, f.effect_z(k), reason, nf));
                 }
-                None => return Err(DiagnoseError::Model(format!("{} fitted but not among the added", cand.name))),
+            }
+            let Some((k, _, reason, nf)) = failing.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+                return Ok(removed_any);
             };
+            let (cand, estimate) = f.state.effects[k].clone();
+            let Some(i) = self.added.iter().position(|e| e.name == cand.name) else {
+                return Err(DiagnoseError::Model(format!("{} fitted but not among the added", cand.name)));
+            };
+            let mut removed = self.added.remove(i);
+            removed.estimate = estimate;
+            removed.sigma = f.effect_sigma[k];
             if let Some(c) = self.candidates.iter().position(|c| c.name == cand.name) {
                 self.excluded.push(c);
             }
-            self.steps.push(Step::Removed { effect: removed, rms_sigma: [f.rms(), nf.rms()] });
+            self.steps.push(Step::Removed { effect: removed, rms_sigma: [f.rms(), nf.rms()], reason });
             self.fit = Some(nf);
             self.rescore()?;
+            removed_any = true;
         }
+    }
+
+    /// Why effect `k` of fit `with` is not needed (`without`: the same data refitted without
+    /// it), or `None` when the data need it.
+    fn unneeded_because(&self, with: &Fit, without: &Fit, k: usize) -> Result<Option<String>, DiagnoseError> {
+        let z = with.effect_z(k);
+        if z < REMOVE_BELOW_SIGMA {
+            return Ok(Some(format!("its estimate is {z:.1}σ from none (needs {REMOVE_BELOW_SIGMA}σ)")));
+        }
+        let delta_chi2 = without.chi2() - with.chi2();
+        let margin = (self.fit_set().len() as f64).ln();
+        if delta_chi2 < margin {
+            return Ok(Some(format!("χ² is only {delta_chi2:.1} lower with it (the BIC margin is {margin:.1})")));
+        }
+        let held = [self.held_rms(&without.state)?, self.held_rms(&with.state)?];
+        if !self.held_out_allows(held) {
+            return Ok(Some(format!(
+                "the held-out motions are worse with it (rms {:.2}σ without, {:.2}σ with)",
+                held[0], held[1]
+            )));
+        }
+        Ok(None)
+    }
+
+    /// Whether the held-out rms `held` = [before, after] did not grow by more than their noise
+    /// allows. When they already miss the model by more than their σ (errors the analysis does
+    /// not see), the allowance scales with that misfit, as σ would after a Birge-ratio
+    /// correction.
+    fn held_out_allows(&self, held: [f64; 2]) -> bool {
+        let n_held = self.held_out.iter().filter(|h| **h).count().max(1) as f64;
+        held[1] * held[1] <= held[0] * held[0] + 3.0 * (2.0 / n_held).sqrt() * (held[0] * held[0]).max(1.0)
     }
 
     fn do_finish(&mut self) -> Result<(), DiagnoseError> {
         let f = self.fit.clone().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
-        let (rms0, nm0, held0) = self.baseline.unwrap_or((f64::NAN, f64::NAN, f64::NAN));
         let obs = self.fit_set();
+        // "Before" is the model without effects on the same analysis of the same traces as
+        // "after": the re-analyses change the data themselves.
+        let before = if f.state.effects.is_empty() {
+            f.clone()
+        } else {
+            self.refit(&ModelState { effects: vec![], ..f.state.clone() })?
+        };
+        let (rms0, nm0, held0) = (before.rms(), obs_rms_nm(&obs, &before.residuals), self.held_rms(&before.state)?);
         let at_floor = f.rms() <= NOISE_FLOOR_FACTOR;
         let not_detectable: Vec<String> = self
             .scores

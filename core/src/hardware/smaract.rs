@@ -115,7 +115,9 @@ pub fn parse_reply(line: &str) -> Option<McsReply> {
         return (v.len() == 2 && (v[1] == 0 || v[1] == 1))
             .then(|| McsReply::PhysicalPositionKnown { channel: v[0], known: v[1] == 1 });
     }
-    let (tag, rest) = body.split_at(1.min(body.len()));
+    // The tag is one character, which may be any (a multi-byte one is no reply we know).
+    let tag_len = body.chars().next().map_or(0, char::len_utf8);
+    let (tag, rest) = body.split_at(tag_len);
     let v = nums(rest)?;
     match (tag, v.as_slice()) {
         ("E", [ch, code]) => u32::try_from(*code).ok().map(|code| McsReply::Error(McsError { channel: *ch, code })),
@@ -425,6 +427,19 @@ mod tests {
         assert_eq!(parse_reply(":N3"), Some(McsReply::Channels(3)));
         for bad in ["", ":", "P0,1", ":P0", ":P0,x", ":A0,1", ":E0,-5", ":Q0,1", ":PPK0,2", ":S1,2,3"] {
             assert_eq!(parse_reply(bad), None, "{bad}");
+        }
+        // A multi-byte character after the colon is refused, not split inside.
+        assert_eq!(parse_reply(":é0,1"), None);
+        assert_eq!(parse_reply(":\u{80}"), None);
+    }
+
+    proptest::proptest! {
+        /// Any line, bytes from a wire read lossily included, parses or is refused: never a panic.
+        #[test]
+        fn any_reply_line_parses_or_is_refused(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..24)) {
+            let mut line = vec![b':'];
+            line.extend(bytes);
+            let _ = parse_reply(&String::from_utf8_lossy(&line));
         }
     }
 

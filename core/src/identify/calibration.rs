@@ -19,6 +19,7 @@ use crate::measure::PhaseModel;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::plan::Plan;
 use crate::trace::Trace;
+use crate::validate::forecast::{forecast, ValidationForecast};
 use crate::validate::{run_validation, ValidationMotion};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
@@ -102,6 +103,10 @@ pub struct CalibrationReport {
     /// identified extrinsics (traces recorded elsewhere, no bench to run on), not measurements.
     #[serde(default)]
     pub validation_predicted: bool,
+    /// What the uncertainty of the extrinsics allows each validation motion planned with them
+    /// (empty when the model does not fit): above a motion's target, no run can meet it.
+    #[serde(default)]
+    pub validation_forecast: Vec<ValidationForecast>,
     /// Bench time of the measurements (s).
     pub measurement_duration_s: f64,
     /// Bench time of each plan run, in order, from the plans' timing model (empty for traces
@@ -279,6 +284,17 @@ pub fn report_from_traces(
         warnings
             .push(format!("the solver did not converge ({}): the values below are not a calibration", est.termination));
     }
+    let validation_forecast = match fit.verdict {
+        Verdict::DoesNotFit => vec![],
+        _ => forecast_validation(nominal, &est.extrinsics, &parameters, &report),
+    };
+    for f in validation_forecast.iter().filter(|f| !f.within_target()) {
+        warnings.push(format!(
+            "`{}`: planned with these extrinsics it can move the gap by up to {:.0} nm (95 %, from their \
+             uncertainty), above its {:.0} nm target: the data do not determine them well enough for it",
+            f.motion, f.expected_nm, f.target_nm
+        ));
+    }
     let signs = translation_signs(obs, est);
     for s in signs.iter().filter(|s| !s.agrees) {
         warnings.push(format!(
@@ -303,6 +319,7 @@ pub fn report_from_traces(
             .collect(),
         validation: Vec::new(),
         validation_predicted: false,
+        validation_forecast,
         measurement_duration_s: duration_s,
         plan_durations: Vec::new(),
         observations: obs.len(),
@@ -312,6 +329,27 @@ pub fn report_from_traces(
         extrinsics: est.extrinsics,
         traces,
     })
+}
+
+/// The validation forecast ([`forecast`]) of the parameters reported: their σ (withheld ones
+/// left out) and the identifiability's correlations.
+fn forecast_validation(
+    nominal: &PhaseModel,
+    identified: &Extrinsics,
+    parameters: &[ParameterRow],
+    report: &IdentifiabilityReport,
+) -> Vec<ValidationForecast> {
+    let index = |name: &str| report.parameters.iter().position(|p| p.name == name);
+    let sigma: [Option<f64>; 8] = std::array::from_fn(|i| {
+        parameters.iter().find(|p| p.name == PARAMETER_NAMES[i].0 && p.determined).and_then(|p| p.sigma)
+    });
+    let correlation: [[f64; 8]; 8] = std::array::from_fn(|i| {
+        std::array::from_fn(|j| match (index(PARAMETER_NAMES[i].0), index(PARAMETER_NAMES[j].0)) {
+            (Some(a), Some(b)) => report.correlation.get(a).and_then(|r| r.get(b).copied().flatten()).unwrap_or(0.0),
+            _ => 0.0,
+        })
+    });
+    forecast(nominal, identified, &sigma, &correlation)
 }
 
 /// The verdict on the identification's fit: its residual against [`rms_threshold`], the worst

@@ -194,8 +194,10 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
     // on the tilt the model puts the lamella at in its pose (up to 0.3 µm between a square
     // model and Table II's 1.1°), so there they count with that much uncertainty.
     let loose = loosen(&swept, FIRST_PASS_GAP_SIGMA_UM);
-    let mut runs: Vec<(String, Identification)> =
-        starts.par_iter().map(|s| (s.name.clone(), one_pass(mode, nominal, &loose, &motions, s.extrinsics))).collect();
+    let mut runs: Vec<(String, Identification)> = starts
+        .par_iter()
+        .map(|s| (s.name.clone(), one_pass(mode, nominal, &loose, &motions, s.extrinsics, FIRST_PASS)))
+        .collect();
     runs.sort_by(|a, b| a.1.cost().total_cmp(&b.1.cost()));
     if mode == Mode::Joint {
         let reach = PRUNE_FACTOR * runs[0].1.cost() + PRUNE_MARGIN;
@@ -208,7 +210,7 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
                 // Second pass: sweeps and motions analysed with the first pass's estimate.
                 let e = first.estimate.extrinsics;
                 let swept = observations_from_traces(&sweeps, &model_with(nominal, e), &extract_options());
-                (name, one_pass(mode, nominal, &swept, &motions, e))
+                (name, one_pass(mode, nominal, &swept, &motions, e, FINAL_PASS))
             })
             .collect();
         runs.sort_by(|a, b| a.1.cost().total_cmp(&b.1.cost()));
@@ -246,6 +248,56 @@ fn ties_on_the_same_data(nominal: &PhaseModel, best: &Identification, other: &Ex
     chi2 - own < TIE_DELTA_CHI2
 }
 
+/// How far one pass goes: the fringe amplitudes kept over all traces (each costs the fit three
+/// windowed power models per evaluation: a plan of rotations only gives hundreds, and a few
+/// dozen evenly spread along each rotation locate the tilt as well) and the solver's patience
+/// (evaluations per parameter).
+#[derive(Debug, Clone, Copy)]
+struct Pass {
+    amplitudes: usize,
+    patience: usize,
+}
+
+/// The first pass only has to reach a branch's basin: a start that has not settled within 15
+/// evaluations per parameter is far from any minimum (one such start ran 3,600 evaluations,
+/// 200 s, on a plan of rotations only, and lost). The final pass keeps what sixteen ±4° scans
+/// give (the shipped joint plans have about 540 amplitudes: thinned to 320, σ(β_wf) grew from
+/// 0.0006° to 0.0009°).
+const FIRST_PASS: Pass = Pass { amplitudes: 120, patience: 15 };
+const FINAL_PASS: Pass = Pass { amplitudes: 640, patience: 200 };
+
+/// The observations with at most `budget` fringe amplitudes, shared evenly between the gain
+/// groups (each rotation's own) and evenly spread within each; the other kinds all kept.
+fn within_amplitude_budget(obs: Vec<Observation>, budget: usize) -> Vec<Observation> {
+    let group_of = |o: &Observation| match o.kind {
+        ObservationKind::FringeAmplitude { group, .. } => Some(group),
+        _ => None,
+    };
+    let mut counts = std::collections::BTreeMap::<usize, usize>::new();
+    for g in obs.iter().filter_map(group_of) {
+        *counts.entry(g).or_default() += 1;
+    }
+    let total: usize = counts.values().sum();
+    if total <= budget {
+        return obs;
+    }
+    let per_group = (budget / counts.len().max(1)).max(MIN_AMPLITUDES_PER_GROUP);
+    let mut seen = std::collections::BTreeMap::<usize, usize>::new();
+    obs.into_iter()
+        .filter(|o| {
+            let Some(g) = group_of(o) else { return true };
+            let (n, k) = (counts[&g], seen.entry(g).or_default());
+            let index = *k;
+            *k += 1;
+            // Keep the indices nearest an even spread of `per_group` over 0..n (first and last kept).
+            n <= per_group || (0..per_group).any(|j| j * (n - 1) / (per_group - 1).max(1) == index)
+        })
+        .collect()
+}
+
+/// A gain group keeps at least this many amplitudes: its gain takes one of them.
+const MIN_AMPLITUDES_PER_GROUP: usize = 6;
+
 /// σ floor of the absolute gaps in the first pass (µm): what the nominal model's tilt can move
 /// a sweep's analysis by.
 const FIRST_PASS_GAP_SIGMA_UM: f64 = 0.5;
@@ -274,14 +326,19 @@ fn one_pass(
     swept: &Extracted,
     motions: &[Trace],
     current: Extrinsics,
+    pass: Pass,
 ) -> Identification {
     let model = model_with(nominal, current);
     let mut extracted = observations_from_traces(motions, &model, &extract_options());
     extracted.skipped.extend(swept.skipped.iter().cloned());
     let mut obs = swept.observations.clone();
     obs.append(&mut extracted.observations);
+    let obs = within_amplitude_budget(obs, pass.amplitudes);
     let (estimate, step_a, observations) = match mode {
-        Mode::Joint => (joint::estimate(nominal, &obs, &current, &JointOptions::default()), None, obs),
+        Mode::Joint => {
+            let options = JointOptions { patience: pass.patience, ..JointOptions::default() };
+            (joint::estimate(nominal, &obs, &current, &options), None, obs)
+        }
         Mode::Paper => {
             let (est, a, translations) = paper_estimate(nominal, &obs, &current);
             (est, Some(a), translations)
@@ -355,4 +412,56 @@ pub fn is_translation(o: &Observation) -> bool {
 /// A gap change over a rotation: only revolute joints moved.
 pub fn is_rotation(o: &Observation) -> bool {
     joints_changed(o).is_some_and(|c| c[3..].iter().any(|&x| x) && !c[..3].iter().any(|&x| x))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn amplitude(group: usize, index: usize) -> Observation {
+        Observation {
+            label: format!("motion {group}"),
+            kind: ObservationKind::FringeAmplitude {
+                at_display: [index as f64, 0.0, 0.0, 0.0, 0.0, 0.0],
+                amplitude_mw: 1.0,
+                group,
+                neighbours: None,
+            },
+            sigma: 0.01,
+            wavelength_nm: 1550.0,
+            time_s: [0.0; 2],
+            approach: [[0; 6]; 2],
+        }
+    }
+
+    fn gap() -> Observation {
+        Observation { kind: ObservationKind::AbsoluteGap { at_display: [0.0; 6], gap_um: 100.0 }, ..amplitude(0, 0) }
+    }
+
+    /// Kept per group: the budget shared evenly, the ends of each kept, the other kinds kept.
+    #[test]
+    fn the_amplitude_budget_is_shared_evenly_and_keeps_the_ends() {
+        let mut obs = vec![gap()];
+        obs.extend((0..40).map(|i| amplitude(0, i)));
+        obs.extend((0..10).map(|i| amplitude(1, i)));
+        obs.extend((0..100).map(|i| amplitude(2, i)));
+        obs.push(gap());
+        let kept = within_amplitude_budget(obs.clone(), 45);
+        let of = |g: usize| -> Vec<f64> {
+            kept.iter()
+                .filter_map(|o| match o.kind {
+                    ObservationKind::FringeAmplitude { group, at_display, .. } if group == g => Some(at_display[0]),
+                    _ => None,
+                })
+                .collect()
+        };
+        assert_eq!(kept.iter().filter(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. })).count(), 2);
+        assert_eq!(of(0).len(), 15);
+        assert_eq!(of(1).len(), 10, "a group under its share keeps all");
+        assert_eq!(of(2).len(), 15);
+        assert_eq!((of(2)[0], of(2)[14]), (0.0, 99.0));
+        assert_eq!(within_amplitude_budget(obs.clone(), 150).len(), obs.len(), "within budget: all kept");
+        let tiny = within_amplitude_budget(obs, 3);
+        assert_eq!(tiny.len(), 2 + 3 * MIN_AMPLITUDES_PER_GROUP, "each gain keeps its minimum");
+    }
 }

@@ -13,6 +13,9 @@ use std::path::Path;
 /// The robot shipped with the project (the paper's bench), embedded so the app runs anywhere.
 pub const FEMTO_6DOF_RON: &str = include_str!("../../../assets/robots/femto-6dof.ron");
 
+/// Joints of every robot the software drives: poses, plans and traces carry six.
+pub const JOINTS: usize = 6;
+
 /// The kind of a joint.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum JointType {
@@ -137,10 +140,15 @@ impl RobotDescription {
         Ok(d)
     }
 
-    /// Check every field: finite numbers, ordered limits that contain zero, unique names.
+    /// Check every field (six links): finite numbers, ordered limits that contain zero, unique names.
     pub fn validate(&self) -> Result<(), FieldError> {
-        if self.links.is_empty() {
-            return Err(FieldError::new("links", "expected at least one link, found none"));
+        // Poses, plans and traces all carry six joints (three stages, two goniometers, a rotary
+        // stage): another count would reach the kinematics with vectors of the wrong length.
+        if self.links.len() != JOINTS {
+            return Err(FieldError::new(
+                "links",
+                format!("expected {JOINTS} links (q1..q6, base to end effector), found {}", self.links.len()),
+            ));
         }
         for (i, l) in self.links.iter().enumerate() {
             let f = |name: &str| format!("links[{i}].{name}");
@@ -290,7 +298,13 @@ mod tests {
         let err = RobotDescription::from_ron_str("RobotDescription(name: \"x\", links: [])", Path::new("e.ron"))
             .unwrap_err()
             .to_string();
-        assert_eq!(err, "e.ron: field `links`: expected at least one link, found none");
+        assert_eq!(err, "e.ron: field `links`: expected 6 links (q1..q6, base to end effector), found 0");
+        // Five links: refused by name, before the kinematics could see five joints.
+        let mut five = RobotDescription::femto_6dof();
+        five.links.pop();
+        let text = ron::ser::to_string(&five).unwrap();
+        let err = RobotDescription::from_ron_str(&text, Path::new("five.ron")).unwrap_err().to_string();
+        assert_eq!(err, "five.ron: field `links`: expected 6 links (q1..q6, base to end effector), found 5");
     }
 
     #[test]

@@ -7,6 +7,8 @@
 //! phase-equivalent change is corrected by the model's tilt term (phase-equivalent gap − |L|) before the
 //! peak-to-peak is taken. With perfect extrinsics the figure is the noise.
 
+pub mod forecast;
+
 use crate::bench::{run_plan, Bench, RunControl};
 use crate::measure::{self, Measurement, PhaseModel};
 use crate::model::effects::Backlash;
@@ -88,6 +90,18 @@ pub enum ValidationError {
         /// What happened.
         problem: String,
     },
+}
+
+impl ValidationMotion {
+    /// Waypoints a validation plans this motion with (the motion is linear in the joints
+    /// between them).
+    pub fn waypoint_count(self) -> usize {
+        match self {
+            ValidationMotion::Circle => 72,
+            ValidationMotion::RotationOpticalAxis => 46,
+            _ => 24,
+        }
+    }
 }
 
 /// Waypoints (µm, °) of a validation motion planned with `extrinsics` from the pose `start` (µm, °).
@@ -401,11 +415,7 @@ pub fn run_validation_planned(
     start: [f64; 6],
     compensation: &Compensation,
 ) -> Result<ValidationFigure, ValidationError> {
-    let count = match motion {
-        ValidationMotion::Circle => 72,
-        ValidationMotion::RotationOpticalAxis => 46,
-        _ => 24,
-    };
+    let count = motion.waypoint_count();
     let play = &compensation.play;
     let mut w = waypoints(planning, planned_with, motion, start, count)?;
     let (mut p, mut state, reaching) = plan_reaching(motion, &w, play);
