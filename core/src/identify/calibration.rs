@@ -104,7 +104,7 @@ pub struct CalibrationReport {
     #[serde(default)]
     pub validation_predicted: bool,
     /// What the uncertainty of the extrinsics allows each validation motion planned with them
-    /// (empty when the model does not fit): above a motion's target, no run can meet it.
+    /// (only when the model fits, with no tie): above a motion's target, no run can meet it.
     #[serde(default)]
     pub validation_forecast: Vec<ValidationForecast>,
     /// Bench time of the measurements (s).
@@ -284,9 +284,10 @@ pub fn report_from_traces(
         warnings
             .push(format!("the solver did not converge ({}): the values below are not a calibration", est.termination));
     }
+    // Only a fit has an uncertainty to carry: tied branches leave parameters without one.
     let validation_forecast = match fit.verdict {
-        Verdict::DoesNotFit => vec![],
-        _ => forecast_validation(nominal, &est.extrinsics, &parameters, &report),
+        Verdict::Fits => forecast_validation(nominal, &est.extrinsics, &parameters, &report),
+        _ => vec![],
     };
     for f in validation_forecast.iter().filter(|f| !f.within_target()) {
         warnings.push(format!(
@@ -365,9 +366,12 @@ pub fn fit_check(id: &Identification, report: &IdentifiabilityReport) -> FitChec
         .map(|(name, _)| report.parameters.iter().find(|p| p.name == *name).and_then(|p| p.sigma))
         .collect();
     let mut ambiguous_parameters: Vec<String> = Vec::new();
+    // Tied branches may differ freely where the data determine nothing: only a determined
+    // parameter they disagree on makes the result ambiguous.
+    let determined = |name: &str| report.parameters.iter().any(|p| p.name == name && p.determined);
     for &t in &id.tied {
         for p in differing_parameters(&est.extrinsics, &id.branches[t].extrinsics, &sigma, 3.0) {
-            if !ambiguous_parameters.contains(&p) {
+            if determined(&p) && !ambiguous_parameters.contains(&p) {
                 ambiguous_parameters.push(p);
             }
         }
