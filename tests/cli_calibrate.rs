@@ -1,6 +1,6 @@
 //! End to end: `photorobot calibrate` on the `table2-ideal` virtual bench measures the paper's
 //! strategies plus the extra measurements, identifies jointly, validates, and writes the
-//! session (issue: identification). The figures asserted are those of the issue.
+//! session. The figures asserted are the acceptance targets.
 
 use photorobot_app::cli::{run, Outcome};
 use photorobot_core::model::extrinsics::Extrinsics;

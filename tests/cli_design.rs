@@ -20,7 +20,7 @@ fn shipped_plan() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/plans/optimised.ron")
 }
 
-/// The σ limits (°, µm).
+/// The required σ limits (°, µm).
 const LIMITS: [(&str, f64); 6] =
     [("beta_et", 0.005), ("theta_et", 0.005), ("beta_wf", 0.01), ("theta_wf", 0.01), ("x_wf", 0.2), ("z_wf", 0.2)];
 

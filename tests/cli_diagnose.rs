@@ -78,7 +78,7 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
     // The first effect named: the joint-4 pivot along Z_w or one of its equivalents (a pivot of
     // joint 6 along Z_w or X_w, or of joint 5 along X_w, with the beam shifted), of its size.
     // (The workflow may add one of them and remove it again when another explains it better:
-    // measured 2026-11-24, q6 along X_w added first, −17.8 µm, then q6 along Z_w, after which
+    // q6 along X_w added first, −17.8 µm, then q6 along Z_w, after which
     // q6 along X_w refitted to −1.2 ± 1.2 µm and was removed.)
     let first = &v["effects"][0];
     let name = first["name"].as_str().unwrap();
@@ -112,7 +112,7 @@ fn diagnose_names_the_hidden_pivot_from_virtual_bench_traces() {
         // angles fixed by the fringe amplitudes of the rotations, the rotation about Z_f (joint 4
         // barely turns) already keeps the cavity within 15 nm without the effect.
         if r["motion"].as_str().unwrap().starts_with("rotation 6°") && without > 100.0 {
-            // Measured (seed 5, 2026-11-24): with the hidden q4 pivot named, 3036 → 19.9 nm about
+            // Measured (seed 5): with the hidden q4 pivot named, 3036 → 19.9 nm about
             // X_f and 3694 → 26.2 nm about Z_f; with its equivalent, the q6 pivot along Z_w,
             // 2830 → 18.1 and 3642 → 32.2 nm; with the reversal errors among the candidates
             // (other discriminating motions: q6 along X_w named, then q4 along Z_w),
@@ -150,7 +150,7 @@ fn diagnose_names_a_hidden_reversal_error_from_virtual_bench_traces() {
     // analysed again. Re-extracted with the fitted extrinsics (fiber angles off by degrees)
     // they moved by 0.2 µm, and a spurious q2 scale of −4393 ± 282 ppm took that up.
     assert_eq!(v["effects"].as_array().unwrap().len(), 1, "{v}");
-    // Measured (seed 5, 2026-11-24): 1.0036 ± 0.0140 µm; residual 2.82σ → 0.38σ. It was
+    // Measured (seed 5): 1.0036 ± 0.0140 µm; residual 2.82σ → 0.38σ. It was
     // 0.942 ± 0.016 µm (3.5σ low) while the fit's fiber angles wandered by degrees: the fringe
     // amplitudes of the rotations now fix them.
     let (est, sigma) = (first["estimate"].as_f64().unwrap(), first["sigma"].as_f64().unwrap());
@@ -176,7 +176,7 @@ fn diagnose_names_a_hidden_thermal_drift_from_virtual_bench_traces() {
     assert_eq!(v["verdict"], "named", "{v}");
     let first = &v["effects"][0];
     assert_eq!(first["name"], "thermal drift rate", "{v}");
-    // Measured (seed 5, 2026-11-24): 0.5172 ± 0.0360 nm/s; residual 0.60σ → 0.38σ.
+    // Measured (seed 5): 0.5172 ± 0.0360 nm/s; residual 0.60σ → 0.38σ.
     let (est, sigma) = (first["estimate"].as_f64().unwrap(), first["sigma"].as_f64().unwrap());
     assert!((est - 0.5).abs() < 3.0 * sigma && sigma < 0.1, "{est} ± {sigma} nm/s");
     let after = v["residual_rms_after_sigma"].as_f64().unwrap();

@@ -332,7 +332,7 @@ fn tracked_gap_changes_carry_the_play_of_a_reversing_stage() {
 /// changes it tracks. Two benches on the exact path with the same seed differ only by a 2 nm
 /// cyclic error; moves along the beam with ends at different fringe phases. The model of the
 /// effect (the gap reads 2 nm·cos φ more) predicts changes of the tracked gap changes up to
-/// 3.1 nm; the tracked ones moved by 0.03 nm at most (measured 2026-11-24). This is why the diagnosis of traces
+/// 3.1 nm; the tracked ones moved by 0.03 nm at most. This is why the diagnosis of traces
 /// does not offer the fringe nonlinearity (`DiagnosisResult::not_seen`).
 #[test]
 fn a_cyclic_phase_error_does_not_reach_the_tracked_gap_changes() {

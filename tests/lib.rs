@@ -79,4 +79,5 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
     ]
 }
 
+pub mod independent;
 pub mod random;

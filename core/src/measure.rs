@@ -245,7 +245,7 @@ pub struct AnalyseOptions {
     /// otherwise: with it on, the start offsets on the calibration traces of table2-ideal
     /// grew from ≤ 0.3 nm to ≤ 1.4 nm on lateral moves and up to 36 nm on a tilt scan at a
     /// lateral offset (`PER_TRACE=1 cargo run --release -p photorobot-core --example
-    /// calib_debug -- table2-ideal joint 1`, measured 2026-11-24).
+    /// calib_debug -- table2-ideal joint 1`).
     pub free_start: bool,
     /// `Some(k)`: the phase free to leave the motion hint in time
     /// ([`FREE_PHASE_RAD_PER_SQRT_SAMPLE`]) when the hint travels under
@@ -320,7 +320,7 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
     // 2.3 → 0.18 nm rms, tilt scans 9.6 → 0.06 nm), but fragile when it is not: with the
     // design extrinsics the modelled tilt is off by ~1°, the 2nd harmonic's phase (it turns by
     // 2k·θ²·L) by radians, and lateral moves came out 4 nm off instead of 0.07 nm; on the
-    // hidden-pivot diagnosis the discriminating rotations went wrong. See issue notes.
+    // hidden-pivot diagnosis the discriminating rotations went wrong.
     // `AnalyseOptions::shaped` is for a model already fitted (the diagnosis's re-analysis,
     // `diagnose::REANALYSE_OPTIONS`).
     // A trace the model's shape cannot be computed on (the beam misses the lamella at some

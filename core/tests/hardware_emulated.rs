@@ -1,4 +1,4 @@
-//! The real-controller drivers against their protocol emulators on loopback (issue 8): the paper's
+//! The real-controller drivers against their protocol emulators on loopback: the paper's
 //! strategies through PI GCS 2 and SmarAct MCS compared with the virtual bench, a fault matrix, and
 //! recorded protocol transcripts.
 //!
@@ -383,7 +383,7 @@ fn check_fixture(name: &str, transcript: &[String]) {
     assert_eq!(text, want, "the session differs from {}", path.display());
 }
 
-/// The GCS 2 subset of issue 8, plus `DRL?`, `TSP?` and `FRF?` (see pi_gcs.rs).
+/// The GCS 2 subset the bench needs, plus `DRL?`, `TSP?` and `FRF?` (see pi_gcs.rs).
 const GCS_SUBSET: [&str; 21] = [
     "*IDN?", "SAI?", "SVO", "MOV", "MVR", "POS?", "ONT?", "VEL", "TMN?", "TMX?", "STP", "HLT", "ERR?", "DRC", "DRT",
     "RTR", "DRR?", "DRL?", "TSP?", "FRF?", "FRF",

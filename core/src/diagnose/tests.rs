@@ -165,7 +165,7 @@ fn every_library_effect_at_typical_size_is_named_first_and_estimated() {
 /// A reversal error of a revolute stage (20 µrad, SPEC section 9) is not named: motions
 /// tracked from the motion do not show it (their observations start as if each moving stage
 /// had approached in its direction of motion), and the pool has no rotation tracked from the
-/// samples. Such rotations were tried (2026-11-24): on the virtual bench's traces a q4
+/// samples. Such rotations were tried: on the virtual bench's traces a q4
 /// reversal at q = 0 tracked from the samples missed the model by 6.2σ on average, and adding
 /// them to the pool changed the design enough that the hidden-pivot diagnosis of
 /// tests/cli_diagnose.rs found nothing. Before the observations modelled the tracking, this

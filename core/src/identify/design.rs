@@ -500,7 +500,7 @@ impl Target {
         Self { name: name.into(), unit: PARAMETER_NAMES[i].1.into(), combination, max_sigma, bootstrap: false }
     }
 
-    /// The acceptance targets on `table2-ideal` (joint mode): σ ≤ 0.005° for β_et, θ_et,
+    /// The acceptance targets on `table2-ideal` (joint mode): σ ≤ 0.005° for β_et, θ_et,
     /// ≤ 0.01° for β_wf, θ_wf, ≤ 0.2 µm for x_wf, z_wf, and the gap y_wf − Z_et within 0.05 µm,
     /// read as 3σ ≤ 0.05 µm; plus the bootstrap: the sweeps alone must fix the lamella normal to
     /// 0.05° (a rough start for the motion hints, [`Target::bootstrap`]).

@@ -1284,7 +1284,7 @@ mod tests {
             entries in proptest::collection::vec(-1.0f64..1.0, 13 * 5),
             // Two decades of column scale (our Jacobians are in comparable mrad/µm units). Beyond about three
             // decades nalgebra's SVD of the raw columns loses ~1e-4 relative accuracy: equilibrating the
-            // columns before the SVD is left to do (see the issue note).
+            // columns before the SVD would fix that and is not done yet.
             log_scales in proptest::collection::vec(-1.0f64..1.0, 5),
         ) {
             let m = n + extra;

@@ -1514,7 +1514,7 @@ mod tests {
         /// R = 1.008 (`proptest-regressions/model/optics.txt`). The model sums a given number
         /// of beams (one beam and that mirror: R = 1.16), and its cleave couples only the
         /// direct reflection, not the bounces off the fiber end inside the cavity (all beams:
-        /// R = 1.0096; without the cleave 0.991). Measured 2026-11-25, see the issue note.
+        /// R = 1.0096; without the cleave 0.991).
         #[test]
         fn reflectance_stays_between_0_and_1(
             gap in -2000.0..2000.0f64,
