@@ -26,10 +26,9 @@ fn calibrate(recorder: &Recorder) -> Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}: {text}"))
 }
 
-/// Every determined parameter within 3σ of Table II (those in `biased` within their bound,
-/// µm or °, instead), the fit accepted at the noise floor; returns the names of the
-/// determined parameters.
-fn assert_right(doc: &Value, seed: u64, biased: &[(&str, f64)]) -> Vec<String> {
+/// Every determined parameter within 3σ of Table II, the fit accepted at the noise floor;
+/// returns the names of the determined parameters.
+fn assert_right(doc: &Value, seed: u64) -> Vec<String> {
     let verdict = doc["fit"]["verdict"].as_str().unwrap_or("missing");
     let rms = doc["residual_rms_sigma"].as_f64().unwrap_or(f64::NAN);
     eprintln!("seed {seed}: verdict {verdict}, residual {rms:.2}σ");
@@ -43,11 +42,7 @@ fn assert_right(doc: &Value, seed: u64, biased: &[(&str, f64)]) -> Vec<String> {
             continue;
         }
         determined.push(name.to_string());
-        let within = match biased.iter().find(|b| b.0 == name) {
-            Some((_, bound)) => (value - truth).abs() <= *bound,
-            None => e.abs() <= 3.0,
-        };
-        if !within {
+        if e.abs() > 3.0 {
             wrong.push(format!("{name} {value} ± {sigma} ({e:+.1}σ from {truth})"));
         }
     }
@@ -82,18 +77,21 @@ fn validation_on_the_truth(doc: &Value) -> Vec<(String, f64, f64, f64)> {
     rows
 }
 
-/// Two seeds of the lab motions, one with a dark offset on the photodiode and twice the noise:
-/// Table II recovered within 3σ in every parameter the data determine, the lamella normal and
-/// the beam's hit point among them; the validation motions planned with the result keep the
-/// true gap within their targets (10 nm circle, 20 nm rotations), as the report forecasts.
+/// Three seeds of the lab motions: one as recorded, one with a dark offset on the photodiode and
+/// twice the noise, one with smooth (raised-cosine) starts and stops. Table II recovered within
+/// 3σ in every parameter the data determine, the lamella normal and the beam's hit point among
+/// them; the validation motions planned with the result keep the true gap within their targets
+/// (10 nm circle, 20 nm rotations), as the report forecasts.
 #[test]
 fn independent_recordings_calibrate_to_table_two() {
     let mut offset = Recorder::new(12);
     offset.offset_v = 0.3;
     offset.noise_rel_fringe = 2e-3;
-    for (seed, recorder) in [(11, Recorder::new(11)), (12, offset)] {
+    let mut smooth = Recorder::new(13);
+    smooth.profile = Profile::RaisedCosine;
+    for (seed, recorder) in [(11, Recorder::new(11)), (12, offset), (13, smooth)] {
         let doc = calibrate(&recorder);
-        let determined = assert_right(&doc, seed, &[]);
+        let determined = assert_right(&doc, seed);
         for name in ["beta_et", "theta_et", "x_wf", "z_wf"] {
             let found = determined.iter().any(|d| d == name);
             assert!(found, "seed {seed}: {name} not determined: {determined:?}");
@@ -103,22 +101,5 @@ fn independent_recordings_calibrate_to_table_two() {
             assert!(forecast_nm <= target_nm, "seed {seed}: {motion} not promised: {forecast_nm} nm");
             assert!(true_nm <= target_nm, "seed {seed}: {motion} moves the true gap by {true_nm} nm");
         }
-    }
-}
-
-/// Motions that start and stop smoothly (raised-cosine velocity) leave the beam's hit point
-/// biased: x_wf and z_wf come out 15-47 nm low, 2.5-6σ of their stated σ, on every seed and
-/// sample rate tried, while constant-velocity recordings of the same motions are right. The
-/// rest stays within 3σ and the validation within its targets; the hit point's error is
-/// pinned here so that a change in it shows.
-#[test]
-fn smooth_motions_leave_the_hit_point_biased_by_tens_of_nm() {
-    let mut recorder = Recorder::new(13);
-    recorder.profile = Profile::RaisedCosine;
-    let doc = calibrate(&recorder);
-    assert_right(&doc, 13, &[("x_wf", 0.060), ("z_wf", 0.060)]);
-    for (motion, true_nm, forecast_nm, target_nm) in validation_on_the_truth(&doc) {
-        eprintln!("  {motion}: true gap {true_nm:.2} nm, forecast ≤ {forecast_nm:.1} nm, target {target_nm} nm");
-        assert!(true_nm <= target_nm, "{motion} moves the true gap by {true_nm} nm");
     }
 }

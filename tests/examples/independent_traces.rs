@@ -17,6 +17,19 @@ fn main() {
         eprintln!("usage: independent_traces DIR [SEED]");
         std::process::exit(2);
     };
+    if dir == "truth" {
+        use photorobot_e2e::independent::{cavity, Record, TABLE2};
+        for (i, r) in lab_records().iter().enumerate() {
+            if let Record::Motion { label, from, to } = r {
+                let path = |q: [f64; 6]| {
+                    let (l, tilt) = cavity(&TABLE2, q);
+                    l.abs() * tilt.cos()
+                };
+                println!("{i:03} {label}: optical gap change {:.4} µm", path(*to) - path(*from));
+            }
+        }
+        return;
+    }
     if dir == "plan" {
         write_plan(&args[1]);
         return;

@@ -305,6 +305,9 @@ fn rival_on_the_same_data(
 struct Pass {
     amplitudes: usize,
     patience: usize,
+    /// Motions tracked with the model's fringe shape at the pass's start
+    /// ([`ExtractOptions::shaped`]).
+    shaped: bool,
 }
 
 /// The first pass only has to reach a branch's basin: a start that has not settled within 15
@@ -312,8 +315,8 @@ struct Pass {
 /// 200 s, on a plan of rotations only, and lost). The final pass keeps what sixteen ±4° scans
 /// give (the shipped joint plans have about 540 amplitudes: thinned to 320, σ(β_wf) grew from
 /// 0.0006° to 0.0009°).
-const FIRST_PASS: Pass = Pass { amplitudes: 120, patience: 15 };
-const FINAL_PASS: Pass = Pass { amplitudes: 640, patience: 200 };
+const FIRST_PASS: Pass = Pass { amplitudes: 120, patience: 15, shaped: false };
+const FINAL_PASS: Pass = Pass { amplitudes: 640, patience: 200, shaped: true };
 
 /// The observations with at most `budget` fringe amplitudes, shared evenly between the gain
 /// groups (each rotation's own) and evenly spread within each; the other kinds all kept.
@@ -373,7 +376,8 @@ fn one_pass(
     pass: Pass,
 ) -> Identification {
     let model = model_with(nominal, current);
-    let mut extracted = observations_from_traces(motions, &model, &extract_options());
+    let options = ExtractOptions { shaped: pass.shaped, ..extract_options() };
+    let mut extracted = observations_from_traces(motions, &model, &options);
     extracted.skipped.extend(swept.skipped.iter().cloned());
     let mut obs = swept.observations.clone();
     obs.append(&mut extracted.observations);
