@@ -14,7 +14,7 @@ use serde_json::Value;
 fn calibrate(recorder: &Recorder) -> Value {
     let dir = tempfile::tempdir().expect("a temporary folder");
     let traces = dir.path().join("traces");
-    let samples = recorder.write_folder(&lab_records(), &traces).expect("the traces written");
+    let (samples, _) = recorder.write_folder(&lab_records(), &traces).expect("the traces written");
     assert!(samples > 100_000, "{samples} samples");
     let args = ["photorobot", "calibrate", "--bench", "table2-ideal", "--traces"].map(String::from);
     let rest =

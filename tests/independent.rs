@@ -76,12 +76,31 @@ fn trans(x: f64, y: f64, z: f64) -> Matrix4<f64> {
 /// End-effector pose in the world for joints in display units (µm, °): the Khalil-Kleinfinger
 /// chain of the paper's Table I, each link RotX(α)·RotZ(θ)·TransZ(r) (β = d = 0 on every link).
 pub fn end_effector(q: [f64; 6]) -> Matrix4<f64> {
+    end_effector_with(q, &Hidden::default())
+}
+
+/// Imperfections of this bench that its readings do not show: a zero offset per joint (µm, °;
+/// the joint is at its reading plus the offset) and a tilt of the q3 stage's axis toward its
+/// link frame's x and y (mrad: it moves along (tan t_x, tan t_y, 1), normalised).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Hidden {
+    pub joint_offset: [f64; 6],
+    pub q3_tilt_mrad: [f64; 2],
+}
+
+/// [`end_effector`] of a bench with `hidden` imperfections.
+pub fn end_effector_with(q: [f64; 6], hidden: &Hidden) -> Matrix4<f64> {
     let link = |alpha: f64, theta: f64, r: f64| rot_x(alpha) * rot_z(theta) * trans(0.0, 0.0, r);
     let m90 = -PI / 2.0;
+    let q: [f64; 6] = std::array::from_fn(|j| q[j] + hidden.joint_offset[j]);
     let [q4, q5, q6] = [q[3].to_radians(), q[4].to_radians(), q[5].to_radians()];
+    let [tx, ty] = hidden.q3_tilt_mrad.map(|m| (m * 1e-3).tan());
+    let axis = Vector3::new(tx, ty, 1.0).normalize() * q[2];
     link(0.0, 0.0, q[0])
         * link(m90, m90, q[1])
-        * link(m90, m90, q[2])
+        * rot_x(m90)
+        * rot_z(m90)
+        * trans(axis.x, axis.y, axis.z)
         * link(0.0, q4, 0.0)
         * link(m90, q5 + m90, 0.0)
         * link(m90, q6, 0.0)
@@ -89,9 +108,14 @@ pub fn end_effector(q: [f64; 6]) -> Matrix4<f64> {
 
 /// Signed cavity length L (µm) and the angle between the lamella normal and the fiber axis (rad).
 pub fn cavity(e: &Extrinsics, q: [f64; 6]) -> (f64, f64) {
+    cavity_with(e, q, &Hidden::default())
+}
+
+/// [`cavity`] on a bench with `hidden` imperfections.
+pub fn cavity_with(e: &Extrinsics, q: [f64; 6], hidden: &Hidden) -> (f64, f64) {
     let fiber =
         trans(e.x_wf_um, e.y_wf_um, e.z_wf_um) * rot_x(e.beta_wf_deg.to_radians()) * rot_z(e.theta_wf_deg.to_radians());
-    let tool = end_effector(q)
+    let tool = end_effector_with(q, hidden)
         * trans(0.0, 0.0, e.z_et_um)
         * rot_x(e.beta_et_deg.to_radians())
         * rot_y(e.theta_et_deg.to_radians());
@@ -164,8 +188,54 @@ impl Optics {
 /// One recorded file: a motion between two joint vectors, or a sweep at fixed joints.
 #[derive(Debug, Clone)]
 pub enum Record {
-    Motion { label: String, from: [f64; 6], to: [f64; 6] },
-    Sweep { label: String, at: [f64; 6], from_nm: f64, to_nm: f64, rate_nm_per_s: f64 },
+    Motion {
+        label: String,
+        from: [f64; 6],
+        to: [f64; 6],
+    },
+    Sweep {
+        label: String,
+        at: [f64; 6],
+        from_nm: f64,
+        to_nm: f64,
+        rate_nm_per_s: f64,
+    },
+    /// Nothing recorded: the stages go to `at` and wait `s` seconds there.
+    Wait {
+        at: [f64; 6],
+        s: f64,
+    },
+}
+
+/// The records of a plan file in the project's format, as a lab's recorder would run it: an
+/// unrecorded move or a pause only moves the pose and the clock, a recorded move is a motion from
+/// the pose it starts at, a sweep is recorded where the stages stand.
+pub fn records_of(plan: &photorobot_core::plan::Plan) -> Vec<Record> {
+    use photorobot_core::plan::Segment;
+    let (mut at, mut out) = ([0.0; 6], Vec::new());
+    for seg in &plan.segments {
+        match seg {
+            Segment::Move { to, record, label } => {
+                let t = to;
+                let targets = [t.q1_um, t.q2_um, t.q3_um, t.q4_deg, t.q5_deg, t.q6_deg];
+                let next: [f64; 6] = std::array::from_fn(|j| targets[j].unwrap_or(at[j]));
+                out.push(match record {
+                    true => Record::Motion { label: label.clone(), from: at, to: next },
+                    false => Record::Wait { at: next, s: 0.0 },
+                });
+                at = next;
+            }
+            Segment::Sweep { from_nm, to_nm, rate_nm_per_s, label } => out.push(Record::Sweep {
+                label: label.clone(),
+                at,
+                from_nm: *from_nm,
+                to_nm: *to_nm,
+                rate_nm_per_s: *rate_nm_per_s,
+            }),
+            Segment::Dwell { duration_s, .. } => out.push(Record::Wait { at, s: *duration_s }),
+        }
+    }
+    out
 }
 
 /// How the joints move between two poses in time.
@@ -212,6 +282,10 @@ pub struct Recorder {
     pub offset_v: f64,
     pub noise_rel_fringe: f64,
     pub seed: u64,
+    /// What the bench hides from its readings.
+    pub hidden: Hidden,
+    /// The session clock at the start of the first record (s).
+    pub start_clock_s: f64,
 }
 
 impl Recorder {
@@ -229,11 +303,13 @@ impl Recorder {
             offset_v: 0.0,
             noise_rel_fringe: 1e-3,
             seed,
+            hidden: Hidden::default(),
+            start_clock_s: 3.7,
         }
     }
 
     fn signal(&self, q: [f64; 6], wavelength_nm: f64) -> f64 {
-        let (l, tilt) = cavity(&self.truth, q);
+        let (l, tilt) = cavity_with(&self.truth, q, &self.hidden);
         self.offset_v + self.gain_v * self.optics.reflectance(l.abs(), tilt, wavelength_nm)
     }
 
@@ -254,16 +330,17 @@ impl Recorder {
         t * self.profile.duration_factor()
     }
 
-    /// Write every record to `dir` as `NNN.csv`, on one clock (setup moves between records take
-    /// their time unrecorded). Returns the number of samples written.
-    pub fn write_folder(&self, records: &[Record], dir: &Path) -> std::io::Result<usize> {
+    /// Write every record to `dir` as `NNN.csv`, on one clock from `start_clock_s` (setup moves
+    /// between records and waits take their time unrecorded). Returns the number of samples
+    /// written and the clock at the end (s).
+    pub fn write_folder(&self, records: &[Record], dir: &Path) -> std::io::Result<(usize, f64)> {
         std::fs::create_dir_all(dir)?;
         let mut rng = StdRng::seed_from_u64(self.seed);
         let noise = Normal::new(0.0, self.noise_rel_fringe * self.fringe_amplitude_v()).expect("a finite σ");
         let dt = 1.0 / self.sample_rate_hz;
-        let (mut clock, mut at, mut samples) = (3.7, [0.0; 6], 0);
+        let (mut clock, mut at, mut samples, mut files) = (self.start_clock_s, [0.0; 6], 0, 0);
         let encoder = |q: [f64; 6]| q.map(|v| (v * 1e4).round() / 1e4);
-        for (i, record) in records.iter().enumerate() {
+        for record in records {
             let mut text = String::from("# recorded by an independent simulator\n");
             let mut row = |t: f64, q: [f64; 6], nm: f64, rng: &mut StdRng| {
                 let v = self.signal(q, nm) + noise.sample(rng);
@@ -274,6 +351,11 @@ impl Recorder {
             let (label, start) = match record {
                 Record::Motion { label, from, .. } => (label, *from),
                 Record::Sweep { label, at, .. } => (label, *at),
+                Record::Wait { at: pose, s } => {
+                    clock += self.duration_s(&at, pose) + s;
+                    at = *pose;
+                    continue;
+                }
             };
             clock += self.duration_s(&at, &start) + 0.3;
             let header =
@@ -303,10 +385,12 @@ impl Recorder {
                     clock += total;
                     at = *pose;
                 }
+                Record::Wait { .. } => unreachable!("a wait records nothing: handled above"),
             }
-            std::fs::write(dir.join(format!("{i:03}.csv")), header + &text)?;
+            std::fs::write(dir.join(format!("{files:03}.csv")), header + &text)?;
+            files += 1;
         }
-        Ok(samples)
+        Ok((samples, clock))
     }
 }
 

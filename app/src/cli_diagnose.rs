@@ -5,7 +5,9 @@
 //! The session folder has `traces/*.csv` and `extrinsics.ron`. The bench is the one the traces
 //! name (`# bench: virtual bench <preset>`), or `--bench`; discriminating motions run on a fresh
 //! virtual bench of that preset (seed `--seed`, default the preset's + 1). With `--bench none`
-//! nothing runs and the report says which motions would tell the absorbed candidates apart.
+//! nothing runs: the report says which motions would tell the absorbed candidates apart, and
+//! writes them as a plan file (`discriminating-motions.ron` in the session folder) to record on
+//! the bench and add to the session's traces.
 
 use crate::cli::CliError;
 use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
@@ -46,7 +48,12 @@ struct JsonOut<'a> {
     /// The validation motions planned without and with the added effects (empty without a
     /// bench or without added effects).
     validation: &'a [EffectValidationRow],
+    /// The plan file of the discriminating motions designed but not run (`--bench none`).
+    proposed_plan_file: Option<&'a Path>,
 }
+
+/// Where `--bench none` writes the discriminating motions it proposes, in the session folder.
+pub const PROPOSED_PLAN_FILE: &str = "discriminating-motions.ron";
 
 fn invalid(file: &Path, field: &str, problem: String) -> CliError {
     CliError::File(FileError::Invalid { file: file.to_path_buf(), field: field.into(), problem })
@@ -158,18 +165,38 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
         _ => Vec::new(),
     };
     save_record(&a.session, &result, &effects, &validation)?;
+    let proposed = match d.proposed_plan() {
+        Some(plan) => {
+            let file = a.session.join(PROPOSED_PLAN_FILE);
+            photorobot_core::files::save_ron(&file, &plan)?;
+            Some(file)
+        }
+        None => None,
+    };
     if a.json {
         let text = serde_json::to_string_pretty(&JsonOut {
             result: &result,
             steps: &d.steps,
             skipped_traces: &skipped,
             validation: &validation,
+            proposed_plan_file: proposed.as_deref(),
         })
         .map_err(std::io::Error::other)?;
         writeln!(out, "{text}")?;
     } else {
         print_validation(&validation, out)?;
         print_result(&result, out)?;
+        if let Some(file) = &proposed {
+            writeln!(
+                out,
+                "the discriminating motions, as a plan: {}\nrecord it on the bench that recorded these traces \
+                 (e.g. `photorobot simulate --bench PRESET --plan {} --out DIR` on a virtual one), put the traces \
+                 in {}, and diagnose again",
+                file.display(),
+                file.display(),
+                a.session.join("traces").display()
+            )?;
+        }
     }
     Ok(())
 }

@@ -40,7 +40,7 @@ fn main() {
         recorder.profile = photorobot_e2e::independent::Profile::RaisedCosine;
     }
     match recorder.write_folder(&lab_records(), std::path::Path::new(dir)) {
-        Ok(n) => println!("{} traces, {n} samples in {dir}", lab_records().len()),
+        Ok((n, _)) => println!("{} traces, {n} samples in {dir}", lab_records().len()),
         Err(e) => {
             eprintln!("{dir}: {e}");
             std::process::exit(1);
@@ -67,6 +67,12 @@ fn write_plan(file: &str) {
             Record::Sweep { label, at, from_nm, to_nm, rate_nm_per_s } => {
                 segments.push(mv(at, false, "setup"));
                 segments.push(Segment::Sweep { from_nm, to_nm, rate_nm_per_s, label });
+            }
+            Record::Wait { at, s } => {
+                segments.push(mv(at, false, "setup"));
+                if s > 0.0 {
+                    segments.push(Segment::Dwell { duration_s: s, record: false, label: "wait".into() });
+                }
             }
         }
     }

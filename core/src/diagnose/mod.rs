@@ -511,6 +511,27 @@ impl Diagnosis {
         self.observations.iter().map(|o| o.time_s[1]).fold(0.0, f64::max)
     }
 
+    /// The discriminating motions designed but not run (no bench was given), as a plan the
+    /// technician can run on the bench that recorded the traces: each motion after an unrecorded
+    /// setup move to its start. `None` when motions ran or none would help.
+    pub fn proposed_plan(&self) -> Option<crate::plan::Plan> {
+        if self.ran || self.designed.is_empty() {
+            return None;
+        }
+        let mut plan = motions::plan_of(&self.designed);
+        plan.name = "discriminating motions".into();
+        plan.description = format!(
+            "Motions that would tell apart what the recorded traces cannot: {}. Record them on the bench \
+             that recorded the session, add the traces to the session's traces/ and diagnose again.",
+            if self.need_motions.is_empty() {
+                "the candidates the data absorb".into()
+            } else {
+                self.need_motions.join(", ")
+            }
+        );
+        Some(plan)
+    }
+
     /// The result, once the last step has run.
     pub fn result(&self) -> Option<&DiagnosisResult> {
         self.result.as_ref()
