@@ -196,11 +196,21 @@ pub enum CliError {
 }
 
 impl CliError {
-    /// The process exit code: 1 for a run that finished without a result, 2 otherwise.
+    /// The process exit code: 1 for a run that failed or finished without a result (not a
+    /// calibration, a bench or plan that failed, a trace that could not be analysed, output that
+    /// could not be written), 2 for a command line that is wrong, 3 for a file that cannot be
+    /// used (a plan, preset, trace or session that is missing or malformed, a bench preset that
+    /// cannot be built).
     pub fn exit_code(&self) -> u8 {
         match self {
-            CliError::NotACalibration { .. } => 1,
-            _ => 2,
+            CliError::Bench(BenchError::Config(_)) => 3,
+            CliError::NotACalibration { .. }
+            | CliError::Bench(_)
+            | CliError::Run(_)
+            | CliError::Measure(_)
+            | CliError::Output(_) => 1,
+            CliError::Usage(_) | CliError::Argument { .. } | CliError::Limits(_) => 2,
+            CliError::File(_) | CliError::Trace(_) | CliError::Session(_) => 3,
         }
     }
 }
@@ -527,4 +537,37 @@ fn fringes(a: &FringesArgs, out: &mut dyn Write) -> Result<(), CliError> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn exit_code(args: &[&str]) -> u8 {
+        let mut out = Vec::new();
+        run(args.iter().copied(), &mut out).map(|_| 0).unwrap_or_else(|e| e.exit_code())
+    }
+
+    #[test]
+    fn a_wrong_command_line_exits_2_and_an_unusable_file_3() {
+        assert_eq!(exit_code(&["photorobot", "frames", "--no-such-flag"]), 2);
+        assert_eq!(exit_code(&["photorobot", "frames", "--q", "1,2,3"]), 2, "three joints for six");
+        let dir = tempfile::tempdir().unwrap();
+        let plan = dir.path().join("missing-plan.ron");
+        let out = dir.path().join("out");
+        let (plan, out) = (plan.to_str().unwrap(), out.to_str().unwrap());
+        assert_eq!(exit_code(&["photorobot", "simulate", "--bench", "table2-ideal", "--plan", plan, "--out", out]), 3);
+        std::fs::write(dir.path().join("bench.ron"), "BenchPreset(name: 1)").unwrap();
+        let bench = dir.path().join("bench.ron");
+        let args = ["photorobot", "simulate", "--bench", bench.to_str().unwrap(), "--plan", "strategy1", "--out", out];
+        assert_eq!(exit_code(&args), 3, "a malformed preset");
+        assert_eq!(exit_code(&["photorobot", "frames"]), 0);
+    }
+
+    #[test]
+    fn a_run_without_a_result_exits_1() {
+        let e = CliError::NotACalibration { session: "s".into(), problem: "the model does not fit".into() };
+        assert_eq!(e.exit_code(), 1);
+        assert_eq!(CliError::Output(std::io::Error::other("disk full")).exit_code(), 1);
+    }
 }

@@ -235,7 +235,7 @@ fn print_validation(rows: &[EffectValidationRow], out: &mut dyn Write) -> std::i
 }
 
 fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()> {
-    writeln!(out, "\nverdict: {:?}", r.verdict)?;
+    writeln!(out, "\nverdict: {}", r.verdict.word())?;
     for e in &r.effects {
         writeln!(
             out,

@@ -14,6 +14,7 @@ pub mod model;
 pub mod plan;
 pub mod report;
 pub mod session;
+pub mod solver;
 pub mod sweep;
 pub mod trace;
 pub mod validate;

@@ -509,7 +509,7 @@ pub fn fit_gap(wavelength_nm: &[f64], irradiance: &[f64], cfg: &SweepConfig) -> 
         if fringes < MIN_FRINGES {
             return Err(SweepError::TooFewFringes { fringes, min: MIN_FRINGES });
         }
-        return Err(SweepError::FitFailed(format!("{:?}", report.termination)));
+        return Err(SweepError::FitFailed(crate::solver::termination_words(&report.termination)));
     }
     let mut p = problem.p;
     if p.iter().any(|v| !v.is_finite()) {

@@ -93,6 +93,17 @@ pub enum Verdict {
     Unexplained,
 }
 
+impl Verdict {
+    /// The verdict's word, as in the JSON.
+    pub fn word(self) -> &'static str {
+        match self {
+            Verdict::Named => "named",
+            Verdict::None => "none",
+            Verdict::Unexplained => "unexplained",
+        }
+    }
+}
+
 /// A named (added) effect.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NamedEffect {

@@ -302,7 +302,7 @@ pub fn report_from_traces(
             "translation `{}`: its measured gap change ({:+.1} nm) disagrees in sign with {}",
             s.label,
             s.dl_nm,
-            s.evidence.iter().map(|e| format!("{:?}", e.source)).collect::<Vec<_>>().join(", ")
+            s.evidence.iter().map(|e| e.source.words()).collect::<Vec<_>>().join(", ")
         ));
     }
     Ok(CalibrationReport {

@@ -239,7 +239,7 @@ fn run(
     }
     let (problem, converged, termination, evaluations) = if minimise {
         let (problem, report) = LevenbergMarquardt::new().with_patience(options.patience.max(1)).minimize(problem);
-        let t = format!("{:?}", report.termination);
+        let t = crate::solver::termination_words(&report.termination);
         (problem, report.termination.was_successful(), t, report.number_of_evaluations)
     } else {
         (problem, true, "evaluated, not minimised".to_string(), 1)

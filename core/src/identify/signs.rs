@@ -23,6 +23,16 @@ pub enum SignSource {
     FittedModel,
 }
 
+impl SignSource {
+    /// The source in words, for warnings and reports.
+    pub fn words(self) -> &'static str {
+        match self {
+            SignSource::SweepsBeforeAndAfter => "the sweeps before and after",
+            SignSource::FittedModel => "the model fitted to all the data",
+        }
+    }
+}
+
 /// One source's sign.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SignEvidence {
