@@ -195,6 +195,19 @@ pub enum CliError {
     },
 }
 
+/// The version of every command's JSON output, in its `schema` field: raised when a field is
+/// renamed, removed or changes meaning (new fields do not raise it).
+pub const JSON_SCHEMA: u32 = 1;
+
+/// A command's JSON document as printed, with `schema` ([`JSON_SCHEMA`]) added.
+pub fn json_text<T: serde::Serialize>(doc: &T) -> std::io::Result<String> {
+    let mut doc = serde_json::to_value(doc).map_err(std::io::Error::other)?;
+    if let Some(map) = doc.as_object_mut() {
+        map.insert("schema".into(), JSON_SCHEMA.into());
+    }
+    serde_json::to_string_pretty(&doc).map_err(std::io::Error::other)
+}
+
 impl CliError {
     /// The process exit code: 1 for a run that failed or finished without a result (not a
     /// calibration, a bench or plan that failed, a trace that could not be analysed, output that
@@ -315,7 +328,7 @@ fn frames(a: &FramesArgs, out: &mut dyn Write) -> Result<(), CliError> {
             "frames": tree.records(),
         });
         doc.as_object_mut().unwrap().extend(cavity.as_object().unwrap().clone());
-        writeln!(out, "{}", serde_json::to_string_pretty(&doc).expect("JSON of plain data"))?;
+        writeln!(out, "{}", json_text(&doc)?)?;
         return Ok(());
     }
     let origin = |p: &Option<PathBuf>, default: &str| match p {
@@ -479,7 +492,7 @@ fn fringes(a: &FringesArgs, out: &mut dyn Write) -> Result<(), CliError> {
                 "sigma_um": mm.track.sigma_total_nm * 1e-3,
                 "predicted_dl_um": mm.hint_nm.last().copied().unwrap_or(0.0) * 1e-3,
             });
-            writeln!(out, "{}", serde_json::to_string_pretty(&doc).expect("JSON of plain data"))?;
+            writeln!(out, "{}", json_text(&doc)?)?;
         }
         (Measurement::Motion(mm), false) => {
             writeln!(
@@ -520,7 +533,7 @@ fn fringes(a: &FringesArgs, out: &mut dyn Write) -> Result<(), CliError> {
                     "peak_fsr_gap_um": s.peak_fsr.map(|p| p.gap_um),
                     "peak_fsr_sigma_um": s.peak_fsr.map(|p| p.sigma_um),
                 });
-                writeln!(out, "{}", serde_json::to_string_pretty(&doc).expect("JSON of plain data"))?;
+                writeln!(out, "{}", json_text(&doc)?)?;
             } else {
                 writeln!(
                     out,
@@ -562,6 +575,15 @@ mod tests {
         let args = ["photorobot", "simulate", "--bench", bench.to_str().unwrap(), "--plan", "strategy1", "--out", out];
         assert_eq!(exit_code(&args), 3, "a malformed preset");
         assert_eq!(exit_code(&["photorobot", "frames"]), 0);
+    }
+
+    #[test]
+    fn json_output_carries_its_schema_version() {
+        let mut out = Vec::new();
+        run(["photorobot", "frames", "--json"], &mut out).unwrap();
+        let doc: serde_json::Value = serde_json::from_slice(&out).unwrap();
+        assert_eq!(doc["schema"], JSON_SCHEMA);
+        assert!(doc["frames"].is_array(), "the document itself is kept: {doc}");
     }
 
     #[test]

@@ -175,7 +175,7 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
     session.calibration = Some(CalibrationReport { traces: Vec::new(), ..report.clone() });
     session.save(&a.out)?;
     save_ron(&a.out.join("extrinsics.ron"), &report.extrinsics)?;
-    let json = serde_json::to_string_pretty(&report).map_err(std::io::Error::other)?;
+    let json = crate::cli::json_text(&report)?;
     write_atomic(&a.out.join("report.json"), json.as_bytes())?;
     if a.json {
         writeln!(out, "{json}")?;

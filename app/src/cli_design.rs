@@ -122,7 +122,7 @@ pub fn run_design(a: &DesignArgs, out: &mut dyn Write) -> Result<(), CliError> {
             "plan": d.plan,
             "out": a.out,
         });
-        writeln!(out, "{}", serde_json::to_string_pretty(&doc).map_err(std::io::Error::other)?)?;
+        writeln!(out, "{}", crate::cli::json_text(&doc)?)?;
     } else {
         print_design(&d, &preset.name, out)?;
         if let Some(p) = &a.out {

@@ -174,14 +174,13 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
         None => None,
     };
     if a.json {
-        let text = serde_json::to_string_pretty(&JsonOut {
+        let text = crate::cli::json_text(&JsonOut {
             result: &result,
             steps: &d.steps,
             skipped_traces: &skipped,
             validation: &validation,
             proposed_plan_file: proposed.as_deref(),
-        })
-        .map_err(std::io::Error::other)?;
+        })?;
         writeln!(out, "{text}")?;
     } else {
         print_validation(&validation, out)?;
