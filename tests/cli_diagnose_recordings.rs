@@ -5,47 +5,21 @@
 //! would tell the rest apart as a plan file; those are recorded on the same bench (`simulate
 //! --plan` that file), added to the session's traces, and the diagnosis runs again.
 
-use photorobot_app::cli::run;
 use photorobot_app::cli_diagnose::PROPOSED_PLAN_FILE;
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::files::save_ron;
 use photorobot_core::identify::design::candidate_pool;
 use photorobot_core::model::effects::Effect;
 use photorobot_core::plan::random::{random_plan, Family};
+use photorobot_e2e::recordings::{add_traces, assert_named, cli, diagnose_without_bench as diagnose};
 use serde_json::Value;
 use std::path::Path;
-
-fn cli(args: &[&str]) -> (bool, String) {
-    let mut out = Vec::new();
-    let r = run(args.iter().copied(), &mut out);
-    let mut text = String::from_utf8_lossy(&out).into_owned();
-    if let Err(e) = &r {
-        text += &format!("\nerror: {e}");
-    }
-    (r.is_ok(), text)
-}
 
 fn simulate(bench: &str, plan: &Path, seed: u64, out: &Path) {
     let seed = seed.to_string();
     let (p, o) = (plan.to_str().unwrap(), out.to_str().unwrap());
     let (ok, text) = cli(&["photorobot", "simulate", "--bench", bench, "--plan", p, "--seed", &seed, "--out", o]);
     assert!(ok, "simulate: {text}");
-}
-
-fn diagnose(session: &Path) -> Value {
-    let (ok, text) = cli(&["photorobot", "diagnose", session.to_str().unwrap(), "--bench", "none", "--json"]);
-    assert!(ok, "diagnose: {text}");
-    let v: Value = serde_json::from_str(&text).unwrap();
-    eprintln!(
-        "  verdict {}, residual {:.2} → {:.2}σ, effects {}, need motions {}, proposed {}",
-        v["verdict"],
-        v["residual_rms_before_sigma"].as_f64().unwrap_or(f64::NAN),
-        v["residual_rms_after_sigma"].as_f64().unwrap_or(f64::NAN),
-        v["effects"],
-        v["need_motions"],
-        v["proposed_plan_file"]
-    );
-    v
 }
 
 /// What the recordings alone gave, then what they gave with the proposed motions added (when
@@ -82,27 +56,10 @@ fn from_recordings(effects: Vec<Effect>, family: Family, plan_seed: u64) -> Outc
         assert!(proposal.exists(), "{}", first["proposed_plan_file"]);
         let added = dir.path().join("proposed");
         simulate(bench, &proposal, 6, &added);
-        for f in std::fs::read_dir(&added).unwrap() {
-            let f = f.unwrap().path();
-            let name = format!("z-{}", f.file_name().unwrap().to_str().unwrap());
-            std::fs::copy(&f, session.join("traces").join(name)).unwrap();
-        }
+        add_traces(&added, &session);
         diagnose(&session)
     });
     Outcome { first, second }
-}
-
-/// The first named effect is one of `names`, within 3σ of `value` (sign free when `abs`).
-fn assert_named(v: &Value, names: &[&str], value: f64, abs: bool) {
-    assert_eq!(v["verdict"], "named", "{v}");
-    let first = &v["effects"][0];
-    let name = first["name"].as_str().unwrap();
-    assert!(names.contains(&name), "{name}: {v}");
-    let (mut est, sigma) = (first["estimate"].as_f64().unwrap(), first["sigma"].as_f64().unwrap());
-    if abs {
-        est = est.abs();
-    }
-    assert!((est - value).abs() <= 3.0 * sigma, "{name} = {est} ± {sigma}, hidden {value}");
 }
 
 /// The named result: from the recordings alone, or once the proposed motions were added.

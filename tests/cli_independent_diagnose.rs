@@ -5,37 +5,11 @@
 //! on the same bench, later on the same clock, the traces join the session's, and the diagnosis
 //! runs again.
 
-use photorobot_app::cli::run;
 use photorobot_app::cli_diagnose::PROPOSED_PLAN_FILE;
 use photorobot_core::plan::Plan;
 use photorobot_e2e::independent::{lab_records, records_of, Hidden, Recorder};
+use photorobot_e2e::recordings::{add_traces, assert_named, cli, diagnose_without_bench as diagnose};
 use serde_json::Value;
-use std::path::Path;
-
-fn cli(args: &[&str]) -> (bool, String) {
-    let mut out = Vec::new();
-    let r = run(args.iter().copied(), &mut out);
-    let mut text = String::from_utf8_lossy(&out).into_owned();
-    if let Err(e) = &r {
-        text += &format!("\nerror: {e}");
-    }
-    (r.is_ok(), text)
-}
-
-fn diagnose(session: &Path) -> Value {
-    let (ok, text) = cli(&["photorobot", "diagnose", session.to_str().unwrap(), "--bench", "none", "--json"]);
-    assert!(ok, "diagnose: {text}");
-    let v: Value = serde_json::from_str(&text).unwrap();
-    eprintln!(
-        "  verdict {}, residual {:.2} → {:.2}σ, effects {}, proposed {}",
-        v["verdict"],
-        v["residual_rms_before_sigma"].as_f64().unwrap_or(f64::NAN),
-        v["residual_rms_after_sigma"].as_f64().unwrap_or(f64::NAN),
-        v["effects"],
-        v["proposed_plan_file"]
-    );
-    v
-}
 
 /// The lab motions recorded with `hidden`, calibrated, diagnosed without a bench; then, if
 /// motions were proposed, those recorded and the diagnosis run again. (first, second)
@@ -58,23 +32,10 @@ fn from_recordings(hidden: Hidden, seed: u64) -> (Value, Option<Value>) {
         later.start_clock_s = end_s + 60.0;
         let added = dir.path().join("proposed");
         later.write_folder(&records_of(&plan), &added).unwrap();
-        for f in std::fs::read_dir(&added).unwrap() {
-            let f = f.unwrap().path();
-            let name = format!("z-{}", f.file_name().unwrap().to_str().unwrap());
-            std::fs::copy(&f, session.join("traces").join(name)).unwrap();
-        }
+        add_traces(&added, &session);
         diagnose(&session)
     });
     (first, second)
-}
-
-/// The first named effect is `name`, within 3σ of `value`.
-fn assert_named(v: &Value, name: &str, value: f64) {
-    assert_eq!(v["verdict"], "named", "{v}");
-    let first = &v["effects"][0];
-    assert_eq!(first["name"], name, "{v}");
-    let (est, sigma) = (first["estimate"].as_f64().unwrap(), first["sigma"].as_f64().unwrap());
-    assert!((est - value).abs() <= 3.0 * sigma, "{name} = {est} ± {sigma}, hidden {value}");
 }
 
 /// What the recordings alone name is the hidden effect, or lists it among those it cannot be
@@ -101,7 +62,7 @@ fn another_simulators_hidden_q4_zero_offset_is_named() {
     let hidden = Hidden { joint_offset: [0.0, 0.0, 0.0, 0.07, 0.0, 0.0], ..Hidden::default() };
     let (first, second) = from_recordings(hidden, 22);
     assert_not_misnamed(&first, "joint zero offset q4");
-    assert_named(second.as_ref().unwrap_or(&first), "joint zero offset q4", 0.07);
+    assert_named(second.as_ref().unwrap_or(&first), &["joint zero offset q4"], 0.07, false);
 }
 
 #[test]
@@ -111,5 +72,5 @@ fn another_simulators_hidden_stage_axis_tilt_is_named() {
     // Measured: the recordings alone name a q1 reversal of 0.07 µm that cannot be told apart
     // from this tilt; the proposed motions tell them apart.
     assert_not_misnamed(&first, "axis tilt q3 toward link y");
-    assert_named(second.as_ref().unwrap_or(&first), "axis tilt q3 toward link y", 1.0);
+    assert_named(second.as_ref().unwrap_or(&first), &["axis tilt q3 toward link y"], 1.0, false);
 }

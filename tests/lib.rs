@@ -81,3 +81,4 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
 
 pub mod independent;
 pub mod random;
+pub mod recordings;

@@ -1,0 +1,57 @@
+//! Diagnosis from recordings alone, as a user runs it: the CLI called with arguments, the
+//! session diagnosed without a bench, and the traces of a proposed plan added to the session.
+
+use photorobot_app::cli::run;
+use serde_json::Value;
+use std::path::Path;
+
+/// Run `photorobot` with `args`: whether it succeeded, and what it printed (then the error).
+pub fn cli(args: &[&str]) -> (bool, String) {
+    let mut out = Vec::new();
+    let r = run(args.iter().copied(), &mut out);
+    let mut text = String::from_utf8_lossy(&out).into_owned();
+    if let Err(e) = &r {
+        text += &format!("\nerror: {e}");
+    }
+    (r.is_ok(), text)
+}
+
+/// `photorobot diagnose SESSION --bench none --json`, its outcome printed in brief.
+pub fn diagnose_without_bench(session: &Path) -> Value {
+    let (ok, text) = cli(&["photorobot", "diagnose", session.to_str().unwrap(), "--bench", "none", "--json"]);
+    assert!(ok, "diagnose: {text}");
+    let v: Value = serde_json::from_str(&text).unwrap();
+    eprintln!(
+        "  verdict {}, residual {:.2} → {:.2}σ, effects {}, need motions {}, proposed {}",
+        v["verdict"],
+        v["residual_rms_before_sigma"].as_f64().unwrap_or(f64::NAN),
+        v["residual_rms_after_sigma"].as_f64().unwrap_or(f64::NAN),
+        v["effects"],
+        v["need_motions"],
+        v["proposed_plan_file"]
+    );
+    v
+}
+
+/// Copy every trace of folder `from` into `session/traces/`, named `z-NAME` so that none
+/// replaces a recorded one.
+pub fn add_traces(from: &Path, session: &Path) {
+    for f in std::fs::read_dir(from).unwrap() {
+        let f = f.unwrap().path();
+        let name = format!("z-{}", f.file_name().unwrap().to_str().unwrap());
+        std::fs::copy(&f, session.join("traces").join(name)).unwrap();
+    }
+}
+
+/// The first named effect is one of `names`, within 3σ of `value` (its magnitude when `abs`).
+pub fn assert_named(v: &Value, names: &[&str], value: f64, abs: bool) {
+    assert_eq!(v["verdict"], "named", "{v}");
+    let first = &v["effects"][0];
+    let name = first["name"].as_str().unwrap();
+    assert!(names.contains(&name), "{name}: {v}");
+    let (mut est, sigma) = (first["estimate"].as_f64().unwrap(), first["sigma"].as_f64().unwrap());
+    if abs {
+        est = est.abs();
+    }
+    assert!((est - value).abs() <= 3.0 * sigma, "{name} = {est} ± {sigma}, hidden {value}");
+}
