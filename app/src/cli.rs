@@ -184,6 +184,14 @@ pub enum CliError {
     /// Output could not be written.
     #[error("cannot write output: {0}")]
     Output(#[from] std::io::Error),
+    /// The work itself failed (a calibration, design or diagnosis that could not be computed).
+    #[error("{what} failed: {problem}")]
+    Failed {
+        /// What failed, e.g. "calibration".
+        what: &'static str,
+        /// Why.
+        problem: String,
+    },
     /// The run finished and its session was written, but it is not a calibration (the model does
     /// not fit the data, branches tie, or the solver did not converge).
     #[error("not a calibration: {problem} (session written to {})", session.display())]
@@ -218,6 +226,7 @@ impl CliError {
         match self {
             CliError::Bench(BenchError::Config(_)) => 3,
             CliError::NotACalibration { .. }
+            | CliError::Failed { .. }
             | CliError::Bench(_)
             | CliError::Run(_)
             | CliError::Measure(_)
@@ -591,5 +600,6 @@ mod tests {
         let e = CliError::NotACalibration { session: "s".into(), problem: "the model does not fit".into() };
         assert_eq!(e.exit_code(), 1);
         assert_eq!(CliError::Output(std::io::Error::other("disk full")).exit_code(), 1);
+        assert_eq!(CliError::Failed { what: "diagnosis", problem: "no result".into() }.exit_code(), 1);
     }
 }

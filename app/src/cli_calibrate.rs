@@ -93,8 +93,7 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
             problem: format!("{} already holds a session (session.ron); choose another folder", a.out.display()),
         });
     }
-    let failed =
-        |problem: String| CliError::Argument { argument: "--bench", problem: format!("calibration failed: {problem}") };
+    let failed = |problem: String| CliError::Failed { what: "calibration", problem };
     let (mut session, report) = match &a.traces {
         Some(dir) => {
             let mapping = a.mapping.as_deref().map(ColumnMapping::load).transpose()?;

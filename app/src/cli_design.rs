@@ -66,7 +66,7 @@ pub fn run_design(a: &DesignArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let options = DesignOptions { prior, margin: a.margin, seed: a.seed, ..Default::default() };
     let reference = if a.no_reference { Vec::new() } else { plans(Mode::Joint) };
     let d = design(&preset, &options, &reference)
-        .map_err(|e| CliError::Argument { argument: "--bench", problem: format!("design failed: {e}") })?;
+        .map_err(|e| CliError::Failed { what: "design", problem: e.to_string() })?;
     let within = d.total_s <= a.max_minutes * 60.0;
     if let Some(path) = &a.out {
         let argv = format!(

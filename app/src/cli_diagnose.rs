@@ -137,14 +137,14 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     loop {
         let step = d
             .step(runner.as_mut().map(|r| r as &mut dyn MotionRunner))
-            .map_err(|e| CliError::Argument { argument: "session", problem: format!("diagnosis failed: {e}") })?;
+            .map_err(|e| CliError::Failed { what: "diagnosis", problem: e.to_string() })?;
         let Some(step) = step else { break };
         if !a.json {
             writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
         }
     }
     let result =
-        d.result().cloned().ok_or_else(|| CliError::Argument { argument: "session", problem: "no result".into() })?;
+        d.result().cloned().ok_or_else(|| CliError::Failed { what: "diagnosis", problem: "no result".into() })?;
     drop(runner);
     // The extended model in use: the validation motions planned with and without the effects
     // added (named, or tried and kept as partial), on the same bench.
@@ -160,7 +160,7 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
                 )?;
             }
             validate_with_effects(b, &base, &extrinsics, &result.extrinsics, &effects)
-                .map_err(|e| CliError::Argument { argument: "session", problem: format!("extended model: {e}") })?
+                .map_err(|e| CliError::Failed { what: "validation with the named effects", problem: e.to_string() })?
         }
         _ => Vec::new(),
     };
