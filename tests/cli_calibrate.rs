@@ -99,16 +99,30 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
     assert_eq!(diagnosis["verdict"], "none", "{}", diagnosis["steps"]);
     assert_eq!(diagnosis["effects"].as_array().map(Vec::len), Some(0));
     assert_eq!(diagnosis["residual_rms_before_nm"], diagnosis["residual_rms_after_nm"]);
+}
 
-    // Paper mode on the same bench's strategy 1 and 2 traces (identification only): the lamella
-    // angles within 3σ, and what the paper's data cannot determine flagged (SPEC 6.4).
-    let s12 = tempfile::tempdir().unwrap();
-    for r in session.traces.iter().filter(|r| r.complete && r.step.is_some_and(|(p, _)| p < 2)) {
-        let name = std::path::Path::new(&r.file).file_name().unwrap();
-        std::fs::copy(dir.path().join(&r.file), s12.path().join(name)).unwrap();
+/// Paper mode (identification only) on strategy 1 and 2 traces recorded with `photorobot
+/// simulate` on the same bench: the lamella angles within 3σ, and what the paper's data cannot
+/// determine flagged (SPEC 6.4). Its own test, so that it runs beside the joint calibration.
+#[test]
+fn paper_mode_on_the_strategies_traces_determines_the_lamella_angles_and_flags_the_rest() {
+    let dir = tempfile::tempdir().unwrap();
+    let traces = dir.path().join("traces");
+    std::fs::create_dir_all(&traces).unwrap();
+    for (k, plan) in ["strategy1", "strategy2"].into_iter().enumerate() {
+        let recorded = dir.path().join(plan);
+        let seed = (7 + k).to_string();
+        let argv = ["photorobot", "simulate", "--bench", "table2-ideal", "--plan", plan, "--seed", &seed, "--out"];
+        let mut sink = Vec::new();
+        run(argv.into_iter().chain([recorded.to_str().unwrap()]), &mut sink).unwrap();
+        for f in std::fs::read_dir(&recorded).unwrap() {
+            let f = f.unwrap().path();
+            std::fs::copy(&f, traces.join(format!("{k}-{}", f.file_name().unwrap().to_str().unwrap()))).unwrap();
+        }
     }
-    let paper_out = tempfile::tempdir().unwrap();
-    let paper = calibrate("paper", &paper_out.path().join("session"), Some(s12.path()));
+    let truth = Extrinsics::table2().to_array();
+    let index = |n: &str| photorobot_core::model::extrinsics::PARAMETER_NAMES.iter().position(|p| p.0 == n).unwrap();
+    let paper = calibrate("paper", &dir.path().join("session"), Some(&traces));
     eprintln!("{}", serde_json::to_string_pretty(&paper["parameters"]).unwrap());
     for name in ["beta_et", "theta_et"] {
         let p = parameter(&paper, name);

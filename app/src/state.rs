@@ -502,7 +502,7 @@ impl AppState {
             Event::DiagnosisStep(title, summary) => self.diagnosis_steps.push((title, summary)),
             Event::Diagnosed(r) => {
                 self.status = match &r {
-                    Ok(d) => format!("diagnosis: {:?}", d.verdict),
+                    Ok(d) => format!("diagnosis: {}", d.verdict.word()),
                     Err(e) => format!("diagnosis failed: {e}"),
                 };
                 self.diagnosis = Some(r);
