@@ -1400,34 +1400,4 @@ mod tests {
             check_any_input(&bytes);
         }
     }
-
-    /// Reading a million-row trace: `cargo test -p photorobot-core --lib --release -- --ignored read_speed --nocapture`.
-    #[test]
-    #[ignore = "timing; run by hand"]
-    fn read_speed_one_million_rows() {
-        let n = 1_000_000;
-        let mut t = Trace::with_capacity(TraceMeta::default(), n);
-        for i in 0..n {
-            let x = i as f64 * 1e-3;
-            let q = [-150.0 + 3e-4 * i as f64, 0.0, 12.5, 0.0, 1.0 + x.sin() * 1e-3, 0.0];
-            t.push_sample(x, q, 1560.0, 0.5 + 0.4 * (x * 7.0).cos());
-        }
-        let bytes = t.to_csv_bytes(Path::new("speed.csv")).unwrap();
-        // Best of three, wall clock and (on Linux) this thread's CPU time: the machine may be shared.
-        let cpu_s = || {
-            std::fs::read_to_string("/proc/thread-self/schedstat")
-                .ok()
-                .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-                .map_or(f64::NAN, |ns| ns * 1e-9)
-        };
-        let (mut wall, mut cpu) = (f64::INFINITY, f64::INFINITY);
-        for _ in 0..3 {
-            let (start, c0) = (std::time::Instant::now(), cpu_s());
-            let back = Trace::from_csv_reader(&bytes[..], Path::new("speed.csv")).unwrap();
-            wall = wall.min(start.elapsed().as_secs_f64());
-            cpu = cpu.min(cpu_s() - c0);
-            assert_eq!(back.len(), n);
-        }
-        println!("read {n} rows ({} MB): {wall:.3} s wall, {cpu:.3} s CPU (best of 3)", bytes.len() / 1_000_000);
-    }
 }
