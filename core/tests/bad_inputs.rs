@@ -30,23 +30,9 @@ enum Content {
     Huge(u64),
 }
 
+/// A column mapping for the foreign format `FOREIGN` (shared with the fuzzing of mappings).
 fn mapping_text() -> String {
-    r#"ColumnMapping(
-    format_version: 1,
-    columns: {
-        "t_s": (source: Column("time_ms"), unit: "ms"),
-        "q1_um": (source: Column("Z_nm"), unit: "nm"),
-        "q2_um": (source: Constant(0.0), unit: "um"),
-        "q3_um": (source: Column("X_nm"), unit: "nm"),
-        "q4_deg": (source: Constant(0.0), unit: "deg"),
-        "q5_deg": (source: Constant(0.0), unit: "deg"),
-        "q6_deg": (source: Constant(0.0), unit: "deg"),
-        "wavelength_nm": (source: Column("lambda_nm"), unit: "nm"),
-        "irradiance": (source: Column("pd_V"), unit: "V", scale: 10.0),
-    },
-)
-"#
-    .to_string()
+    include_str!("fixtures/foreign-mapping.ron").to_string()
 }
 
 fn session_text() -> String {

@@ -23,20 +23,8 @@ fn asset(path: &str) -> String {
     std::fs::read_to_string(Path::new(ASSETS).join(path)).unwrap()
 }
 
-const MAPPING: &str = r#"ColumnMapping(
-    format_version: 1,
-    columns: {
-        "t_s": (source: Column("time_ms"), unit: "ms"),
-        "q1_um": (source: Column("Z_nm"), unit: "nm"),
-        "q2_um": (source: Constant(0.0), unit: "um"),
-        "q3_um": (source: Column("X_nm"), unit: "nm"),
-        "q4_deg": (source: Constant(0.0), unit: "deg"),
-        "q5_deg": (source: Constant(0.0), unit: "deg"),
-        "q6_deg": (source: Constant(0.0), unit: "deg"),
-        "wavelength_nm": (source: Column("lambda_nm"), unit: "nm"),
-        "irradiance": (source: Column("pd_V"), unit: "V", scale: 10.0),
-    },
-)"#;
+/// The column mapping `bad_inputs.rs` reads foreign traces with.
+const MAPPING: &str = include_str!("fixtures/foreign-mapping.ron");
 
 /// One edit of a text.
 #[derive(Debug, Clone)]
