@@ -50,7 +50,6 @@
 
 use crate::bench::preset::BenchPreset;
 use crate::bench::{Bench, BenchError, RunControl};
-use crate::files::FileError;
 use crate::model::air::{air_index_ciddor, AmbientConditions};
 use crate::model::effects::{self, Effect};
 use crate::model::extrinsics::{Extrinsics, FiberGeometry};
@@ -1332,12 +1331,6 @@ impl Bench for VirtualBench {
         self.clock_s = t0 + duration;
         self.wavelength_nm = laser;
         Ok(trace)
-    }
-}
-
-impl From<FileError> for BenchError {
-    fn from(e: FileError) -> Self {
-        BenchError::Config(e.to_string())
     }
 }
 

@@ -9,8 +9,8 @@
 //! [`ControllerBench::reconnect`] then [`crate::bench::resume_plan`] run the rest of the plan.
 
 use super::emulator::{EmuClock, EmuLaser};
-use super::{AxisUnit, HwError, PiGcs, SmarActMcs, StageController};
-use crate::bench::{Bench, BenchError, RunControl};
+use super::{HwError, PiGcs, SmarActMcs, StageController};
+use crate::bench::{AxisStatus, AxisUnit, Bench, BenchError, RunControl};
 use crate::files::{self, FileError};
 use crate::model::air::AmbientConditions;
 use crate::model::robot::{JointType, RobotDescription};
@@ -260,31 +260,6 @@ impl FixedLaser {
             ),
         }
     }
-}
-
-/// One joint's axis as its controller reports it now (the connection panel's status table).
-#[derive(Debug, Clone, PartialEq)]
-pub struct AxisStatus {
-    /// Joint name ("q1").
-    pub joint: String,
-    /// Controller name ("PI E-712").
-    pub controller: String,
-    /// Axis or channel identifier on the controller.
-    pub axis: String,
-    /// Unit of `position` and `q_display` (µm or °).
-    pub unit: AxisUnit,
-    /// The controller's position of the axis (µm or °), `None` when the query failed.
-    pub position: Option<f64>,
-    /// The joint value, `(position - zero)·sign` (µm or °).
-    pub q_display: Option<f64>,
-    /// On target and standing still (`false`: moving).
-    pub on_target: Option<bool>,
-    /// Closed loop on (`None`: the controller does not report it, or the query failed).
-    pub servo_on: Option<bool>,
-    /// Referenced (absolute position known).
-    pub referenced: Option<bool>,
-    /// The last error of this axis' controller (a failed query now, or the last fault).
-    pub error: Option<String>,
 }
 
 /// Longest round trip (s, real time) of a position poll kept in a recording.

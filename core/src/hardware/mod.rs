@@ -3,7 +3,7 @@
 //! the line-based TCP link they share, and the [`ControllerBench`] that runs plans on real controllers.
 //!
 //! Units: every position crossing the [`StageController`] trait is in the axis' display unit,
-//! µm for a linear axis and degrees for a rotary one ([`AxisUnit`]); drivers convert to what the
+//! µm for a linear axis and degrees for a rotary one ([`crate::bench::AxisUnit`]); drivers convert to what the
 //! controller speaks (µm for the E-712, nm and µ° for the MCS). Times are seconds.
 //!
 //! Network data is never trusted: every reply is parsed into a typed value or a
@@ -16,36 +16,17 @@ pub mod probe;
 pub mod smaract;
 pub mod virtual_stages;
 
-use serde::{Deserialize, Serialize};
+use crate::bench::AxisUnit;
 use std::io::{BufRead, BufReader, ErrorKind, Write};
 use std::net::{TcpStream, ToSocketAddrs};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
-pub use controller_bench::{AxisStatus, ControllerBench, HardwareConfig};
+pub use controller_bench::{ControllerBench, HardwareConfig};
 pub use pi_gcs::{GcsError, PiGcs};
 pub use smaract::{McsError, SmarActMcs};
 pub use virtual_stages::VirtualStages;
-
-/// The unit an axis is commanded in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum AxisUnit {
-    /// A linear axis, in µm.
-    Micrometre,
-    /// A rotary axis (goniometer, rotation stage), in degrees.
-    Degree,
-}
-
-impl AxisUnit {
-    /// The unit symbol ("µm", "°").
-    pub fn symbol(self) -> &'static str {
-        match self {
-            AxisUnit::Micrometre => "µm",
-            AxisUnit::Degree => "°",
-        }
-    }
-}
 
 /// One axis of a controller.
 #[derive(Debug, Clone, PartialEq)]

@@ -147,7 +147,8 @@ impl LocalEmulators {
 mod tests {
     use super::*;
     use crate::bench::{run_plan, RunControl};
-    use crate::hardware::{AxisUnit, ControllerBench};
+    use crate::bench::AxisUnit;
+    use crate::hardware::ControllerBench;
     use crate::plan::{JointTarget, Plan, Segment};
     use std::sync::atomic::AtomicBool;
 
