@@ -157,4 +157,3 @@ pub trait Bench: Send {
         Ok(())
     }
 }
-

@@ -146,8 +146,8 @@ impl LocalEmulators {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::{run_plan, RunControl};
     use crate::bench::AxisUnit;
+    use crate::bench::{run_plan, RunControl};
     use crate::hardware::ControllerBench;
     use crate::plan::{JointTarget, Plan, Segment};
     use std::sync::atomic::AtomicBool;
