@@ -9,6 +9,7 @@
 //! Network data is never trusted: every reply is parsed into a typed value or a
 //! [`HwError::BadReply`] naming the command, the reply and what was expected.
 
+pub mod clock;
 pub mod controller_bench;
 pub mod emulator;
 pub mod pi_gcs;

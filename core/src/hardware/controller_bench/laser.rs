@@ -1,9 +1,7 @@
-//! The tunable laser of a bench on controllers: the emulated one, and a fixed one for a bench
-//! whose laser the software cannot drive.
+//! The tunable laser of a bench on controllers, and a fixed one for a bench whose laser the
+//! software cannot drive (the emulated one is [`crate::hardware::emulator::EmulatedLaser`]).
 
-use crate::hardware::emulator::EmuLaser;
 use crate::hardware::HwError;
-use std::sync::Arc;
 
 /// A tunable laser.
 pub trait Laser: Send {
@@ -13,33 +11,6 @@ pub trait Laser: Send {
     fn set_wavelength(&mut self, nm: f64) -> Result<(), HwError>;
     /// Start a linear sweep (returns at once).
     fn start_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<(), HwError>;
-}
-
-/// The emulated laser ([`EmuLaser`]) as a [`Laser`].
-pub struct EmulatedLaser {
-    laser: Arc<EmuLaser>,
-    nominal_nm: f64,
-}
-
-impl EmulatedLaser {
-    /// Drive `laser`, whose resting wavelength is `nominal_nm`.
-    pub fn new(laser: Arc<EmuLaser>, nominal_nm: f64) -> Self {
-        EmulatedLaser { laser, nominal_nm }
-    }
-}
-
-impl Laser for EmulatedLaser {
-    fn nominal_nm(&self) -> f64 {
-        self.nominal_nm
-    }
-    fn set_wavelength(&mut self, nm: f64) -> Result<(), HwError> {
-        self.laser.set(nm);
-        Ok(())
-    }
-    fn start_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<(), HwError> {
-        self.laser.sweep(from_nm, to_nm, rate_nm_per_s);
-        Ok(())
-    }
 }
 
 /// A laser the software cannot drive (no laser driver yet): it stays at its nominal wavelength, and a

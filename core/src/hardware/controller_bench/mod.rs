@@ -13,7 +13,7 @@ mod config;
 mod laser;
 mod run;
 
-use super::emulator::EmuClock;
+use super::clock::EmuClock;
 use super::{HwError, PiGcs, SmarActMcs, StageController};
 use crate::bench::{AxisStatus, AxisUnit, Bench, BenchError, RunControl};
 use crate::model::air::AmbientConditions;
@@ -25,7 +25,7 @@ use run::Stop;
 use std::sync::Arc;
 
 pub use config::{ControllerConfig, ControllerKind, HardwareConfig, JointConfig, PhotodiodeConfig, FEMTO_HARDWARE_RON};
-pub use laser::{EmulatedLaser, FixedLaser, Laser};
+pub use laser::{FixedLaser, Laser};
 
 /// Where a joint is driven.
 #[derive(Debug, Clone, Copy)]

@@ -4,9 +4,9 @@
 //! hardware. Owns the emulators for as long as it lives (dropping it closes their ports).
 
 use super::smaract::ChannelKind;
-use super::{EmuClock, EmuLaser, PiEmulator, PiEmulatorConfig, SmarActEmulator, SmarActEmulatorConfig};
+use super::{EmuClock, EmuLaser, EmulatedLaser, PiEmulator, PiEmulatorConfig, SmarActEmulator, SmarActEmulatorConfig};
 use crate::bench::{BenchPreset, VirtualBench};
-use crate::hardware::controller_bench::{ControllerKind, EmulatedLaser, HardwareConfig, Laser};
+use crate::hardware::controller_bench::{ControllerKind, HardwareConfig, Laser};
 use crate::model::robot::RobotDescription;
 use rand::{rngs::StdRng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
