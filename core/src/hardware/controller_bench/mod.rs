@@ -17,7 +17,7 @@ use super::clock::EmuClock;
 use super::{HwError, PiGcs, SmarActMcs, StageController};
 use crate::bench::{AxisStatus, AxisUnit, Bench, BenchError, RunControl};
 use crate::model::air::AmbientConditions;
-use crate::model::robot::{JointType, RobotDescription};
+use crate::model::robot::{JointType, LinkDescription, RobotDescription};
 use crate::plan::{MotionLimits, TimedMotion, TimedSegment};
 use crate::trace::{Trace, TraceMeta};
 use acquisition::{trim_to_sweep, Acquisition};
@@ -43,11 +43,15 @@ pub struct ControllerBench {
     motion: MotionLimits,
     ambient: AmbientConditions,
     controllers: Vec<Box<dyn StageController>>,
+    /// Where each joint is driven.
     joints: [JointMap; 6],
+    /// Index of the controller with the photodiode's input and the data recorder.
     recorder_controller: usize,
     laser: Box<dyn Laser>,
     clock: Arc<EmuClock>,
+    /// The joints (µm, °) as last read.
     q_display: [f64; 6],
+    /// The speed last set on each joint's axis (µm/s, °/s; NaN: not set since connecting).
     velocities: [f64; 6],
     /// The last error of each controller (a fault during a segment, a failed status query).
     last_errors: Vec<Option<String>>,
@@ -103,49 +107,8 @@ impl ControllerBench {
                 controllers.len()
             )));
         }
-        let mut joints = Vec::new();
-        for link in &robot.links {
-            let drive = link.drive.as_ref().ok_or_else(|| {
-                cfg_err(format!("joint {} has no `drive` (controller and channel) in the robot description", link.name))
-            })?;
-            let c = config.controllers.iter().position(|c| c.name == drive.controller).ok_or_else(|| {
-                cfg_err(format!(
-                    "joint {} is driven by `{}`, which is not among the configured controllers",
-                    link.name, drive.controller
-                ))
-            })?;
-            let axes = controllers.get(c).map(|k| k.axes().to_vec()).unwrap_or_default();
-            let axis = axes.iter().position(|a| a.id == drive.channel).ok_or_else(|| {
-                cfg_err(format!(
-                    "joint {}: `{}` has no axis `{}` (it has {})",
-                    link.name,
-                    drive.controller,
-                    drive.channel,
-                    axes.iter().map(|a| a.id.as_str()).collect::<Vec<_>>().join(", ")
-                ))
-            })?;
-            let want = match link.joint {
-                JointType::Prismatic => AxisUnit::Micrometre,
-                JointType::Revolute => AxisUnit::Degree,
-            };
-            if axes[axis].unit != want {
-                return Err(cfg_err(format!(
-                    "joint {} is {:?} but `{}` axis `{}` is in {}",
-                    link.name,
-                    link.joint,
-                    drive.controller,
-                    drive.channel,
-                    axes[axis].unit.symbol()
-                )));
-            }
-            let jc = config.joints.iter().find(|j| j.joint == link.name);
-            joints.push(JointMap {
-                controller: c,
-                axis,
-                zero: jc.map_or(0.0, |j| j.zero),
-                sign: jc.map_or(1.0, |j| j.sign),
-            });
-        }
+        let joints =
+            robot.links.iter().map(|link| map_joint(link, &config, &controllers)).collect::<Result<Vec<_>, _>>()?;
         let joints: [JointMap; 6] = std::array::from_fn(|j| joints[j]);
         let recorder_controller = config
             .controllers
@@ -255,6 +218,56 @@ impl ControllerBench {
         }
         Ok(q)
     }
+}
+
+/// Where the joint of `link` is driven: its controller and axis by the link's `drive`, checked
+/// against the connected controllers' axes and units, and its zero and direction from `config`.
+fn map_joint(
+    link: &LinkDescription,
+    config: &HardwareConfig,
+    controllers: &[Box<dyn StageController>],
+) -> Result<JointMap, BenchError> {
+    let cfg_err = |m: String| BenchError::Config(format!("{}: {m}", config.name));
+    let drive = link.drive.as_ref().ok_or_else(|| {
+        cfg_err(format!("joint {} has no `drive` (controller and channel) in the robot description", link.name))
+    })?;
+    let controller = config.controllers.iter().position(|k| k.name == drive.controller).ok_or_else(|| {
+        cfg_err(format!(
+            "joint {} is driven by `{}`, which is not among the configured controllers",
+            link.name, drive.controller
+        ))
+    })?;
+    let axes = controllers.get(controller).map(|k| k.axes().to_vec()).unwrap_or_default();
+    let axis = axes.iter().position(|a| a.id == drive.channel).ok_or_else(|| {
+        cfg_err(format!(
+            "joint {}: `{}` has no axis `{}` (it has {})",
+            link.name,
+            drive.controller,
+            drive.channel,
+            axes.iter().map(|a| a.id.as_str()).collect::<Vec<_>>().join(", ")
+        ))
+    })?;
+    let want = match link.joint {
+        JointType::Prismatic => AxisUnit::Micrometre,
+        JointType::Revolute => AxisUnit::Degree,
+    };
+    if axes[axis].unit != want {
+        return Err(cfg_err(format!(
+            "joint {} is {:?} but `{}` axis `{}` is in {}",
+            link.name,
+            link.joint,
+            drive.controller,
+            drive.channel,
+            axes[axis].unit.symbol()
+        )));
+    }
+    let joint_config = config.joints.iter().find(|j| j.joint == link.name);
+    Ok(JointMap {
+        controller,
+        axis,
+        zero: joint_config.map_or(0.0, |j| j.zero),
+        sign: joint_config.map_or(1.0, |j| j.sign),
+    })
 }
 
 /// The value of `r`, or `None` with its error kept in `error` (the first one wins).
