@@ -242,6 +242,7 @@ fn query_axes(st: &PiState, args: &[&str]) -> Gcs<Vec<usize>> {
     }
 }
 
+/// Run one command: the reply's lines (`None`: a command without reply), or a GCS error number.
 fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
     match name {
         "*IDN?" | "ERR?" | "SAI?" => identify(st, name),

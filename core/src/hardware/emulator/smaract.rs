@@ -222,6 +222,7 @@ struct Fields {
 }
 
 impl Fields {
+    /// The fields of `args`, or error 4 for one that is not an integer.
     fn parse(args: &str) -> Mcs<Self> {
         let fields: Vec<&str> = if args.is_empty() { vec![] } else { args.split(',').collect() };
         let nums: Vec<i64> =
@@ -246,6 +247,7 @@ impl Fields {
     }
 }
 
+/// Run one command (its name and the fields after it): the reply line, or an error reply's channel and code.
 fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str) -> Mcs<String> {
     let fields = Fields::parse(args)?;
     let mut axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
