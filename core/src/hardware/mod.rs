@@ -2,8 +2,10 @@
 //! (PI E-712 over GCS 2, SmarAct MCS over its ASCII protocol, and the virtual bench through an adapter),
 //! the line-based TCP link they share, and the [`ControllerBench`] that runs plans on real controllers.
 //!
+//! The layer above [`crate::bench`]: the controller bench implements its [`crate::bench::Bench`] trait.
+//!
 //! Units: every position crossing the [`StageController`] trait is in the axis' display unit,
-//! µm for a linear axis and degrees for a rotary one ([`crate::bench::AxisUnit`]); drivers convert to what the
+//! µm for a linear axis and degrees for a rotary one ([`AxisUnit`]); drivers convert to what the
 //! controller speaks (µm for the E-712, nm and µ° for the MCS). Times are seconds.
 //!
 //! Network data is never trusted: every reply is parsed into a typed value or a

@@ -8,30 +8,36 @@ use crate::model::air::air_index_ciddor;
 use crate::model::effects::{self, Effect};
 use crate::model::extrinsics::{Extrinsics, FiberGeometry};
 use crate::model::kinematics::Chain;
-use crate::model::optics::FabryPerot;
+use crate::model::optics::{FabryPerot, OpticalParams};
 use crate::model::robot::{JointType, RobotDescription};
 use nalgebra::Vector3;
 
-/// The hidden part.
+/// The hidden part of a virtual bench: the true robot, extrinsics and optics, and the noise levels.
 pub(super) struct Truth {
+    /// The robot with the hidden effects applied.
     pub(super) chain: Chain,
     pub(super) extrinsics: Extrinsics,
     pub(super) geometry: FiberGeometry,
-    pub(super) optics: crate::model::optics::OpticalParams,
+    /// The preset's optics with the hidden optical effects.
+    pub(super) optics: OpticalParams,
     pub(super) n_air: f64,
     pub(super) laser_wavelength_nm: f64,
+    /// The cavity at the laser's resting wavelength.
     pub(super) fp: FabryPerot,
+    /// The hidden effects that act on the optical path (drift, path scale, fringe nonlinearity).
     pub(super) path_effects: Vec<Effect>,
     /// Play of each stage (display units; hidden reversal errors).
     pub(super) play_width: [f64; 6],
     /// The path effects compiled: gap = scale·|L| + offset(t).
     pub(super) gap_map: GapMap,
     pub(super) joint_is_revolute: [bool; 6],
+    /// Detector noise: white (mW), shot (mW at 1 mW) and the laser's relative intensity noise.
     pub(super) white_sigma_mw: f64,
     pub(super) shot_mw_at_1mw: f64,
     pub(super) rin_rel: f64,
     /// Any detector noise at all (a draw per sample).
     pub(super) detector_noise: bool,
+    /// The ADC's quantisation step (0: no quantisation).
     pub(super) adc_step_mw: f64,
     /// 1/adc_step_mw and the number of ADC steps over the full scale.
     pub(super) adc_per_mw: f64,
