@@ -314,7 +314,7 @@ pub struct AppState {
     /// Number of saves still running.
     pub saving: usize,
     /// The stage controllers' view of every joint axis (a bench on controllers), and when it came.
-    pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::hardware::AxisStatus>)>,
+    pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::bench::AxisStatus>)>,
 }
 
 impl AppState {

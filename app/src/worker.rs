@@ -180,7 +180,7 @@ pub enum Event {
     /// The worker started (`Some(what)`) or finished (`None`) a job.
     Busy(Option<String>),
     /// The stage controllers' view of every joint axis (a bench on controllers only).
-    HardwareStatus(Vec<photorobot_core::hardware::AxisStatus>),
+    HardwareStatus(Vec<photorobot_core::bench::AxisStatus>),
 }
 
 /// The UI's handle on the worker thread.

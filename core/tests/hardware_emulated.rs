@@ -10,9 +10,9 @@
 use photorobot_core::bench::{
     resume_plan, run_plan, Bench, BenchError, BenchPreset, RunControl, RunError, VirtualBench,
 };
-use photorobot_core::hardware::controller_bench::EmulatedLaser;
 use photorobot_core::hardware::emulator::{
-    EmuClock, EmuLaser, Fault, FaultSpec, PiEmulator, PiEmulatorConfig, SmarActEmulator, SmarActEmulatorConfig,
+    EmuClock, EmuLaser, EmulatedLaser, Fault, FaultSpec, PiEmulator, PiEmulatorConfig, SmarActEmulator,
+    SmarActEmulatorConfig,
 };
 use photorobot_core::hardware::{ControllerBench, HardwareConfig, PiGcs, SmarActMcs, StageController, VirtualStages};
 use photorobot_core::measure::{self, Measurement, PhaseModel};

@@ -1,17 +1,22 @@
-//! Benches: the interface every bench implements (virtual, real controllers, recorded data) and the plan runner.
-//! Owns running a motion plan on a bench, segment by segment, keeping every recorded trace even when a step fails.
+//! Benches: the interface every bench implements (virtual, real controllers, recorded data), what it
+//! reports (errors, the stage controllers' axis status) and, in [`run`], the plan runner.
+//! The hardware layer implements these traits; nothing here depends on it.
 
 pub mod preset;
+pub mod run;
 pub mod virtual_bench;
 
+use crate::files::FileError;
 use crate::model::air::AmbientConditions;
 use crate::model::robot::RobotDescription;
-use crate::plan::{MotionLimits, Plan, PlanError, TimedMotion, TimedSegment};
-use crate::trace::{Trace, TraceKind, TraceMeta};
+use crate::plan::{MotionLimits, TimedSegment};
+use crate::trace::{Trace, TraceMeta};
+use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use thiserror::Error;
 
 pub use preset::BenchPreset;
+pub use run::{resume_plan, resume_plan_with, run_plan, run_plan_with, OnStep, PlanRun, RunError, StepDone};
 pub use virtual_bench::VirtualBench;
 
 /// Why a bench operation failed.
@@ -41,6 +46,12 @@ pub enum BenchError {
     },
 }
 
+impl From<FileError> for BenchError {
+    fn from(e: FileError) -> Self {
+        BenchError::Config(e.to_string())
+    }
+}
+
 impl BenchError {
     /// The samples recorded before a cancel or a hardware fault, if any.
     pub fn partial(&self) -> Option<&Trace> {
@@ -49,6 +60,50 @@ impl BenchError {
             _ => None,
         }
     }
+}
+
+/// The unit an axis is commanded in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum AxisUnit {
+    /// A linear axis, in µm.
+    Micrometre,
+    /// A rotary axis (goniometer, rotation stage), in degrees.
+    Degree,
+}
+
+impl AxisUnit {
+    /// The unit symbol ("µm", "°").
+    pub fn symbol(self) -> &'static str {
+        match self {
+            AxisUnit::Micrometre => "µm",
+            AxisUnit::Degree => "°",
+        }
+    }
+}
+
+/// One joint's axis as its stage controller reports it now (the connection panel's status table).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AxisStatus {
+    /// Joint name ("q1").
+    pub joint: String,
+    /// Controller name ("PI E-712").
+    pub controller: String,
+    /// Axis or channel identifier on the controller.
+    pub axis: String,
+    /// Unit of `position` and `q_display` (µm or °).
+    pub unit: AxisUnit,
+    /// The controller's position of the axis (µm or °), `None` when the query failed.
+    pub position: Option<f64>,
+    /// The joint value, `(position - zero)·sign` (µm or °).
+    pub q_display: Option<f64>,
+    /// On target and standing still (`false`: moving).
+    pub on_target: Option<bool>,
+    /// Closed loop on (`None`: the controller does not report it, or the query failed).
+    pub servo_on: Option<bool>,
+    /// Referenced (absolute position known).
+    pub referenced: Option<bool>,
+    /// The last error of this axis' controller (a failed query now, or the last fault).
+    pub error: Option<String>,
 }
 
 /// Callbacks and the cancel flag for a running segment.
@@ -94,176 +149,11 @@ pub trait Bench: Send {
     ) -> Result<Option<Trace>, BenchError>;
     /// The stage controllers' view of every joint axis, for a bench on controllers (`None` for a
     /// simulated bench).
-    fn hardware_status(&mut self) -> Option<Vec<crate::hardware::AxisStatus>> {
+    fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
         None
     }
     /// Open the links to the stage controllers again after a fault (nothing to do on a simulated bench).
     fn reconnect(&mut self) -> Result<(), BenchError> {
         Ok(())
     }
-}
-
-/// Why a plan stopped. The traces recorded before the stop are in [`PlanRun::traces`].
-#[derive(Debug, Error)]
-pub enum RunError {
-    /// The plan is invalid or leaves the joint limits; nothing was moved.
-    #[error(transparent)]
-    Plan(#[from] PlanError),
-    /// The per-step callback asked to stop after a completed segment (e.g. an autosave failed).
-    #[error("stopped after segment {segment} ({label}): {reason}")]
-    Stopped {
-        /// Index of the last completed segment.
-        segment: usize,
-        /// Its label.
-        label: String,
-        /// Why.
-        reason: String,
-    },
-    /// A segment failed or was cancelled.
-    #[error("segment {segment} ({label}): {error}")]
-    Segment {
-        /// Index of the segment in the plan.
-        segment: usize,
-        /// Its label.
-        label: String,
-        /// What happened.
-        error: BenchError,
-    },
-}
-
-/// The result of running a plan: every trace recorded, and how it ended.
-#[derive(Debug)]
-pub struct PlanRun {
-    /// Recorded traces, in plan order (a partial trace of an interrupted segment included).
-    pub traces: Vec<Trace>,
-    /// Bench time used (s).
-    pub duration_s: f64,
-    /// `Ok` when every segment ran.
-    pub outcome: Result<(), RunError>,
-}
-
-/// A segment that has just completed, as reported to the per-step callback of [`run_plan_with`].
-#[derive(Debug, Clone, Copy)]
-pub struct StepDone<'a> {
-    /// Index of the segment in the plan.
-    pub segment: usize,
-    /// Its label.
-    pub label: &'a str,
-    /// Its trace, when the segment records.
-    pub trace: Option<&'a Trace>,
-}
-
-/// Called after every completed segment (to autosave, for example); an `Err` stops the plan
-/// before the next segment with [`RunError::Stopped`].
-pub type OnStep<'a> = dyn FnMut(StepDone<'_>) -> Result<(), String> + 'a;
-
-/// Run a plan: expand and check it against the limits first (nothing moves if any move is out
-/// of range), then run segment by segment. Data already recorded is never lost: it is in the
-/// returned [`PlanRun`] whatever the outcome.
-pub fn run_plan(bench: &mut dyn Bench, plan: &Plan, control: &mut RunControl<'_>) -> PlanRun {
-    run_plan_with(bench, plan, control, &mut |_| Ok(()))
-}
-
-/// [`run_plan`], calling `on_step` after every completed segment.
-pub fn run_plan_with(
-    bench: &mut dyn Bench,
-    plan: &Plan,
-    control: &mut RunControl<'_>,
-    on_step: &mut OnStep<'_>,
-) -> PlanRun {
-    let start = bench.clock_s();
-    let segments = match plan.expand(bench.robot(), bench.position_display(), bench.motion_limits()) {
-        Ok(s) => s,
-        Err(e) => return PlanRun { traces: vec![], duration_s: 0.0, outcome: Err(e.into()) },
-    };
-    let mut traces = Vec::new();
-    let count = segments.len();
-    for (i, seg) in segments.iter().enumerate() {
-        let meta = TraceMeta {
-            label: seg.label.clone(),
-            kind: if matches!(seg.motion, TimedMotion::Sweep { .. }) {
-                TraceKind::WavelengthSweep
-            } else {
-                TraceKind::Motion
-            },
-            bench: bench.name(),
-            irradiance_unit: "mW".into(),
-            notes: format!("plan {}, segment {} of {}", plan.name, i + 1, count),
-        };
-        match bench.run_segment(seg, meta, control) {
-            Ok(trace) => {
-                let stop = on_step(StepDone { segment: i, label: &seg.label, trace: trace.as_ref() });
-                traces.extend(trace);
-                if let Err(reason) = stop {
-                    return PlanRun {
-                        traces,
-                        duration_s: bench.clock_s() - start,
-                        outcome: Err(RunError::Stopped { segment: i, label: seg.label.clone(), reason }),
-                    };
-                }
-            }
-            Err(error) => {
-                if let Some(p) = error.partial() {
-                    if !p.is_empty() {
-                        traces.push(p.clone());
-                    }
-                }
-                return PlanRun {
-                    traces,
-                    duration_s: bench.clock_s() - start,
-                    outcome: Err(RunError::Segment { segment: i, label: seg.label.clone(), error }),
-                };
-            }
-        }
-    }
-    PlanRun { traces, duration_s: bench.clock_s() - start, outcome: Ok(()) }
-}
-
-/// Run the rest of a plan after an interruption: first back (unrecorded) to where segment
-/// `from_segment` started, then that segment and every one after it, so an interrupted recorded
-/// move is measured again in full. `plan_start_display` is the joint vector (µm, °) the plan was
-/// first run from (it fixes where each segment starts). Segment indices in the returned outcome
-/// count from the return move (index 0), then `from_segment` as 1, and so on.
-pub fn resume_plan(
-    bench: &mut dyn Bench,
-    plan: &Plan,
-    plan_start_display: [f64; 6],
-    from_segment: usize,
-    control: &mut RunControl<'_>,
-) -> PlanRun {
-    resume_plan_with(bench, plan, plan_start_display, from_segment, control, &mut |_| Ok(()))
-}
-
-/// [`resume_plan`], calling `on_step` after every completed segment of the original plan, with
-/// the segment's index in the original plan (the return move is not reported).
-pub fn resume_plan_with(
-    bench: &mut dyn Bench,
-    plan: &Plan,
-    plan_start_display: [f64; 6],
-    from_segment: usize,
-    control: &mut RunControl<'_>,
-    on_step: &mut OnStep<'_>,
-) -> PlanRun {
-    let segments = match plan.expand(bench.robot(), plan_start_display, bench.motion_limits()) {
-        Ok(s) => s,
-        Err(e) => return PlanRun { traces: vec![], duration_s: 0.0, outcome: Err(e.into()) },
-    };
-    let Some(first) = segments.get(from_segment) else {
-        return PlanRun { traces: vec![], duration_s: 0.0, outcome: Ok(()) };
-    };
-    let mut rest = vec![crate::plan::Segment::Move {
-        to: crate::plan::JointTarget::all(first.from_display),
-        record: false,
-        label: format!("resume: back to the start of segment {from_segment} ({})", first.label),
-    }];
-    rest.extend(plan.segments[from_segment..].iter().cloned());
-    let remainder = Plan {
-        name: format!("{} (resumed at segment {from_segment})", plan.name),
-        description: plan.description.clone(),
-        segments: rest,
-    };
-    run_plan_with(bench, &remainder, control, &mut |step: StepDone<'_>| match step.segment {
-        0 => Ok(()),
-        k => on_step(StepDone { segment: from_segment + k - 1, ..step }),
-    })
 }

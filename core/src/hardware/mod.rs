@@ -2,6 +2,8 @@
 //! (PI E-712 over GCS 2, SmarAct MCS over its ASCII protocol, and the virtual bench through an adapter),
 //! the line-based TCP link they share, and the [`ControllerBench`] that runs plans on real controllers.
 //!
+//! The layer above [`crate::bench`]: the controller bench implements its [`crate::bench::Bench`] trait.
+//!
 //! Units: every position crossing the [`StageController`] trait is in the axis' display unit,
 //! µm for a linear axis and degrees for a rotary one ([`AxisUnit`]); drivers convert to what the
 //! controller speaks (µm for the E-712, nm and µ° for the MCS). Times are seconds.
@@ -9,6 +11,7 @@
 //! Network data is never trusted: every reply is parsed into a typed value or a
 //! [`HwError::BadReply`] naming the command, the reply and what was expected.
 
+pub mod clock;
 pub mod controller_bench;
 pub mod emulator;
 pub mod pi_gcs;
@@ -16,36 +19,17 @@ pub mod probe;
 pub mod smaract;
 pub mod virtual_stages;
 
-use serde::{Deserialize, Serialize};
+use crate::bench::AxisUnit;
 use std::io::{BufRead, BufReader, ErrorKind, Write};
 use std::net::{TcpStream, ToSocketAddrs};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
-pub use controller_bench::{AxisStatus, ControllerBench, HardwareConfig};
+pub use controller_bench::{ControllerBench, HardwareConfig};
 pub use pi_gcs::{GcsError, PiGcs};
 pub use smaract::{McsError, SmarActMcs};
 pub use virtual_stages::VirtualStages;
-
-/// The unit an axis is commanded in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum AxisUnit {
-    /// A linear axis, in µm.
-    Micrometre,
-    /// A rotary axis (goniometer, rotation stage), in degrees.
-    Degree,
-}
-
-impl AxisUnit {
-    /// The unit symbol ("µm", "°").
-    pub fn symbol(self) -> &'static str {
-        match self {
-            AxisUnit::Micrometre => "µm",
-            AxisUnit::Degree => "°",
-        }
-    }
-}
 
 /// One axis of a controller.
 #[derive(Debug, Clone, PartialEq)]

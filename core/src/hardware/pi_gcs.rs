@@ -6,7 +6,8 @@
 //! Positions are in µm (the E-712's unit for the P-563.3CD axes). Errors keep the controller's
 //! number and PI's text for it ([`GcsError`]).
 
-use super::{parse_f64, parse_i64, AxisInfo, AxisUnit, DataRecorder, HwError, Link, RecordedBlock, StageController};
+use super::{parse_f64, parse_i64, AxisInfo, DataRecorder, HwError, Link, RecordedBlock, StageController};
+use crate::bench::AxisUnit;
 use std::fmt;
 
 /// The E-712's default TCP port.

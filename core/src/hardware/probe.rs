@@ -32,8 +32,8 @@ pub fn identify(kind: ControllerKind, name: &str, address: &str, timeout_s: f64)
                 .iter()
                 .map(|a| {
                     let sensor = match a.unit {
-                        super::AxisUnit::Micrometre => "linear",
-                        super::AxisUnit::Degree => "rotary",
+                        crate::bench::AxisUnit::Micrometre => "linear",
+                        crate::bench::AxisUnit::Degree => "rotary",
                     };
                     format!("{} {sensor} ({})", a.id, a.unit.symbol())
                 })

@@ -3,9 +3,10 @@
 //! `:SCLS`, `:GPPK`), reply parsing, MCS error codes, and the linear/rotary probe at connect.
 //!
 //! The controller speaks nm for linear positioners and µ° plus a revolution count for rotary ones;
-//! this driver speaks µm and degrees ([`super::AxisUnit`]).
+//! this driver speaks µm and degrees ([`crate::bench::AxisUnit`]).
 
-use super::{AxisInfo, AxisUnit, HwError, Link, StageController};
+use super::{AxisInfo, HwError, Link, StageController};
+use crate::bench::AxisUnit;
 use std::fmt;
 
 /// The MCS Ethernet interface's default TCP port.

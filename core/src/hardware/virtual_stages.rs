@@ -6,8 +6,8 @@
 //! segment at once): `on_target` is then always true. While the recorder is armed, every move is
 //! recorded and its samples appended.
 
-use super::{AxisInfo, AxisUnit, DataRecorder, HwError, RecordedBlock, StageController};
-use crate::bench::{Bench, RunControl, VirtualBench};
+use super::{AxisInfo, DataRecorder, HwError, RecordedBlock, StageController};
+use crate::bench::{AxisUnit, Bench, RunControl, VirtualBench};
 use crate::model::robot::JointType;
 use crate::plan::{JointTarget, Plan, Segment};
 use crate::trace::{Trace, TraceMeta};

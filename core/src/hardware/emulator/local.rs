@@ -4,9 +4,9 @@
 //! hardware. Owns the emulators for as long as it lives (dropping it closes their ports).
 
 use super::smaract::ChannelKind;
-use super::{EmuClock, EmuLaser, PiEmulator, PiEmulatorConfig, SmarActEmulator, SmarActEmulatorConfig};
+use super::{EmuClock, EmuLaser, EmulatedLaser, PiEmulator, PiEmulatorConfig, SmarActEmulator, SmarActEmulatorConfig};
 use crate::bench::{BenchPreset, VirtualBench};
-use crate::hardware::controller_bench::{ControllerKind, EmulatedLaser, HardwareConfig, Laser};
+use crate::hardware::controller_bench::{ControllerKind, HardwareConfig, Laser};
 use crate::model::robot::RobotDescription;
 use rand::{rngs::StdRng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
@@ -146,8 +146,9 @@ impl LocalEmulators {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bench::AxisUnit;
     use crate::bench::{run_plan, RunControl};
-    use crate::hardware::{AxisUnit, ControllerBench};
+    use crate::hardware::ControllerBench;
     use crate::plan::{JointTarget, Plan, Segment};
     use std::sync::atomic::AtomicBool;
 

@@ -11,39 +11,17 @@ pub mod local;
 pub mod pi;
 pub mod smaract;
 
+pub use crate::hardware::clock::EmuClock;
+use crate::hardware::controller_bench::Laser;
+use crate::hardware::HwError;
 use crate::plan::TrapezoidProfile;
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::Instant;
 
 pub use local::LocalEmulators;
 pub use pi::{PiEmulator, PiEmulatorConfig};
 pub use smaract::{SmarActEmulator, SmarActEmulatorConfig};
-
-/// The emulated time: real time since the start, times a scale (100 runs a 10-minute plan in 6 s).
-#[derive(Debug)]
-pub struct EmuClock {
-    start: Instant,
-    scale: f64,
-}
-
-impl EmuClock {
-    /// A clock running `scale` times faster than real time (1 for real time).
-    pub fn new(scale: f64) -> Arc<Self> {
-        Arc::new(EmuClock { start: Instant::now(), scale: if scale.is_finite() && scale > 0.0 { scale } else { 1.0 } })
-    }
-
-    /// Emulated seconds since the start.
-    pub fn now_s(&self) -> f64 {
-        self.start.elapsed().as_secs_f64() * self.scale
-    }
-
-    /// The time scale.
-    pub fn scale(&self) -> f64 {
-        self.scale
-    }
-}
 
 /// One move of an axis: from `from` at `t0_s` to `to`, trapezoidal.
 #[derive(Debug, Clone, Copy)]
@@ -367,6 +345,33 @@ impl EmuLaser {
     /// The clock.
     pub fn clock(&self) -> &Arc<EmuClock> {
         &self.clock
+    }
+}
+
+/// The emulated laser ([`EmuLaser`]) as a [`Laser`].
+pub struct EmulatedLaser {
+    laser: Arc<EmuLaser>,
+    nominal_nm: f64,
+}
+
+impl EmulatedLaser {
+    /// Drive `laser`, whose resting wavelength is `nominal_nm`.
+    pub fn new(laser: Arc<EmuLaser>, nominal_nm: f64) -> Self {
+        EmulatedLaser { laser, nominal_nm }
+    }
+}
+
+impl Laser for EmulatedLaser {
+    fn nominal_nm(&self) -> f64 {
+        self.nominal_nm
+    }
+    fn set_wavelength(&mut self, nm: f64) -> Result<(), HwError> {
+        self.laser.set(nm);
+        Ok(())
+    }
+    fn start_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<(), HwError> {
+        self.laser.sweep(from_nm, to_nm, rate_nm_per_s);
+        Ok(())
     }
 }
 

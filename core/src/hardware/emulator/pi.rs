@@ -242,11 +242,36 @@ fn query_axes(st: &PiState, args: &[&str]) -> Gcs<Vec<usize>> {
     }
 }
 
+/// Run one command: the reply's lines (`None`: a command without reply), or a GCS error number.
 fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
-    let per_axis = |st: &PiState, axes: &[usize], f: &dyn Fn(&EmuAxis) -> String| -> Vec<String> {
-        let ax = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
-        axes.iter().map(|&i| format!("{}={}", st.ids[i], f(&ax[i]))).collect()
-    };
+    match name {
+        "*IDN?" | "ERR?" | "SAI?" => identify(st, name),
+        "SVO" | "SVO?" => servo(st, name, args),
+        "MOV" | "MVR" | "VEL" | "FRF" | "STP" | "HLT" => motion(shared, st, now, name, args),
+        "POS?" | "ONT?" | "VEL?" | "TMN?" | "TMX?" | "FRF?" => axis_query(shared, st, now, name, args),
+        "TSP?" => {
+            if args.len() != 1 || !st.inputs.iter().any(|i| i == args[0]) {
+                return Err(14);
+            }
+            let f = input_source(shared, args[0]);
+            let v = f.map_or(0.0, |f| f(now));
+            Ok(Some(vec![format!("{}={v}", args[0])]))
+        }
+        "DRC" | "RTR" | "RTR?" | "DRT" | "DRL?" => recorder_setup(st, now, name, args),
+        "DRR?" => recorded_data(shared, st, now, args),
+        "" => Err(1),
+        _ => Err(2),
+    }
+}
+
+/// A line `id=value` per axis of `axes`.
+fn per_axis(shared: &Shared, st: &PiState, axes: &[usize], f: &dyn Fn(&EmuAxis) -> String) -> Vec<String> {
+    let ax = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
+    axes.iter().map(|&i| format!("{}={}", st.ids[i], f(&ax[i]))).collect()
+}
+
+/// Identification, the error register and the axis list.
+fn identify(st: &mut PiState, name: &str) -> Gcs<Option<Vec<String>>> {
     match name {
         "*IDN?" => Ok(Some(vec!["(c)2026 Physik Instrumente (PI) GmbH & Co. KG, E-712 (emulated), 0, 1.0.0".into()])),
         "ERR?" => {
@@ -254,6 +279,13 @@ fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str
             Ok(Some(vec![e.to_string()]))
         }
         "SAI?" => Ok(Some(st.ids.clone())),
+        _ => Err(2),
+    }
+}
+
+/// Closed-loop (servo) mode.
+fn servo(st: &mut PiState, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
+    match name {
         "SVO" => {
             let p = pairs(args)?;
             let mut set = Vec::new();
@@ -275,6 +307,13 @@ fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str
             let axes = query_axes(st, args)?;
             Ok(Some(axes.iter().map(|&i| format!("{}={}", st.ids[i], u8::from(st.servo[i]))).collect()))
         }
+        _ => Err(2),
+    }
+}
+
+/// Commands that move or stop the axes, set their speed or reference them.
+fn motion(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
+    match name {
         "MOV" | "MVR" => {
             let p = pairs(args)?;
             let mut ax = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
@@ -299,17 +338,6 @@ fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str
             }
             Ok(None)
         }
-        "POS?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(st, &axes, &|a| a.position_at(now).to_string())))
-        }
-        "ONT?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(st, &axes, &|a| {
-                let on = !a.moving_at(now) && !a.at_limit && (a.position_at(now) - a.target_at(now)).abs() < 1e-9;
-                u8::from(on).to_string()
-            })))
-        }
         "VEL" => {
             let p = pairs(args)?;
             let mut set = Vec::new();
@@ -327,22 +355,6 @@ fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str
             }
             Ok(None)
         }
-        "VEL?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(st, &axes, &|a| a.speed.to_string())))
-        }
-        "TMN?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(st, &axes, &|a| a.min.to_string())))
-        }
-        "TMX?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(st, &axes, &|a| a.max.to_string())))
-        }
-        "FRF?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(st, &axes, &|a| u8::from(a.referenced).to_string())))
-        }
         "FRF" => {
             let axes = query_axes(st, args)?;
             let mut ax = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
@@ -359,14 +371,47 @@ fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str
             }
             Err(10)
         }
-        "TSP?" => {
-            if args.len() != 1 || !st.inputs.iter().any(|i| i == args[0]) {
-                return Err(14);
-            }
-            let f = input_source(shared, args[0]);
-            let v = f.map_or(0.0, |f| f(now));
-            Ok(Some(vec![format!("{}={v}", args[0])]))
+        _ => Err(2),
+    }
+}
+
+/// Queries of the axes' state: position, on target, speed, travel range, referenced.
+fn axis_query(shared: &Shared, st: &PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
+    match name {
+        "POS?" => {
+            let axes = query_axes(st, args)?;
+            Ok(Some(per_axis(shared, st, &axes, &|a| a.position_at(now).to_string())))
         }
+        "ONT?" => {
+            let axes = query_axes(st, args)?;
+            Ok(Some(per_axis(shared, st, &axes, &|a| {
+                let on = !a.moving_at(now) && !a.at_limit && (a.position_at(now) - a.target_at(now)).abs() < 1e-9;
+                u8::from(on).to_string()
+            })))
+        }
+        "VEL?" => {
+            let axes = query_axes(st, args)?;
+            Ok(Some(per_axis(shared, st, &axes, &|a| a.speed.to_string())))
+        }
+        "TMN?" => {
+            let axes = query_axes(st, args)?;
+            Ok(Some(per_axis(shared, st, &axes, &|a| a.min.to_string())))
+        }
+        "TMX?" => {
+            let axes = query_axes(st, args)?;
+            Ok(Some(per_axis(shared, st, &axes, &|a| a.max.to_string())))
+        }
+        "FRF?" => {
+            let axes = query_axes(st, args)?;
+            Ok(Some(per_axis(shared, st, &axes, &|a| u8::from(a.referenced).to_string())))
+        }
+        _ => Err(2),
+    }
+}
+
+/// The data recorder's configuration: tables, rate, trigger, and the number of points recorded.
+fn recorder_setup(st: &mut PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
+    match name {
         "DRC" => {
             if args.len() != 3 {
                 return Err(1);
@@ -410,66 +455,63 @@ fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str
             let table = table.ok_or(57)?;
             Ok(Some(vec![format!("{table}={}", recorded(st, now))]))
         }
-        "DRR?" => {
-            if args.len() < 3 {
-                return Err(1);
-            }
-            let start = args[0].parse::<usize>().map_err(|_| 1)?;
-            let count = args[1].parse::<usize>().map_err(|_| 1)?;
-            let tables: Vec<usize> = args[2..].iter().map(|t| t.parse::<usize>().map_err(|_| 1)).collect::<Gcs<_>>()?;
-            if start == 0 || tables.iter().any(|&t| t == 0 || t > RECORD_TABLES) {
-                return Err(17);
-            }
-            let sources: Vec<(String, u32)> =
-                tables.iter().map(|&t| st.recorder.tables[t - 1].clone().ok_or(78)).collect::<Gcs<_>>()?;
-            if start - 1 + count > recorded(st, now) {
-                return Err(77);
-            }
-            let dt = st.recorder.rate as f64 * SERVO_CYCLE_S;
-            let t0 = st.recorder.t_trigger.unwrap_or(now);
-            let ids = st.ids.clone();
-            // Sample outside the locks: the photodiode closure reads the axes itself.
-            let axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner()).clone();
-            let sources_fn: Vec<Option<PhotodiodeFn>> =
-                sources.iter().map(|(src, _)| input_source(shared, src)).collect();
-            let mut lines = vec![
-                "# REM E-712 data recorder (emulated)".to_string(),
-                "# VERSION = 1".into(),
-                "# TYPE = 1".into(),
-                "# SEPARATOR = 32".into(),
-                format!("# DIM = {}", tables.len()),
-                format!("# SAMPLE_TIME = {dt}"),
-                format!("# NDATA = {count}"),
-            ];
-            for (k, (src, opt)) in sources.iter().enumerate() {
-                lines.push(format!(
-                    "# NAME{k} = {} of {src}",
-                    if *opt == 2 { "Actual Position" } else { "Input Signal" }
-                ));
-            }
-            lines.push("# END_HEADER".into());
-            for k in 0..count {
-                let t = t0 + (start - 1 + k) as f64 * dt;
-                let row: Vec<String> = sources
-                    .iter()
-                    .zip(&sources_fn)
-                    .map(|((src, opt), f)| {
-                        // Fixed precision, like the controller's: 1e-9 µm, 12 significant digits.
-                        if *opt == RECORD_ACTUAL_POSITION {
-                            let p = ids.iter().position(|i| i == src).map_or(0.0, |i| axes[i].position_at(t));
-                            format!("{p:.9}")
-                        } else {
-                            format!("{:.11e}", f.as_ref().map_or(0.0, |f| f(t)))
-                        }
-                    })
-                    .collect();
-                lines.push(row.join(" "));
-            }
-            Ok(Some(lines))
-        }
-        "" => Err(1),
         _ => Err(2),
     }
+}
+
+/// `DRR?`: the recorded samples of the given tables, a GCS data-recorder header then one row per sample.
+fn recorded_data(shared: &Shared, st: &PiState, now: f64, args: &[&str]) -> Gcs<Option<Vec<String>>> {
+    if args.len() < 3 {
+        return Err(1);
+    }
+    let start = args[0].parse::<usize>().map_err(|_| 1)?;
+    let count = args[1].parse::<usize>().map_err(|_| 1)?;
+    let tables: Vec<usize> = args[2..].iter().map(|t| t.parse::<usize>().map_err(|_| 1)).collect::<Gcs<_>>()?;
+    if start == 0 || tables.iter().any(|&t| t == 0 || t > RECORD_TABLES) {
+        return Err(17);
+    }
+    let sources: Vec<(String, u32)> =
+        tables.iter().map(|&t| st.recorder.tables[t - 1].clone().ok_or(78)).collect::<Gcs<_>>()?;
+    if start - 1 + count > recorded(st, now) {
+        return Err(77);
+    }
+    let dt = st.recorder.rate as f64 * SERVO_CYCLE_S;
+    let t0 = st.recorder.t_trigger.unwrap_or(now);
+    let ids = st.ids.clone();
+    // Sample outside the locks: the photodiode closure reads the axes itself.
+    let axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner()).clone();
+    let sources_fn: Vec<Option<PhotodiodeFn>> = sources.iter().map(|(src, _)| input_source(shared, src)).collect();
+    let mut lines = vec![
+        "# REM E-712 data recorder (emulated)".to_string(),
+        "# VERSION = 1".into(),
+        "# TYPE = 1".into(),
+        "# SEPARATOR = 32".into(),
+        format!("# DIM = {}", tables.len()),
+        format!("# SAMPLE_TIME = {dt}"),
+        format!("# NDATA = {count}"),
+    ];
+    for (k, (src, opt)) in sources.iter().enumerate() {
+        lines.push(format!("# NAME{k} = {} of {src}", if *opt == 2 { "Actual Position" } else { "Input Signal" }));
+    }
+    lines.push("# END_HEADER".into());
+    for k in 0..count {
+        let t = t0 + (start - 1 + k) as f64 * dt;
+        let row: Vec<String> = sources
+            .iter()
+            .zip(&sources_fn)
+            .map(|((src, opt), f)| {
+                // Fixed precision, like the controller's: 1e-9 µm, 12 significant digits.
+                if *opt == RECORD_ACTUAL_POSITION {
+                    let p = ids.iter().position(|i| i == src).map_or(0.0, |i| axes[i].position_at(t));
+                    format!("{p:.9}")
+                } else {
+                    format!("{:.11e}", f.as_ref().map_or(0.0, |f| f(t)))
+                }
+            })
+            .collect();
+        lines.push(row.join(" "));
+    }
+    Ok(Some(lines))
 }
 
 fn recorded(st: &PiState, now: f64) -> usize {

@@ -213,43 +213,76 @@ fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
     Some(Some(reply))
 }
 
-fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str) -> Result<String, (i64, u32)> {
-    let fields: Vec<&str> = if args.is_empty() { vec![] } else { args.split(',').collect() };
-    let nums: Vec<i64> =
-        fields.iter().map(|f| f.trim().parse::<i64>().map_err(|_| (-1, 4))).collect::<Result<_, _>>()?;
-    let count = |n: usize| -> Result<(), (i64, u32)> {
-        let ch = nums.first().copied().unwrap_or(-1);
-        match nums.len().cmp(&n) {
+/// A reply, or the channel and MCS error code of an error reply.
+type Mcs<T> = Result<T, (i64, u32)>;
+
+/// The comma-separated integer fields of a command.
+struct Fields {
+    nums: Vec<i64>,
+}
+
+impl Fields {
+    /// The fields of `args`, or error 4 for one that is not an integer.
+    fn parse(args: &str) -> Mcs<Self> {
+        let fields: Vec<&str> = if args.is_empty() { vec![] } else { args.split(',').collect() };
+        let nums: Vec<i64> =
+            fields.iter().map(|f| f.trim().parse::<i64>().map_err(|_| (-1, 4))).collect::<Result<_, _>>()?;
+        Ok(Fields { nums })
+    }
+
+    /// Exactly `n` fields, or the error for too few (5) or too many (6).
+    fn count(&self, n: usize) -> Mcs<()> {
+        let ch = self.nums.first().copied().unwrap_or(-1);
+        match self.nums.len().cmp(&n) {
             std::cmp::Ordering::Less => Err((ch, 5)),
             std::cmp::Ordering::Greater => Err((ch, 6)),
             std::cmp::Ordering::Equal => Ok(()),
         }
-    };
-    let channel = |st: &McsState| -> Result<usize, (i64, u32)> {
-        let ch = nums.first().copied().unwrap_or(-1);
+    }
+
+    /// The channel the first field names, or the error for a channel the controller does not have (7).
+    fn channel(&self, st: &McsState) -> Mcs<usize> {
+        let ch = self.nums.first().copied().unwrap_or(-1);
         usize::try_from(ch).ok().filter(|&c| c < st.channels.len()).ok_or((ch, 7))
-    };
+    }
+}
+
+/// Run one command (its name and the fields after it): the reply line, or an error reply's channel and code.
+fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str) -> Mcs<String> {
+    let fields = Fields::parse(args)?;
     let mut axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
     match name {
+        "SCM" | "GNC" | "GPPK" | "GP" | "GA" | "GS" => query(st, &mut axes, now, name, &fields),
+        "MPA" | "MPR" | "MAA" | "MAR" => move_channel(st, &mut axes, now, name, &fields),
+        "S" | "SCLS" | "FRM" => control(st, &mut axes, now, name, &fields),
+        _ => Err((-1, 2)),
+    }
+}
+
+/// Queries: communication mode, channel count, referenced, position or angle, status (which
+/// also ends a finished reference move).
+fn query(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, fields: &Fields) -> Mcs<String> {
+    let nums = &fields.nums;
+    match name {
         "SCM" => {
-            count(1)?;
+            fields.count(1)?;
             if nums[0] != 0 {
                 return Err((-1, 7));
             }
             Ok(":E-1,0".into())
         }
         "GNC" => {
-            count(0)?;
+            fields.count(0)?;
             Ok(format!(":N{}", st.channels.len()))
         }
         "GPPK" => {
-            count(1)?;
-            let c = channel(st)?;
+            fields.count(1)?;
+            let c = fields.channel(st)?;
             Ok(format!(":PPK{c},{}", u8::from(axes[c].referenced)))
         }
         "GP" | "GA" => {
-            count(1)?;
-            let c = channel(st)?;
+            fields.count(1)?;
+            let c = fields.channel(st)?;
             let p = axes[c].position_at(now).round();
             match (name, st.channels[c].kind) {
                 ("GP", ChannelKind::Linear) => Ok(format!(":P{c},{}", p as i64)),
@@ -261,8 +294,8 @@ fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str)
             }
         }
         "GS" => {
-            count(1)?;
-            let c = channel(st)?;
+            fields.count(1)?;
+            let c = fields.channel(st)?;
             let ch = &mut st.channels[c];
             let code = if axes[c].moving_at(now) {
                 if ch.referencing {
@@ -283,46 +316,57 @@ fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str)
             };
             Ok(format!(":S{c},{code}"))
         }
-        "MPA" | "MPR" | "MAA" | "MAR" => {
-            let rotary = name.starts_with("MA");
-            count(if rotary { 4 } else { 3 })?;
-            let c = channel(st)?;
-            let kind = st.channels[c].kind;
-            if rotary != (kind == ChannelKind::Rotary) {
-                return Err((c as i64, 143));
-            }
-            let value = if rotary {
-                if !(0..360_000_000).contains(&nums[1]) {
-                    return Err((c as i64, 7));
-                }
-                nums[1] as f64 + nums[2] as f64 * 360e6
-            } else {
-                nums[1] as f64
-            };
-            let hold = nums[nums.len() - 1];
-            if !(0..=60000).contains(&hold) {
-                return Err((c as i64, 7));
-            }
-            let target = if name.ends_with('R') { axes[c].target_at(now) + value } else { value };
-            if target < axes[c].min || target > axes[c].max {
-                return Err((c as i64, 7));
-            }
-            axes[c].start_move(now, target);
-            st.channels[c].holding = true;
-            st.channels[c].referencing = false;
-            Ok(format!(":E{c},0"))
+        _ => Err((-1, 2)),
+    }
+}
+
+/// An absolute or relative move of a linear (`MP*`) or rotary (`MA*`) channel.
+fn move_channel(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, fields: &Fields) -> Mcs<String> {
+    let nums = &fields.nums;
+    let rotary = name.starts_with("MA");
+    fields.count(if rotary { 4 } else { 3 })?;
+    let c = fields.channel(st)?;
+    let kind = st.channels[c].kind;
+    if rotary != (kind == ChannelKind::Rotary) {
+        return Err((c as i64, 143));
+    }
+    let value = if rotary {
+        if !(0..360_000_000).contains(&nums[1]) {
+            return Err((c as i64, 7));
         }
+        nums[1] as f64 + nums[2] as f64 * 360e6
+    } else {
+        nums[1] as f64
+    };
+    let hold = nums[nums.len() - 1];
+    if !(0..=60000).contains(&hold) {
+        return Err((c as i64, 7));
+    }
+    let target = if name.ends_with('R') { axes[c].target_at(now) + value } else { value };
+    if target < axes[c].min || target > axes[c].max {
+        return Err((c as i64, 7));
+    }
+    axes[c].start_move(now, target);
+    st.channels[c].holding = true;
+    st.channels[c].referencing = false;
+    Ok(format!(":E{c},0"))
+}
+
+/// Stop, closed-loop speed, and the reference move.
+fn control(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, fields: &Fields) -> Mcs<String> {
+    let nums = &fields.nums;
+    match name {
         "S" => {
-            count(1)?;
-            let c = channel(st)?;
+            fields.count(1)?;
+            let c = fields.channel(st)?;
             axes[c].stop(now);
             st.channels[c].holding = false;
             st.channels[c].referencing = false;
             Ok(format!(":E{c},0"))
         }
         "SCLS" => {
-            count(2)?;
-            let c = channel(st)?;
+            fields.count(2)?;
+            let c = fields.channel(st)?;
             if nums[1] < 0 {
                 return Err((c as i64, 7));
             }
@@ -330,8 +374,8 @@ fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str)
             Ok(format!(":E{c},0"))
         }
         "FRM" => {
-            count(4)?;
-            let c = channel(st)?;
+            fields.count(4)?;
+            let c = fields.channel(st)?;
             // The reference mark sits at the zero position.
             axes[c].start_move(now, 0.0);
             st.channels[c].holding = nums[2] > 0;

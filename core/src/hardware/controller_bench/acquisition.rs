@@ -1,0 +1,220 @@
+//! Recording during a segment: the recorder of the photodiode's controller samples its joints and
+//! the photodiode, the other controllers' joints are polled and interpolated at the sample times.
+
+use super::ControllerBench;
+use crate::hardware::HwError;
+use crate::plan::TimedSegment;
+use crate::trace::{Trace, TraceMeta};
+
+/// Longest round trip (s, real time) of a position poll kept in a recording.
+const MAX_POLL_RTT_S: f64 = 0.002;
+
+/// Samples read from the recorder, not yet turned into trace rows.
+pub(super) struct Acquisition {
+    pub(super) t_trigger_s: f64,
+    pub(super) dt_s: f64,
+    pub(super) read: usize,
+    /// Recorder joints (joint index, column).
+    pub(super) recorded_joints: Vec<usize>,
+    pub(super) columns: Vec<Vec<f64>>,
+    pub(super) inputs: Vec<Vec<f64>>,
+    /// Polls of the other joints: (bench time, display values of every joint).
+    pub(super) polls: Vec<(f64, [f64; 6])>,
+    pub(super) emitted: usize,
+    pub(super) trace: Trace,
+}
+
+impl ControllerBench {
+    /// Joints on the recorder's controller (recorded), the others polled.
+    fn recorded_joints(&self) -> Vec<usize> {
+        (0..6).filter(|&j| self.joints[j].controller == self.recorder_controller).collect()
+    }
+
+    /// Arm the recorder of the photodiode's controller for the recorded joints and the inputs
+    /// (photodiode, then the wavelength monitor if wired); the acquisition starts empty.
+    pub(super) fn arm_recorder(&mut self, meta: &TraceMeta) -> Result<Acquisition, HwError> {
+        let recorded_joints = self.recorded_joints();
+        let axes: Vec<usize> = recorded_joints.iter().map(|&j| self.joints[j].axis).collect();
+        let mut inputs = vec![self.config.photodiode.input.clone()];
+        inputs.extend(self.config.photodiode.wavelength_input.clone());
+        let period = self.config.sample_period_s;
+        let rec = self.controllers[self.recorder_controller].recorder().ok_or_else(|| HwError::Usage {
+            controller: self.config.photodiode.controller.clone(),
+            problem: "no data recorder".into(),
+        })?;
+        let dt_s = rec.arm(&axes, &inputs, period)?;
+        Ok(Acquisition {
+            t_trigger_s: 0.0,
+            dt_s,
+            read: 0,
+            columns: vec![vec![]; recorded_joints.len()],
+            inputs: vec![vec![]; inputs.len()],
+            recorded_joints,
+            polls: vec![],
+            emitted: 0,
+            trace: Trace::new(meta.clone()),
+        })
+    }
+
+    pub(super) fn poll(&mut self, acq: &mut Acquisition, keep: bool) -> Result<(), HwError> {
+        let polled: Vec<usize> = (0..6).filter(|j| !acq.recorded_joints.contains(j)).collect();
+        if polled.is_empty() {
+            return Ok(());
+        }
+        let t_before = self.bench_now();
+        let mut q = [0.0; 6];
+        for &j in &polled {
+            let m = self.joints[j];
+            let p = self.controllers[m.controller].positions(&[m.axis])?;
+            q[j] = (p[0] - m.zero) * m.sign;
+        }
+        let t_after = self.bench_now();
+        // A poll whose exchange took long (the host was busy) may have been read late: drop it,
+        // unless it is the first or `keep` (at rest, where the time does not matter).
+        let rtt_real_s = (t_after - t_before) / self.clock.scale();
+        if keep || rtt_real_s <= MAX_POLL_RTT_S || acq.polls.is_empty() {
+            acq.polls.push((t_before, q));
+        }
+        Ok(())
+    }
+
+    pub(super) fn read_recorder(&mut self, acq: &mut Acquisition, up_to_s: Option<f64>) -> Result<(), HwError> {
+        let Some(rec) = self.controllers[self.recorder_controller].recorder() else { return Ok(()) };
+        let mut available = rec.recorded_len()?;
+        if let Some(end) = up_to_s {
+            let last = ((end - acq.t_trigger_s) / acq.dt_s).floor().max(0.0) as usize + 1;
+            available = available.min(last);
+        }
+        while acq.read < available {
+            let count = (available - acq.read).min(50_000);
+            let block = rec.read(acq.read, count)?;
+            for (col, new) in acq.columns.iter_mut().zip(block.axes) {
+                col.extend(new);
+            }
+            for (col, new) in acq.inputs.iter_mut().zip(block.inputs) {
+                col.extend(new);
+            }
+            acq.read += count;
+        }
+        Ok(())
+    }
+
+    /// Turn recorded samples into trace rows, up to the last poll (or all of them with `all`).
+    pub(super) fn emit(&self, acq: &mut Acquisition, seg: &TimedSegment, all: bool) {
+        let last_poll = acq.polls.last().map(|p| p.0);
+        let wavelength_recorded = self.config.photodiode.wavelength_input.is_some();
+        let mw = self.config.photodiode.mw_per_unit;
+        while acq.emitted < acq.read {
+            let k = acq.emitted;
+            let t = acq.t_trigger_s + k as f64 * acq.dt_s;
+            if !all && acq.recorded_joints.len() < 6 && last_poll.is_none_or(|lp| t > lp) {
+                break;
+            }
+            let mut q = seg.to_display;
+            // Polled joints: linear interpolation between polls (clamped at the ends).
+            if acq.recorded_joints.len() < 6 {
+                let i = acq.polls.partition_point(|p| p.0 <= t);
+                let value = |j: usize| -> f64 {
+                    match (i.checked_sub(1).and_then(|a| acq.polls.get(a)), acq.polls.get(i)) {
+                        (Some(a), Some(b)) if b.0 > a.0 => a.1[j] + (b.1[j] - a.1[j]) * (t - a.0) / (b.0 - a.0),
+                        (Some(a), _) => a.1[j],
+                        (None, Some(b)) => b.1[j],
+                        (None, None) => seg.from_display[j],
+                    }
+                };
+                for (j, qj) in q.iter_mut().enumerate() {
+                    if !acq.recorded_joints.contains(&j) {
+                        *qj = value(j);
+                    }
+                }
+            }
+            for (c, &j) in acq.recorded_joints.iter().enumerate() {
+                let m = self.joints[j];
+                q[j] = (acq.columns[c][k] - m.zero) * m.sign;
+            }
+            let wavelength = if wavelength_recorded {
+                acq.inputs[1][k]
+            } else {
+                seg.wavelength_at(t - acq.t_trigger_s).unwrap_or(self.laser.nominal_nm())
+            };
+            acq.trace.push_sample(t, q, wavelength, acq.inputs[0][k] * mw);
+            acq.emitted += 1;
+        }
+    }
+
+    /// After the motion ended at bench time `end`: a last poll, then every sample up to `end`
+    /// (waiting up to 1 s of bench time for the recorder, which may lag a poll behind).
+    pub(super) fn finish_acquisition(
+        &mut self,
+        a: &mut Acquisition,
+        seg: &TimedSegment,
+        end: f64,
+    ) -> Result<(), HwError> {
+        self.poll(a, true)?;
+        // The recorder may lag a poll behind: wait for the last samples.
+        let needed = ((end - a.t_trigger_s) / a.dt_s).floor().max(0.0) as usize + 1;
+        let wait_until = self.bench_now() + 1.0;
+        loop {
+            let rec = self.controllers[self.recorder_controller].recorder();
+            let have = match rec {
+                Some(r) => r.recorded_len()?,
+                None => needed,
+            };
+            if have >= needed || self.bench_now() > wait_until {
+                break;
+            }
+            self.sleep_poll();
+        }
+        self.read_recorder(a, Some(end))?;
+        self.emit(a, seg, true);
+        Ok(())
+    }
+}
+
+/// Keep the samples of a sweep trace from the last one at the start wavelength to the first one at
+/// the end wavelength: the laser rests before the sweep starts and after it ends, and sweep analysis
+/// needs a strictly monotonic wavelength.
+pub(super) fn trim_to_sweep(t: &mut Trace) {
+    let w = &t.wavelength_nm;
+    let n = w.len();
+    if n < 3 {
+        return;
+    }
+    let first = (0..n - 1).find(|&i| w[i + 1] != w[i]).unwrap_or(0);
+    let last = (1..n).rev().find(|&i| w[i] != w[i - 1]).unwrap_or(n - 1);
+    if last <= first {
+        return;
+    }
+    let keep = |c: &mut Vec<f64>| {
+        c.truncate(last + 1);
+        c.drain(..first);
+    };
+    keep(&mut t.t_s);
+    keep(&mut t.q1_um);
+    keep(&mut t.q2_um);
+    keep(&mut t.q3_um);
+    keep(&mut t.q4_deg);
+    keep(&mut t.q5_deg);
+    keep(&mut t.q6_deg);
+    keep(&mut t.wavelength_nm);
+    keep(&mut t.irradiance);
+    for e in &mut t.extra {
+        keep(&mut e.values);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sweep_traces_are_trimmed_to_the_sweep() {
+        let mut t = Trace::new(TraceMeta::default());
+        for (i, w) in [1550.0, 1550.0, 1550.0, 1550.5, 1551.0, 1551.5, 1552.0, 1552.0].iter().enumerate() {
+            t.push_sample(i as f64, [0.0; 6], *w, i as f64);
+        }
+        trim_to_sweep(&mut t);
+        assert_eq!(t.wavelength_nm, [1550.0, 1550.5, 1551.0, 1551.5, 1552.0]);
+        assert_eq!(t.irradiance, [2.0, 3.0, 4.0, 5.0, 6.0]);
+    }
+}

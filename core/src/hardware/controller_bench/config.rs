@@ -1,0 +1,214 @@
+//! The hardware configuration of a bench on controllers (`assets/benches/*-hardware.ron`): the
+//! controllers on the network, the joints' zeros and directions, the photodiode's inputs, and the
+//! recorder's and the polling's timing.
+
+use crate::files::{self, FileError};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The hardware configuration of the paper's bench, embedded.
+pub const FEMTO_HARDWARE_RON: &str = include_str!("../../../../assets/benches/femto-hardware.ron");
+
+/// Which driver speaks to a controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ControllerKind {
+    /// PI GCS 2 over TCP (E-712).
+    PiGcs,
+    /// SmarAct MCS ASCII over TCP.
+    SmarActMcs,
+}
+
+/// One controller on the network.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerConfig {
+    /// Name, as in the robot description's `drive.controller` ("PI E-712").
+    pub name: String,
+    /// Driver.
+    pub kind: ControllerKind,
+    /// host:port.
+    pub address: String,
+    /// Reply timeout (s, real time). Default 2 s.
+    #[serde(default = "default_timeout")]
+    pub timeout_s: f64,
+    /// Travel range per channel (µm or °) for controllers that cannot report it (MCS); default
+    /// unlimited (the robot's joint limits are checked before any move anyway).
+    #[serde(default)]
+    pub travel: Vec<(f64, f64)>,
+}
+
+fn default_timeout() -> f64 {
+    2.0
+}
+fn one() -> f64 {
+    1.0
+}
+fn default_sample_period() -> f64 {
+    0.0005
+}
+fn default_poll_period() -> f64 {
+    0.001
+}
+fn default_margin() -> f64 {
+    10.0
+}
+
+/// Where joint zero sits on its axis and which way the joint runs: controller position =
+/// `zero + sign·q` (µm or °).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointConfig {
+    /// Joint name ("q1").
+    pub joint: String,
+    /// Controller position of the joint's zero (µm or °). Default 0.
+    #[serde(default)]
+    pub zero: f64,
+    /// +1 or -1. Default +1.
+    #[serde(default = "one")]
+    pub sign: f64,
+}
+
+/// The photodiode and the laser's wavelength monitor on a controller's analog inputs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhotodiodeConfig {
+    /// Controller with the analog inputs and the data recorder.
+    pub controller: String,
+    /// Input channel of the photodiode.
+    pub input: String,
+    /// Optical power per input unit (mW per unit). Default 1.
+    #[serde(default = "one")]
+    pub mw_per_unit: f64,
+    /// Input channel of the laser's wavelength monitor (nm per unit 1), if wired; otherwise the
+    /// trace's wavelength column is the commanded sweep.
+    #[serde(default)]
+    pub wavelength_input: Option<String>,
+}
+
+/// How a bench's controllers are reached and mapped to the joints.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HardwareConfig {
+    /// Name of the bench.
+    pub name: String,
+    /// What it is.
+    #[serde(default)]
+    pub description: String,
+    /// The controllers.
+    pub controllers: Vec<ControllerConfig>,
+    /// Joint zeros and directions (joints not listed: zero 0, sign +1).
+    #[serde(default)]
+    pub joints: Vec<JointConfig>,
+    /// The photodiode.
+    pub photodiode: PhotodiodeConfig,
+    /// Recorder sampling period (s). Default 0.5 ms.
+    #[serde(default = "default_sample_period")]
+    pub sample_period_s: f64,
+    /// Polling period while waiting (s, real time). Default 1 ms.
+    #[serde(default = "default_poll_period")]
+    pub poll_period_s: f64,
+    /// Extra time allowed for a segment beyond twice its planned duration (s, bench time). Default 10 s.
+    #[serde(default = "default_margin")]
+    pub timeout_margin_s: f64,
+}
+
+const EXPECTED: &str =
+    "a HardwareConfig(name, controllers: [...], joints: [...], photodiode: (...)) as in assets/benches/femto-hardware.ron";
+
+impl HardwareConfig {
+    /// The paper's bench (PI E-712 and SmarAct MCS on the lab network), embedded.
+    pub fn femto() -> Self {
+        Self::from_ron_str(FEMTO_HARDWARE_RON, Path::new("assets/benches/femto-hardware.ron"))
+            .expect("the embedded hardware configuration is valid (checked by tests)")
+    }
+
+    /// Load a configuration file.
+    pub fn load(path: &Path) -> Result<Self, FileError> {
+        let text = files::read_text(path)?;
+        Self::from_ron_str(&text, path)
+    }
+
+    /// Parse configuration text; `origin` names it in errors.
+    pub fn from_ron_str(text: &str, origin: &Path) -> Result<Self, FileError> {
+        let c: Self = files::parse_ron(text, origin, EXPECTED)?;
+        let bad = |field: &str, problem: String| FileError::Invalid {
+            file: origin.to_path_buf(),
+            field: field.into(),
+            problem,
+        };
+        if c.controllers.is_empty() {
+            return Err(bad("controllers", "expected at least one controller, found none".into()));
+        }
+        for (name, v) in [("sample_period_s", c.sample_period_s), ("poll_period_s", c.poll_period_s)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(name, format!("expected a positive number of seconds, found {v}")));
+            }
+        }
+        for (i, j) in c.joints.iter().enumerate() {
+            if j.sign != 1.0 && j.sign != -1.0 {
+                return Err(bad(&format!("joints[{i}].sign"), format!("expected 1.0 or -1.0, found {}", j.sign)));
+            }
+        }
+        if !c.controllers.iter().any(|k| k.name == c.photodiode.controller) {
+            return Err(bad(
+                "photodiode.controller",
+                format!("expected one of the controllers' names, found `{}`", c.photodiode.controller),
+            ));
+        }
+        Ok(c)
+    }
+
+    /// This configuration with every controller's address replaced (e.g. by emulators' addresses).
+    pub fn with_addresses(mut self, addresses: &[(&str, String)]) -> Self {
+        for c in &mut self.controllers {
+            if let Some((_, a)) = addresses.iter().find(|(n, _)| *n == c.name) {
+                c.address = a.clone();
+            }
+        }
+        self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::robot::RobotDescription;
+
+    #[test]
+    fn the_embedded_configuration_maps_every_joint_of_the_robot() {
+        let c = HardwareConfig::femto();
+        assert_eq!(c.controllers.len(), 2);
+        let robot = RobotDescription::femto_6dof();
+        for l in &robot.links {
+            let d = l.drive.as_ref().expect("every joint has a drive");
+            assert!(c.controllers.iter().any(|k| k.name == d.controller), "{}", l.name);
+        }
+        assert_eq!(c.photodiode.wavelength_input.as_deref(), Some("6"));
+    }
+
+    #[test]
+    fn bad_configurations_name_the_field() {
+        let cases = [
+            (
+                "sign",
+                "(joint: \"q1\", zero: 150.0)",
+                "(joint: \"q1\", zero: 150.0, sign: 2.0)",
+                "field `joints[0].sign`: expected 1.0 or -1.0",
+            ),
+            (
+                "photodiode",
+                "controller: \"PI E-712\", input",
+                "controller: \"PI E-999\", input",
+                "field `photodiode.controller`",
+            ),
+            ("period", "sample_period_s: 0.0005", "sample_period_s: -1.0", "field `sample_period_s`"),
+        ];
+        for (what, from, to, want) in cases {
+            assert!(FEMTO_HARDWARE_RON.contains(from), "{what}");
+            let err = HardwareConfig::from_ron_str(&FEMTO_HARDWARE_RON.replacen(from, to, 1), Path::new("hw.ron"))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(want), "{what}: {err}");
+        }
+    }
+}

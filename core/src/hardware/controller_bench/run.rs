@@ -1,0 +1,246 @@
+//! Running one segment on the controllers: speeds, the motion started on every controller (the
+//! recorder's first), following it to its end while streaming the samples, checking that every
+//! joint got there, and stopping everything after a fault.
+
+use super::acquisition::Acquisition;
+use super::ControllerBench;
+use crate::bench::RunControl;
+use crate::hardware::HwError;
+use crate::model::robot::JointType;
+use crate::plan::{TimedMotion, TimedSegment};
+use crate::trace::TraceMeta;
+use std::time::Duration;
+
+/// How a segment that met no fault ended.
+pub(super) enum Stop {
+    /// It ran to its end.
+    Done,
+    /// The user cancelled it.
+    Cancelled,
+}
+
+impl ControllerBench {
+    /// Run the segment; on a fault return it with what was acquired.
+    pub(super) fn run_inner(
+        &mut self,
+        seg: &TimedSegment,
+        meta: &TraceMeta,
+        acq: &mut Option<Acquisition>,
+        control: &mut RunControl<'_>,
+    ) -> Result<Stop, HwError> {
+        self.set_speeds(seg)?;
+        if let TimedMotion::Sweep { from_nm, .. } = seg.motion {
+            self.laser.set_wavelength(from_nm)?;
+        }
+        if seg.record {
+            *acq = Some(self.arm_recorder(meta)?);
+            if let Some(a) = acq.as_mut() {
+                self.poll(a, true)?;
+            }
+        }
+        let t_start = self.bench_now();
+        let t_trigger = self.start_motion(seg)?;
+        if let Some(a) = acq.as_mut() {
+            a.t_trigger_s = t_trigger;
+        }
+        if let TimedMotion::Sweep { from_nm, to_nm } = seg.motion {
+            let rate = (to_nm - from_nm).abs() / seg.duration_s.max(f64::MIN_POSITIVE);
+            self.laser.start_sweep(from_nm, to_nm, rate)?;
+        }
+        let Some(done_at) = self.follow_motion(seg, acq, control, t_start)? else {
+            return Ok(Stop::Cancelled);
+        };
+        if matches!(seg.motion, TimedMotion::Move { .. }) {
+            self.check_arrival(seg)?;
+        }
+        if let Some(a) = acq.as_mut() {
+            self.finish_acquisition(a, seg, done_at)?;
+        }
+        if matches!(seg.motion, TimedMotion::Sweep { .. }) {
+            let nominal = self.laser.nominal_nm();
+            self.laser.set_wavelength(nominal)?;
+        }
+        Ok(Stop::Done)
+    }
+
+    /// Follow the motion started at bench time `t_start` until it has ended and settled, streaming
+    /// the samples and the progress: the bench time it settled at, or `None` when the user cancelled.
+    fn follow_motion(
+        &mut self,
+        seg: &TimedSegment,
+        acq: &mut Option<Acquisition>,
+        control: &mut RunControl<'_>,
+        t_start: f64,
+    ) -> Result<Option<f64>, HwError> {
+        let settle_s = match seg.motion {
+            TimedMotion::Move { settle_s, .. } => settle_s,
+            _ => 0.0,
+        };
+        let deadline = t_start + 2.0 * seg.duration_s + self.config.timeout_margin_s;
+        let mut done_at: Option<f64> = None;
+        let mut reported = 0;
+        loop {
+            let now = self.bench_now();
+            if control.cancelled() {
+                return Ok(None);
+            }
+            if let Some(a) = acq.as_mut() {
+                self.poll(a, false)?;
+                self.read_recorder(a, None)?;
+                self.emit(a, seg, false);
+                if a.trace.len() > reported {
+                    (control.on_samples)(&a.trace, reported);
+                    reported = a.trace.len();
+                }
+            }
+            (control.on_progress)(((now - t_start) / seg.duration_s.max(1e-9)).clamp(0.0, 1.0));
+            match done_at {
+                Some(t) if now >= t => return Ok(Some(t)),
+                Some(_) => {}
+                None => {
+                    let finished = match seg.motion {
+                        TimedMotion::Move { .. } => self.all_on_target()?,
+                        _ => now >= t_start + seg.duration_s,
+                    };
+                    if finished {
+                        // The stages stand still from here: a poll now is exact whatever its round
+                        // trip, and bounds the interpolation at the end of the motion (polls during
+                        // the motion may all have been dropped on a busy host).
+                        if let Some(a) = acq.as_mut() {
+                            self.poll(a, true)?;
+                        }
+                        done_at = Some(now + settle_s);
+                    } else if now > deadline {
+                        return Err(HwError::WaitTimeout {
+                            controller: self.config.name.clone(),
+                            axes: (0..6)
+                                .filter(|&j| seg.to_display[j] != seg.from_display[j])
+                                .map(|j| self.robot.links[j].name.clone())
+                                .collect::<Vec<_>>()
+                                .join(","),
+                            timeout_s: deadline - t_start,
+                        });
+                    }
+                }
+            }
+            self.sleep_poll();
+        }
+    }
+
+    /// After a move: every joint at its target. A lost command looks like a finished move.
+    fn check_arrival(&mut self, seg: &TimedSegment) -> Result<(), HwError> {
+        let q = self.read_joints()?;
+        for (j, &qj) in q.iter().enumerate() {
+            let (tol, unit) = match self.robot.links[j].joint {
+                JointType::Prismatic => (0.01, "µm"),
+                JointType::Revolute => (1e-4, "°"),
+            };
+            if (qj - seg.to_display[j]).abs() > tol {
+                let m = self.joints[j];
+                return Err(HwError::LimitReached {
+                    controller: self.config.controllers[m.controller].name.clone(),
+                    axis: format!(
+                        "{} (joint {})",
+                        self.controllers[m.controller].axes()[m.axis].id,
+                        self.robot.links[j].name
+                    ),
+                    position: qj,
+                    target: seg.to_display[j],
+                    unit,
+                    reason: "the move ended off its target: a lost command, an end stop or a limit".into(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn to_controller(&self, j: usize, q: f64) -> f64 {
+        self.joints[j].zero + self.joints[j].sign * q
+    }
+
+    fn set_speeds(&mut self, seg: &TimedSegment) -> Result<(), HwError> {
+        let d: [f64; 6] = std::array::from_fn(|j| (seg.to_display[j] - seg.from_display[j]).abs());
+        let limit = |j: usize| self.motion.for_joint(self.robot.links[j].joint).0;
+        // All joints arrive together: the slowest sets the time.
+        let time = (0..6).map(|j| d[j] / limit(j)).fold(0.0, f64::max);
+        for (j, &dj) in d.iter().enumerate() {
+            let v = if dj > 0.0 && time > 0.0 { dj / time } else { limit(j) };
+            if (v - self.velocities[j]).abs() > 1e-9 * v || self.velocities[j].is_nan() {
+                let m = self.joints[j];
+                self.controllers[m.controller].set_velocity(m.axis, v)?;
+                self.velocities[j] = v;
+            }
+        }
+        Ok(())
+    }
+
+    /// Start the segment's motion: the recorder's controller first (its move command triggers the
+    /// recorder, even when it does not move), then the others. Returns the bench time at which the
+    /// recorder started: when the move command was sent. The polls of the other axes are stamped
+    /// when their request is sent too, so the one-way latency to the controllers cancels; stamping
+    /// at the reply would add whatever delay the host takes to read it (measured: under load,
+    /// stamps at the middle of the exchange put q4/q5 several nm of dL off).
+    fn start_motion(&mut self, seg: &TimedSegment) -> Result<f64, HwError> {
+        let n = self.controllers.len();
+        let mut t_trigger = self.bench_now();
+        let order = std::iter::once(self.recorder_controller).chain((0..n).filter(|&c| c != self.recorder_controller));
+        for c in order {
+            let targets: Vec<(usize, f64)> = (0..6)
+                .filter(|&j| self.joints[j].controller == c)
+                .filter(|&j| c == self.recorder_controller || seg.to_display[j] != seg.from_display[j])
+                .map(|j| (self.joints[j].axis, self.to_controller(j, seg.to_display[j])))
+                .collect();
+            if c == self.recorder_controller {
+                // Travel limits are cached after the first move: only the move command is timed.
+                for &(a, _) in &targets {
+                    self.controllers[c].travel_limits(a)?;
+                }
+                t_trigger = self.bench_now();
+                self.controllers[c].move_absolute(&targets)?;
+            } else {
+                self.controllers[c].move_absolute(&targets)?;
+            }
+        }
+        Ok(t_trigger)
+    }
+
+    fn all_on_target(&mut self) -> Result<bool, HwError> {
+        for c in 0..self.controllers.len() {
+            let axes: Vec<usize> =
+                (0..6).filter(|&j| self.joints[j].controller == c).map(|j| self.joints[j].axis).collect();
+            if !axes.is_empty() && !self.controllers[c].on_target(&axes)?.iter().all(|&t| t) {
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    }
+
+    pub(super) fn bench_now(&self) -> f64 {
+        self.clock.now_s()
+    }
+
+    pub(super) fn sleep_poll(&self) {
+        std::thread::sleep(Duration::from_secs_f64(self.config.poll_period_s));
+    }
+
+    /// Stop everything after a fault; say what was done.
+    pub(super) fn stop_all(&mut self) -> String {
+        let mut said = Vec::new();
+        for (c, cfg) in self.controllers.iter_mut().zip(&self.config.controllers) {
+            let outcome = match c.stop() {
+                Ok(()) => "stopped".to_string(),
+                Err(e) if e.needs_reconnect() => match c.reconnect().and_then(|()| c.stop()) {
+                    Ok(()) => "reconnected and stopped".to_string(),
+                    Err(e2) => format!("NOT stopped ({e2})"),
+                },
+                Err(e) => format!("NOT stopped ({e})"),
+            };
+            said.push(format!("{}: {outcome}", cfg.name));
+        }
+        let nominal = self.laser.nominal_nm();
+        if self.laser.set_wavelength(nominal).is_err() {
+            said.push("laser: could not return to its nominal wavelength".into());
+        }
+        said.join(", ")
+    }
+}
