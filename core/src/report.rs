@@ -7,7 +7,7 @@
 //! validation motions before and after calibration (figures and curves); the diagnosis if one
 //! was run; the notes and the list of traces.
 
-use crate::identify::calibration::{CalibrationReport, ValidationRow};
+use crate::calibration::{CalibrationReport, ValidationRow};
 use crate::session::{Session, FORMAT_VERSION};
 use std::fmt::Write as _;
 
@@ -90,8 +90,8 @@ fn summary(h: &mut String, c: &CalibrationReport) {
         "<h2>Summary</h2>\n<p>Identifier: <b>{}</b> mode. {} observations from {:.1} min of measurement. Solver: {}. \
          Residual RMS {:.2} σ (1 = at the noise floor of the measurements).</p>",
         match c.mode {
-            crate::identify::calibration::Mode::Paper => "paper (steps A, B, C)",
-            crate::identify::calibration::Mode::Joint => "joint estimate",
+            crate::calibration::Mode::Paper => "paper (steps A, B, C)",
+            crate::calibration::Mode::Joint => "joint estimate",
         },
         c.observations,
         c.measurement_duration_s / 60.0,

@@ -401,7 +401,7 @@ mod tests {
     /// the truth plus Gaussian noise of their stated σ).
     #[test]
     fn reported_sigma_matches_the_monte_carlo_scatter() {
-        use crate::identify::calibration::analyse_estimate;
+        use crate::identify::observability::analyse_estimate;
         use rand::{rngs::StdRng, SeedableRng};
         use rand_distr::{Distribution, StandardNormal};
         let truth = Extrinsics::table2();

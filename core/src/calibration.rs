@@ -6,10 +6,9 @@
 //! ([`crate::identify::verdict`]), the Table II-style rows and the validation.
 
 use crate::bench::{run_plan, Bench, RunControl};
-use crate::identify::joint::JointEstimate;
 use crate::identify::multistart::model_with;
 pub use crate::identify::multistart::{identify, Identification, Mode};
-use crate::identify::observability::IdentifiabilityReport;
+use crate::identify::observability::{analyse_estimate, IdentifiabilityReport};
 use crate::identify::signs::{translation_signs, TranslationSign};
 use crate::identify::verdict::{
     differing_parameters, jackknife_sigma, rms_threshold, worst_traces, FitCheck, Verdict, WORST_TRACES,
@@ -180,42 +179,6 @@ pub fn measure(bench: &mut dyn Bench, plans: &[Plan]) -> Result<(Vec<Trace>, f64
         run.outcome.map_err(|e| format!("plan {}: {e}", p.name))?;
     }
     Ok((traces, duration))
-}
-
-/// The identifiability report of a joint estimate: its weighted Jacobian and residuals, the
-/// free extrinsics with their useful bounds, and the detector gains as nuisance parameters.
-pub fn analyse_estimate(est: &JointEstimate) -> IdentifiabilityReport {
-    use crate::identify::observability::{analyse, Options, ParamInfo};
-    let all = ParamInfo::extrinsics();
-    let params: Vec<ParamInfo> = est
-        .column_parameter
-        .iter()
-        .zip(&est.column_names)
-        .map(|(p, name)| match p {
-            Some(i) => all[*i].clone(),
-            None => ParamInfo::new(name.clone(), "(gain)", 1.0),
-        })
-        .collect();
-    let rows = est.weighted_jacobian.nrows();
-    let mut r = nalgebra::DVector::zeros(rows);
-    for (k, v) in est.normalised_residuals.iter().enumerate().take(rows) {
-        r[k] = *v;
-    }
-    match analyse(&est.weighted_jacobian, &r, &params, &Options::default()) {
-        Ok(report) => report,
-        Err(e) => {
-            // Inconsistent input is a bug, but the user still gets a report that says so.
-            let mut report = analyse(
-                &nalgebra::DMatrix::zeros(1, params.len()),
-                &nalgebra::DVector::zeros(1),
-                &params,
-                &Options::default(),
-            )
-            .expect("a zero Jacobian is valid input");
-            report.warnings.push(format!("identifiability analysis failed: {e}"));
-            report
-        }
-    }
 }
 
 /// Rows of the Table II-style result from an estimate and its identifiability report.
