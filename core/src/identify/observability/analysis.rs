@@ -2,11 +2,10 @@
 //! each parameter, correlations, the base set, condition numbers and the warning sentences.
 //! The method is in the documentation of [`super`].
 
+use super::input::{AnalysisError, Options, ParamInfo};
 use super::numerics::{pivot_order, pseudo_inverse_covariance, scaled_condition_number, sparsify, PseudoInverse};
+use super::report::{Combination, CombinationKind, IdentifiabilityReport, ParameterUncertainty};
 use super::words::{coefficient_text, describe, pretty, sparse_coefficients, three_significant};
-use super::{
-    AnalysisError, Combination, CombinationKind, IdentifiabilityReport, Options, ParamInfo, ParameterUncertainty,
-};
 use nalgebra::{DMatrix, DVector};
 
 /// Analyse the identifiability of a weighted least-squares problem.

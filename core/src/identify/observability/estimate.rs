@@ -1,6 +1,8 @@
 //! The identifiability report of a joint estimate, as the calibration and the tests read it.
 
-use super::{analyse, IdentifiabilityReport, Options, ParamInfo};
+use super::analysis::analyse;
+use super::input::{Options, ParamInfo};
+use super::report::IdentifiabilityReport;
 use crate::identify::joint::JointEstimate;
 
 /// The identifiability report of a joint estimate: its weighted Jacobian and residuals, the

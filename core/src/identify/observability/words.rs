@@ -1,6 +1,6 @@
 //! The words of the analysis: parameter names, numbers and combinations as they appear in its sentences.
 
-use super::CombinationKind;
+use super::report::CombinationKind;
 use nalgebra::DVector;
 
 /// `beta_wf` → `β_wf`, `theta_et` → `θ_et`; other names unchanged.
