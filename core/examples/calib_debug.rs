@@ -209,7 +209,7 @@ fn main() {
         println!("skipped {l}: {w}");
     }
     println!("identify {:.1} s, converged {}, {}", t1.elapsed().as_secs_f64(), est.converged, est.termination);
-    let report = photorobot_core::identify::observability::analyse_estimate(&est);
+    let report = photorobot_core::identify::joint::analyse_estimate(&est);
     let rows = calibration::parameter_rows(&est.extrinsics, &report);
     let truth = preset.truth.to_array();
     for (i, r) in rows.iter().enumerate() {

@@ -29,18 +29,18 @@ impl Diagnosis {
         let templates = motions::templates(&pool, t_end + 10.0);
         let all: Vec<Observation> = obs.iter().chain(&templates).cloned().collect();
         let j = fit::jacobian_of(&self.predictor, &f.state, &all).map_err(|e| DiagnoseError::Model(e.to_string()))?;
-        let sig = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
+        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
             .map_err(|e| DiagnoseError::Model(e.to_string()))?;
         let base_proj = Projector::new(&j);
         let mut per_motion = vec![vec![0.0; targets.len()]; pool.len()];
         let mut absorbed = Vec::new();
         for (t, (c, others)) in targets.iter().enumerate() {
-            let s = &sig[*c];
+            let s = &signatures[*c];
             let sp = if others.is_empty() {
                 base_proj.orthogonal(s)
             } else {
                 let mut cols: Vec<DVector<f64>> = j.column_iter().map(|c| c.into_owned()).collect();
-                cols.extend(others.iter().map(|&o| sig[o].clone()));
+                cols.extend(others.iter().map(|&o| signatures[o].clone()));
                 Projector::new(&DMatrix::from_columns(&cols)).orthogonal(s)
             };
             absorbed.push(if s.norm_squared() > 0.0 { 1.0 - sp.norm_squared() / s.norm_squared() } else { 1.0 });

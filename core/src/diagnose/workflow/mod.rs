@@ -230,9 +230,9 @@ impl Diagnosis {
     fn rescore(&mut self) -> Result<(), DiagnoseError> {
         let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("scored before the baseline".into()))?;
         let obs = self.fit_set();
-        let sig = scoring::signatures(&self.predictor, &f.state, &self.candidates, &obs)
+        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &obs)
             .map_err(|e| DiagnoseError::Model(e.to_string()))?;
-        let (mut scores, projected) = scoring::score(&self.candidates, &sig, &f.jacobian, &f.residuals);
+        let (mut scores, projected) = scoring::score(&self.candidates, &signatures, &f.jacobian, &f.residuals);
         for (k, s) in scores.iter_mut().enumerate() {
             if self.excluded.contains(&k) || f.state.effects.iter().any(|(c, _)| c.name == s.name) {
                 s.significant = false;
@@ -272,11 +272,11 @@ impl Diagnosis {
         let pool = motions::templates(&motions::pool(), 0.0);
         self.predictor.extend(&pool).map_err(DiagnoseError::Model)?;
         let all: Vec<Observation> = obs.iter().chain(&pool).cloned().collect();
-        let sig = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
+        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
             .map_err(|e| DiagnoseError::Model(e.to_string()))?;
         let mut invisible = self.not_seen.clone();
         let mut keep = Vec::new();
-        for (c, s) in self.candidates.iter().zip(&sig) {
+        for (c, s) in self.candidates.iter().zip(&signatures) {
             if s.norm_squared() * c.typical * c.typical < 1e-6 {
                 invisible.push(c.name.clone());
             } else {

@@ -56,7 +56,7 @@
 //!    plan's own ([`Plan::duration_s`]), usually a little less than the sum of the candidates'
 //!    costs (setup moves between neighbours are shorter than from q = 0).
 //!
-//! A design is only as good as its model: run the plan ([`crate::calibration`]) and
+//! A design is only as good as its model: run the plan (`photorobot calibrate --plan`) and
 //! check the reported σ; the design margin (default 0.8) leaves room for the difference between
 //! prior and truth and for the residual-variance scaling of the reported σ.
 

@@ -51,14 +51,12 @@
 //!   direction β_wf/θ_wf, gap split y_wf/Z_et, beam origin x_wf/z_wf against beam angles), or a generic sentence.
 
 mod analysis;
-mod estimate;
 mod input;
 mod numerics;
 mod report;
 mod words;
 
 pub use analysis::analyse;
-pub use estimate::analyse_estimate;
 pub use input::{AnalysisError, Options, ParamInfo, DEFAULT_USEFUL_ANGLE_DEG, DEFAULT_USEFUL_LENGTH_UM};
 pub use numerics::{pseudo_inverse_covariance, PseudoInverse};
 pub use report::{Combination, CombinationKind, IdentifiabilityReport, ParameterUncertainty};
