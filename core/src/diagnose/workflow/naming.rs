@@ -64,7 +64,7 @@ impl Diagnosis {
             confirmed,
         });
         if confirmed {
-            self.keep_added(effect, nf, runner.as_deref_mut())?;
+            self.keep_added(effect, nf, runner)?;
         } else {
             self.excluded.push(best);
             self.rescore()?;
