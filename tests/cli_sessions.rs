@@ -5,7 +5,7 @@
 //! HTML file. A short plan keeps the three identifications cheap.
 
 use photorobot_app::cli::{run, Outcome};
-use photorobot_core::identify::calibration::{report_from_traces, Mode};
+use photorobot_core::calibration::{report_from_traces, Mode};
 use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use photorobot_core::session::Session;

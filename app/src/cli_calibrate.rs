@@ -1,6 +1,6 @@
 //! `photorobot calibrate --bench <preset> [--seed N] [--mode paper|joint] --out <session> [--json]`: measure,
 //! identify and validate end to end; with `--traces <dir> [--mapping <file>]`, identify from traces recorded
-//! elsewhere. Owns only argument parsing and printing; the work is `photorobot_core::identify::calibration`,
+//! elsewhere. Owns only argument parsing and printing; the work is `photorobot_core::calibration`,
 //! `photorobot_core::session` and `photorobot_core::import`.
 //!
 //! The session folder gets `session.ron` (the session: bench, robot, plans, trace references,
@@ -11,10 +11,10 @@
 
 use crate::cli::CliError;
 use photorobot_core::bench::{BenchPreset, RunControl, VirtualBench};
-use photorobot_core::files::{save_ron, write_atomic};
-use photorobot_core::identify::calibration::{
+use photorobot_core::calibration::{
     plan_durations, plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
 };
+use photorobot_core::files::{save_ron, write_atomic};
 use photorobot_core::identify::signs::{SignSource, TranslationSign};
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
 use photorobot_core::import::{read_folder, ColumnMapping};

@@ -6,8 +6,8 @@
 
 use crate::cli::CliError;
 use photorobot_core::bench::BenchPreset;
+use photorobot_core::calibration::{plans, Mode};
 use photorobot_core::files::write_atomic;
-use photorobot_core::identify::calibration::{plans, Mode};
 use photorobot_core::identify::design::{design, plan_ron_with_header, Design, DesignOptions};
 use photorobot_core::model::extrinsics::Extrinsics;
 use serde_json::json;

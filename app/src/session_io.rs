@@ -20,7 +20,7 @@ pub struct Snapshot {
     /// Per step: traces and whether the step ran to the end.
     steps: Vec<(Vec<Trace>, bool)>,
     imported: Vec<Trace>,
-    calibration: Option<photorobot_core::identify::calibration::CalibrationReport>,
+    calibration: Option<photorobot_core::calibration::CalibrationReport>,
     diagnosis: Option<photorobot_core::session::DiagnosisRecord>,
     notes: String,
 }

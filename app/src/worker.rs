@@ -6,10 +6,10 @@
 //! (times a speed factor) so a virtual bench looks like a real one, or runs as fast as it can.
 
 use photorobot_core::bench::{run_plan, Bench, BenchPreset, RunControl, VirtualBench};
+use photorobot_core::calibration::{report_from_traces, CalibrationReport, Mode};
 use photorobot_core::diagnose::motions::BenchRunner;
 use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
 use photorobot_core::diagnose::{Diagnosis, DiagnosisResult};
-use photorobot_core::identify::calibration::{report_from_traces, CalibrationReport, Mode};
 use photorobot_core::measure::{self, Measurement, PhaseModel};
 use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;

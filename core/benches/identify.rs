@@ -4,7 +4,7 @@
 //! the design extrinsics. `cargo bench -p photorobot-core --bench identify`; target < 50 ms.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use photorobot_core::identify::calibration::{plans, Mode};
+use photorobot_core::calibration::{plans, Mode};
 use photorobot_core::identify::joint::{estimate, JointOptions};
 use photorobot_core::identify::{predict, Observation, ObservationKind};
 use photorobot_core::measure::PhaseModel;

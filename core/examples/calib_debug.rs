@@ -1,7 +1,7 @@
 //! Debug harness for the calibration: simulate (cached under /tmp), identify, compare with the truth.
 //! `cargo run --release -p photorobot-core --example calib_debug -- <preset> <joint|paper> [seed]`
 use photorobot_core::bench::{BenchPreset, VirtualBench};
-use photorobot_core::identify::calibration::{self, Mode};
+use photorobot_core::calibration::{self, Mode};
 use photorobot_core::identify::joint;
 use photorobot_core::identify::ObservationKind;
 use photorobot_core::measure::PhaseModel;
@@ -209,7 +209,7 @@ fn main() {
         println!("skipped {l}: {w}");
     }
     println!("identify {:.1} s, converged {}, {}", t1.elapsed().as_secs_f64(), est.converged, est.termination);
-    let report = calibration::analyse_estimate(&est);
+    let report = photorobot_core::identify::joint::analyse_estimate(&est);
     let rows = calibration::parameter_rows(&est.extrinsics, &report);
     let truth = preset.truth.to_array();
     for (i, r) in rows.iter().enumerate() {

@@ -3,6 +3,7 @@
 
 pub mod alignment;
 pub mod bench;
+pub mod calibration;
 pub mod diagnose;
 pub mod files;
 pub mod fringes;

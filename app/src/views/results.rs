@@ -5,7 +5,7 @@
 use crate::state::AppState;
 use egui::{Color32, RichText};
 use egui_plot::{Legend, Plot, PlotPoints, Points};
-use photorobot_core::identify::calibration::CalibrationReport;
+use photorobot_core::calibration::CalibrationReport;
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
 
 /// The equation (measurement kind) a residual belongs to, from its unit and trace label: an

@@ -7,6 +7,7 @@
 //! as in the identifier, instead of wandering.
 
 use crate::diagnose::candidates::Candidate;
+use crate::diagnose::projection::{Projector, RANK_TOLERANCE};
 use crate::identify::{parameter_scale, predict_with_path, Observation, ObservationKind, N_EXTRINSICS};
 use crate::measure::PhaseModel;
 use crate::model::effects::{apply_optics, Effect, EffectError};
@@ -231,9 +232,6 @@ pub fn rms(v: &DVector<f64>) -> f64 {
     }
 }
 
-/// Relative singular-value threshold below which a direction counts as undetermined.
-pub const RANK_TOLERANCE: f64 = 1e-7;
-
 fn jacobian(
     p: &Predictor,
     layout: &Layout,
@@ -344,7 +342,7 @@ pub fn fit(
         .map(|k| {
             let col = n_free + k;
             let others: Vec<usize> = (0..j.ncols()).filter(|&c| c != col).collect();
-            let proj = crate::diagnose::scoring::Projector::new(&j.select_columns(others.iter()));
+            let proj = Projector::new(&j.select_columns(others.iter()));
             let s = proj.orthogonal(&j.column(col).into_owned());
             let n = s.norm();
             (n > 1e-12).then(|| state.effects[k].0.step / n * scale)

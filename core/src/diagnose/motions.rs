@@ -473,7 +473,7 @@ impl<'a> BenchRunner<'a> {
     pub fn new(bench: &'a mut dyn Bench, time_offset_s: f64) -> Self {
         Self {
             bench,
-            options: crate::diagnose::EXTRACT_OPTIONS,
+            options: crate::diagnose::settings::EXTRACT_OPTIONS,
             time_offset_s,
             traces: Vec::new(),
             free_start: Default::default(),
@@ -564,7 +564,7 @@ impl MotionRunner for BenchRunner<'_> {
     }
 
     fn reanalyse(&self, analysis: &PhaseModel) -> Option<Vec<Observation>> {
-        // Shaped, as the diagnosis re-analyses its session ([`crate::diagnose::REANALYSE_OPTIONS`]).
+        // Shaped, as the diagnosis re-analyses its session ([`crate::diagnose::settings::REANALYSE_OPTIONS`]).
         Some(self.extract(0, analysis, &ExtractOptions { shaped: true, ..self.options }))
     }
 }
@@ -622,7 +622,7 @@ mod tests {
         }
     }
 
-    const EXTRACT_SIGMA_FLOOR_NM: f64 = crate::diagnose::EXTRACT_OPTIONS.sigma_floor_nm;
+    const EXTRACT_SIGMA_FLOOR_NM: f64 = crate::diagnose::settings::EXTRACT_OPTIONS.sigma_floor_nm;
 
     /// With a 20 µm pivot offset of q4 along Z_w, the q4 rotation at q1 = 150 µm starts on a
     /// turning point of the phase-equivalent gap (the tilt phase cancels the gap's change

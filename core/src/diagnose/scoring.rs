@@ -19,7 +19,8 @@
 //! −1e6 ppm from uncalibrated extrinsics) is structure the candidate does not explain.
 
 use crate::diagnose::candidates::Candidate;
-use crate::diagnose::fit::{ModelState, Predictor, RANK_TOLERANCE};
+use crate::diagnose::fit::{ModelState, Predictor};
+use crate::diagnose::projection::Projector;
 use crate::identify::Observation;
 use crate::model::effects::EffectError;
 use nalgebra::{DMatrix, DVector};
@@ -34,36 +35,6 @@ pub const PLAUSIBLE_TYPICAL_MULTIPLE: f64 = 20.0;
 
 /// Cosine between two candidates' projected signatures above which they cannot be told apart.
 pub const AMBIGUITY_COSINE: f64 = 0.95;
-
-/// Projection onto the orthogonal complement of a matrix's determined column space.
-#[derive(Debug, Clone)]
-pub struct Projector {
-    u: DMatrix<f64>,
-}
-
-impl Projector {
-    /// The projector for `j`; columns below [`RANK_TOLERANCE`] of the largest singular value are
-    /// treated as absent.
-    pub fn new(j: &DMatrix<f64>) -> Self {
-        if j.ncols() == 0 || j.nrows() == 0 {
-            return Self { u: DMatrix::zeros(j.nrows(), 0) };
-        }
-        let svd = j.clone().svd(true, false);
-        let smax = svd.singular_values.max();
-        let u = svd.u.expect("U requested");
-        let keep: Vec<usize> =
-            (0..svd.singular_values.len()).filter(|&k| svd.singular_values[k] > RANK_TOLERANCE * smax).collect();
-        Self { u: u.select_columns(keep.iter()) }
-    }
-
-    /// The part of `s` orthogonal to the column space.
-    pub fn orthogonal(&self, s: &DVector<f64>) -> DVector<f64> {
-        if self.u.ncols() == 0 {
-            return s.clone();
-        }
-        s - &self.u * (self.u.transpose() * s)
-    }
-}
 
 /// Whitened signatures (derivative of each prediction per unit of the candidate's parameter,
 /// divided by σ) of candidates at the state, by central differences of one step.

@@ -8,7 +8,7 @@
 //! drift expected when the bench reaches them.
 
 use crate::bench::Bench;
-use crate::identify::calibration::{thin, CURVE_POINTS};
+use crate::calibration::{thin, CURVE_POINTS};
 use crate::measure::PhaseModel;
 use crate::model::effects::{apply_all, apply_optics, Effect, EffectError};
 use crate::model::extrinsics::Extrinsics;

@@ -1,6 +1,7 @@
 //! The joint estimate: every extrinsic parameter from every observation at once (fringe phase, absolute gaps, power),
 //! by Levenberg-Marquardt, with per-parameter masks and priors. Owns the convergence report.
 
+use crate::identify::observability::{analyse, IdentifiabilityReport, Options, ParamInfo};
 use crate::identify::{parameter_scale, predict, Observation, ObservationKind, N_EXTRINSICS};
 use crate::measure::PhaseModel;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
@@ -269,6 +270,41 @@ fn run(
     }
 }
 
+/// The identifiability report of a joint estimate: its weighted Jacobian and residuals, the
+/// free extrinsics with their useful bounds, and the detector gains as nuisance parameters.
+pub fn analyse_estimate(est: &JointEstimate) -> IdentifiabilityReport {
+    let all = ParamInfo::extrinsics();
+    let params: Vec<ParamInfo> = est
+        .column_parameter
+        .iter()
+        .zip(&est.column_names)
+        .map(|(p, name)| match p {
+            Some(i) => all[*i].clone(),
+            None => ParamInfo::new(name.clone(), "(gain)", 1.0),
+        })
+        .collect();
+    let rows = est.weighted_jacobian.nrows();
+    let mut r = nalgebra::DVector::zeros(rows);
+    for (k, v) in est.normalised_residuals.iter().enumerate().take(rows) {
+        r[k] = *v;
+    }
+    match analyse(&est.weighted_jacobian, &r, &params, &Options::default()) {
+        Ok(report) => report,
+        Err(e) => {
+            // Inconsistent input is a bug, but the user still gets a report that says so.
+            let mut report = analyse(
+                &nalgebra::DMatrix::zeros(1, params.len()),
+                &nalgebra::DVector::zeros(1),
+                &params,
+                &Options::default(),
+            )
+            .expect("a zero Jacobian is valid input");
+            report.warnings.push(format!("identifiability analysis failed: {e}"));
+            report
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -401,7 +437,6 @@ mod tests {
     /// the truth plus Gaussian noise of their stated σ).
     #[test]
     fn reported_sigma_matches_the_monte_carlo_scatter() {
-        use crate::identify::calibration::analyse_estimate;
         use rand::{rngs::StdRng, SeedableRng};
         use rand_distr::{Distribution, StandardNormal};
         let truth = Extrinsics::table2();

@@ -5,7 +5,6 @@
 //! ([`crate::measure::PhaseModel`]): phase-equivalent gap changes from the fringes, absolute
 //! gaps from sweeps, fringe amplitudes (reflected power) from tilt scans.
 
-pub mod calibration;
 pub mod design;
 pub mod joint;
 pub mod measurements;

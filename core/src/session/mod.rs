@@ -21,8 +21,8 @@
 pub mod recording;
 
 use crate::bench::BenchPreset;
+use crate::calibration::CalibrationReport;
 use crate::files::{self, FieldError, FileError};
-use crate::identify::calibration::CalibrationReport;
 use crate::model::robot::RobotDescription;
 use crate::plan::Plan;
 use crate::trace::{Trace, TraceError, TraceKind};

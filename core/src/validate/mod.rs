@@ -535,10 +535,9 @@ mod tests {
     /// was planned with, which expects it to stand still. Planned with the lamella's tilt off
     /// by 0.0025° (44 µrad), the 100 µm circle's real gap rises and falls by about 8 nm: less
     /// than a fringe moves the intensity, and no fringe extremum is crossed. The tracked gap
-    /// along it against the truth (the bench's own extrinsics at the recorded joints): before,
-    /// a 0.5 µW bump at its end was taken for a fringe maximum and the default phase walk
-    /// shared the rest with the envelope, and the hidden-pivot diagnosis's circle came out
-    /// 39.5 nm where its gap changed by 8 nm; now within 1.5 nm at 12 points along it.
+    /// along it against the truth (the bench's own extrinsics at the recorded joints) stays
+    /// within 1.5 nm at 12 points along it: a small bump at its end must not be taken for a
+    /// fringe maximum, nor the phase walk shared with the envelope.
     #[test]
     fn a_validation_circle_tracks_its_small_gap_change() {
         let preset = BenchPreset::resolve("table2-ideal").unwrap();

@@ -3,10 +3,11 @@
 //!
 //! The identification itself (starts, passes, the choice of branch) is
 //! [`crate::identify::multistart`]; this module adds the verdict on the fit as a whole
-//! ([`crate::identify::verdict`]), the Table II-style rows and the validation.
+//! ([`crate::identify::verdict`]), the Table II-style rows and the validation. It sits above
+//! identify and validate so that neither depends on the other; the CLI and the GUI call it.
 
 use crate::bench::{run_plan, Bench, RunControl};
-use crate::identify::joint::JointEstimate;
+use crate::identify::joint::analyse_estimate;
 use crate::identify::multistart::model_with;
 pub use crate::identify::multistart::{identify, Identification, Mode};
 use crate::identify::observability::IdentifiabilityReport;
@@ -118,7 +119,7 @@ pub struct CalibrationReport {
     /// Sentences for the user.
     pub warnings: Vec<String>,
     /// The verdict on the fit as a whole (does the model fit, is the branch unique); `None` in
-    /// reports written before it was made.
+    /// reports saved without one.
     #[serde(default)]
     pub fit: Option<FitCheck>,
     /// The sign of each translation's gap change and the sources that fix it.
@@ -182,56 +183,20 @@ pub fn measure(bench: &mut dyn Bench, plans: &[Plan]) -> Result<(Vec<Trace>, f64
     Ok((traces, duration))
 }
 
-/// The identifiability report of a joint estimate: its weighted Jacobian and residuals, the
-/// free extrinsics with their useful bounds, and the detector gains as nuisance parameters.
-pub fn analyse_estimate(est: &JointEstimate) -> IdentifiabilityReport {
-    use crate::identify::observability::{analyse, Options, ParamInfo};
-    let all = ParamInfo::extrinsics();
-    let params: Vec<ParamInfo> = est
-        .column_parameter
-        .iter()
-        .zip(&est.column_names)
-        .map(|(p, name)| match p {
-            Some(i) => all[*i].clone(),
-            None => ParamInfo::new(name.clone(), "(gain)", 1.0),
-        })
-        .collect();
-    let rows = est.weighted_jacobian.nrows();
-    let mut r = nalgebra::DVector::zeros(rows);
-    for (k, v) in est.normalised_residuals.iter().enumerate().take(rows) {
-        r[k] = *v;
-    }
-    match analyse(&est.weighted_jacobian, &r, &params, &Options::default()) {
-        Ok(report) => report,
-        Err(e) => {
-            // Inconsistent input is a bug, but the user still gets a report that says so.
-            let mut report = analyse(
-                &nalgebra::DMatrix::zeros(1, params.len()),
-                &nalgebra::DVector::zeros(1),
-                &params,
-                &Options::default(),
-            )
-            .expect("a zero Jacobian is valid input");
-            report.warnings.push(format!("identifiability analysis failed: {e}"));
-            report
-        }
-    }
-}
-
 /// Rows of the Table II-style result from an estimate and its identifiability report.
-pub fn parameter_rows(e: &Extrinsics, report: &IdentifiabilityReport) -> Vec<ParameterRow> {
-    let values = e.to_array();
+pub fn parameter_rows(extrinsics: &Extrinsics, report: &IdentifiabilityReport) -> Vec<ParameterRow> {
+    let values = extrinsics.to_array();
     (0..N_EXTRINSICS)
         .map(|i| {
             let (name, unit) = PARAMETER_NAMES[i];
-            let u = report.parameters.iter().find(|p| p.name == name);
+            let uncertainty = report.parameters.iter().find(|p| p.name == name);
             ParameterRow {
                 name: name.to_string(),
                 value: values[i],
                 unit: unit.to_string(),
-                sigma: u.and_then(|u| u.sigma),
-                determined: u.is_some_and(|u| u.determined),
-                reason: match u {
+                sigma: uncertainty.and_then(|u| u.sigma),
+                determined: uncertainty.is_some_and(|u| u.determined),
+                reason: match uncertainty {
                     Some(u) => u.reason.clone(),
                     None => Some("held fixed (masked)".into()),
                 },
@@ -357,9 +322,9 @@ fn forecast_validation(
 /// traces, and the branches that tie with it.
 pub fn fit_check(id: &Identification, report: &IdentifiabilityReport) -> FitCheck {
     let est = &id.estimate;
-    let r = &id.raw_normalised_residuals();
-    let rms_sigma = (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
-    let threshold_sigma = rms_threshold(r.len(), est.weighted_jacobian.ncols());
+    let normalised = &id.raw_normalised_residuals();
+    let rms_sigma = (normalised.iter().map(|v| v * v).sum::<f64>() / normalised.len().max(1) as f64).sqrt();
+    let threshold_sigma = rms_threshold(normalised.len(), est.weighted_jacobian.ncols());
     let labels: Vec<String> = id.observations.iter().map(|o| o.label.clone()).collect();
     let sigma: Vec<Option<f64>> = PARAMETER_NAMES
         .iter()
@@ -382,7 +347,7 @@ pub fn fit_check(id: &Identification, report: &IdentifiabilityReport) -> FitChec
             format!(
                 "the model does not fit these data: residual {rms_sigma:.2}σ rms, above the {threshold_sigma:.2}σ that \
                  noise allows for {} observations; no parameter is determined (worst traces listed)",
-                r.len()
+                normalised.len()
             ),
         )
     } else if !ambiguous_parameters.is_empty() {
@@ -401,7 +366,7 @@ pub fn fit_check(id: &Identification, report: &IdentifiabilityReport) -> FitChec
         verdict,
         rms_sigma,
         threshold_sigma,
-        worst_traces: worst_traces(&labels, r, WORST_TRACES),
+        worst_traces: worst_traces(&labels, normalised, WORST_TRACES),
         branches: id.branches.clone(),
         tied_branches: id.tied.clone(),
         ambiguous_parameters,

@@ -7,25 +7,15 @@
 //! validation motions before and after calibration (figures and curves); the diagnosis if one
 //! was run; the notes and the list of traces.
 
-use crate::identify::calibration::{CalibrationReport, ValidationRow};
+use crate::calibration::{CalibrationReport, ValidationRow};
 use crate::session::{Session, FORMAT_VERSION};
 use std::fmt::Write as _;
+use svg::{svg_plot, Series};
 
-/// Escape text for HTML (also inside attributes).
-pub fn escape(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
-}
+mod escape;
+mod svg;
+
+pub use escape::escape;
 
 const STYLE: &str = "body{font-family:'DejaVu Sans',Arial,sans-serif;max-width:60em;margin:1.5em auto;padding:0 1em;color:#222;line-height:1.4}\
 h1{font-size:1.6em;margin-bottom:0.2em}h2{font-size:1.2em;border-bottom:1px solid #ccc;margin-top:1.6em}\
@@ -90,8 +80,8 @@ fn summary(h: &mut String, c: &CalibrationReport) {
         "<h2>Summary</h2>\n<p>Identifier: <b>{}</b> mode. {} observations from {:.1} min of measurement. Solver: {}. \
          Residual RMS {:.2} σ (1 = at the noise floor of the measurements).</p>",
         match c.mode {
-            crate::identify::calibration::Mode::Paper => "paper (steps A, B, C)",
-            crate::identify::calibration::Mode::Joint => "joint estimate",
+            crate::calibration::Mode::Paper => "paper (steps A, B, C)",
+            crate::calibration::Mode::Joint => "joint estimate",
         },
         c.observations,
         c.measurement_duration_s / 60.0,
@@ -179,12 +169,12 @@ fn identifiability(h: &mut String, c: &CalibrationReport) {
         let _ = writeln!(
             h,
             "<li>condition number {}{}</li>",
-            sci(k),
+            scientific(k),
             if k > 100.0 { " (above 100: some combinations are poorly determined)" } else { "" }
         );
     }
     if let Some(k) = id.condition_number_determined {
-        let _ = writeln!(h, "<li>condition number of the determined parameters {}</li>", sci(k));
+        let _ = writeln!(h, "<li>condition number of the determined parameters {}</li>", scientific(k));
     }
     for (a, b, rho) in &id.strong_correlations {
         let _ = writeln!(h, "<li>strongly correlated: {} and {} (ρ = {rho:+.3})</li>", escape(a), escape(b));
@@ -198,169 +188,13 @@ fn identifiability(h: &mut String, c: &CalibrationReport) {
     }
 }
 
-fn sci(v: f64) -> String {
+/// A number in scientific notation; infinite for an exactly singular matrix.
+fn scientific(v: f64) -> String {
     if v.is_finite() {
         format!("{v:.3e}")
     } else {
         "∞ (exactly singular)".into()
     }
-}
-
-/// A "nice" tick step for a range: 1, 2 or 5 × 10ⁿ giving about `count` ticks.
-fn tick_step(range: f64, count: f64) -> f64 {
-    let raw = (range / count).max(f64::MIN_POSITIVE);
-    let mag = 10f64.powf(raw.log10().floor());
-    let r = raw / mag;
-    mag * if r < 1.5 {
-        1.0
-    } else if r < 3.5 {
-        2.0
-    } else if r < 7.5 {
-        5.0
-    } else {
-        10.0
-    }
-}
-
-fn tick_label(v: f64, step: f64) -> String {
-    let decimals = (-step.log10().floor()).clamp(0.0, 9.0) as usize;
-    format!("{v:.decimals$}")
-}
-
-/// One data series of a plot.
-struct Series<'a> {
-    name: &'a str,
-    color: &'a str,
-    points: Vec<(f64, f64)>,
-    /// Draw as markers instead of a line.
-    markers: bool,
-}
-
-/// An SVG plot with axes, ticks, labels and a legend; y range from the data (and `y_include`).
-fn svg_plot(
-    title: &str,
-    x_label: &str,
-    y_label: &str,
-    series: &[Series<'_>],
-    y_include: &[f64],
-    guides: &[f64],
-) -> String {
-    let (w, hgt) = (640.0, 300.0);
-    let (left, right, top, bottom) = (70.0, 16.0, 34.0, 46.0);
-    let all = series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-    for &(x, y) in all {
-        x0 = x0.min(x);
-        x1 = x1.max(x);
-        y0 = y0.min(y);
-        y1 = y1.max(y);
-    }
-    for &y in y_include {
-        y0 = y0.min(y);
-        y1 = y1.max(y);
-    }
-    if !x0.is_finite() {
-        (x0, x1, y0, y1) = (0.0, 1.0, -1.0, 1.0);
-    }
-    if x1 - x0 <= 0.0 {
-        x1 = x0 + 1.0;
-    }
-    if y1 - y0 <= 0.0 {
-        let pad = y0.abs().max(1.0) * 0.1;
-        (y0, y1) = (y0 - pad, y1 + pad);
-    }
-    let ystep = tick_step(y1 - y0, 5.0);
-    let (y0, y1) = ((y0 / ystep).floor() * ystep, (y1 / ystep).ceil() * ystep);
-    let xstep = tick_step(x1 - x0, 6.0);
-    let px = |x: f64| left + (x - x0) / (x1 - x0) * (w - left - right);
-    let py = |y: f64| top + (y1 - y) / (y1 - y0) * (hgt - top - bottom);
-    let mut s = String::new();
-    let _ = write!(
-        s,
-        "<svg width=\"{w}\" height=\"{hgt}\" viewBox=\"0 0 {w} {hgt}\" font-family=\"DejaVu Sans, Arial, sans-serif\" font-size=\"11\">\
-         <rect width=\"{w}\" height=\"{hgt}\" fill=\"white\"/>\
-         <text x=\"{}\" y=\"18\" font-size=\"13\" font-weight=\"bold\">{}</text>",
-        left,
-        escape(title)
-    );
-    // Grid and ticks.
-    let mut y = y0;
-    while y <= y1 + ystep * 1e-6 {
-        let v = py(y);
-        let _ = write!(
-            s,
-            "<line x1=\"{left}\" y1=\"{v:.1}\" x2=\"{:.1}\" y2=\"{v:.1}\" stroke=\"#e4e4e4\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>",
-            w - right,
-            left - 5.0,
-            v + 4.0,
-            tick_label(y, ystep)
-        );
-        y += ystep;
-    }
-    let mut x = (x0 / xstep).ceil() * xstep;
-    while x <= x1 + xstep * 1e-6 {
-        let v = px(x);
-        let _ = write!(
-            s,
-            "<line x1=\"{v:.1}\" y1=\"{top}\" x2=\"{v:.1}\" y2=\"{:.1}\" stroke=\"#f0f0f0\"/><text x=\"{v:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
-            hgt - bottom,
-            hgt - bottom + 15.0,
-            tick_label(x, xstep)
-        );
-        x += xstep;
-    }
-    for &g in guides {
-        if g >= y0 && g <= y1 {
-            let v = py(g);
-            let _ = write!(
-                s,
-                "<line x1=\"{left}\" y1=\"{v:.1}\" x2=\"{:.1}\" y2=\"{v:.1}\" stroke=\"#999\" stroke-dasharray=\"4 3\"/>",
-                w - right
-            );
-        }
-    }
-    let _ = write!(
-        s,
-        "<rect x=\"{left}\" y=\"{top}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"none\" stroke=\"#444\"/>\
-         <text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>\
-         <text transform=\"translate(14 {:.1}) rotate(-90)\" text-anchor=\"middle\">{}</text>",
-        w - left - right,
-        hgt - top - bottom,
-        (left + w - right) / 2.0,
-        hgt - 8.0,
-        escape(x_label),
-        (top + hgt - bottom) / 2.0,
-        escape(y_label)
-    );
-    for (k, sr) in series.iter().enumerate() {
-        let pts = sr.points.iter().filter(|p| p.0.is_finite() && p.1.is_finite());
-        if sr.markers {
-            for &(x, y) in pts {
-                let _ = write!(s, "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"2.2\" fill=\"{}\"/>", px(x), py(y), sr.color);
-            }
-        } else {
-            let coords: Vec<String> = pts.map(|&(x, y)| format!("{:.1},{:.1}", px(x), py(y))).collect();
-            let _ = write!(
-                s,
-                "<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\" points=\"{}\"/>",
-                sr.color,
-                coords.join(" ")
-            );
-        }
-        // Legend, top right.
-        let ly = top + 14.0 + 14.0 * k as f64;
-        let lx = w - right - 190.0;
-        let _ = write!(
-            s,
-            "<rect x=\"{lx:.1}\" y=\"{:.1}\" width=\"10\" height=\"10\" fill=\"{}\"/><text x=\"{:.1}\" y=\"{ly:.1}\">{}</text>",
-            ly - 9.0,
-            sr.color,
-            lx + 14.0,
-            escape(sr.name)
-        );
-    }
-    s.push_str("</svg>");
-    s
 }
 
 fn residual_plot(h: &mut String, c: &CalibrationReport) {

@@ -1,0 +1,116 @@
+//! What a diagnosis finds: the verdict, the named effects and the serialisable result, and why
+//! a diagnosis cannot run.
+
+use crate::diagnose::replay::ResidualGroup;
+use crate::model::extrinsics::Extrinsics;
+use serde::{Deserialize, Serialize};
+
+/// The overall finding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// Effects were named and the residual is at the noise floor with them.
+    Named,
+    /// No significant missing effect: the residual is at the noise floor.
+    None,
+    /// The residual is above the noise floor and no candidate of the library explains it.
+    Unexplained,
+}
+
+impl Verdict {
+    /// The verdict's word, as in the JSON.
+    pub fn word(self) -> &'static str {
+        match self {
+            Verdict::Named => "named",
+            Verdict::None => "none",
+            Verdict::Unexplained => "unexplained",
+        }
+    }
+}
+
+/// A named (added) effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NamedEffect {
+    /// Candidate name, e.g. "pivot offset q4 along Z_w".
+    pub name: String,
+    /// Fitted value (with the extrinsics refitted).
+    pub estimate: f64,
+    /// Unit of the estimate and σ.
+    pub unit: String,
+    /// Standard uncertainty (`None` when the data do not determine it).
+    pub sigma: Option<f64>,
+    /// F statistic when it was named.
+    pub score: f64,
+    /// ΔBIC when it was named.
+    pub delta_bic: f64,
+    /// Share of its signature the extrinsics absorb on the data it was named on.
+    pub absorbed_share: f64,
+    /// Candidates that could not be told apart from it (nearly collinear projected signatures).
+    pub ambiguous_with: Vec<String>,
+}
+
+/// The diagnosis result, serialisable (for sessions and `--json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisResult {
+    /// Named, none or unexplained.
+    pub verdict: Verdict,
+    /// The named effects with their estimates (empty unless the verdict is `named`).
+    pub effects: Vec<NamedEffect>,
+    /// RMS of the gap-change residuals with the baseline model (extrinsics refitted, no
+    /// effect) on the final analysis of the data, the one "after" is computed on (nm).
+    pub residual_rms_before_nm: f64,
+    /// RMS of the gap-change residuals with the final model (nm).
+    pub residual_rms_after_nm: f64,
+    /// RMS of all whitened residuals with the baseline model (1 = noise floor).
+    pub residual_rms_before_sigma: f64,
+    /// The same with the final model.
+    pub residual_rms_after_sigma: f64,
+    /// Whitened RMS on the held-out motions, baseline model.
+    pub held_out_rms_before_sigma: f64,
+    /// Whitened RMS on the held-out motions, final model.
+    pub held_out_rms_after_sigma: f64,
+    /// Effects added that did not bring the residual to the noise floor (verdict unexplained).
+    pub partial: Vec<NamedEffect>,
+    /// Candidates the extrinsics absorb on every available motion: equivalent to an extrinsic change.
+    pub equivalent_to_extrinsics: Vec<String>,
+    /// Candidates the recorded data cannot tell from an extrinsic change (or cannot see at
+    /// their typical size) but the designed motions would (when no bench ran them).
+    pub need_motions: Vec<String>,
+    /// Candidates whose signature at their typical size, after projecting out what the
+    /// extrinsics explain, stays below the detection score ([`DETECTABLE_SCORE`]) on the fitted
+    /// data and every motion run, and that no designed motion would show either: not ruled
+    /// out, only invisible at that size here (a larger one would be seen). On table2-ideal a
+    /// 0.6 mrad tilt of the q4 goniometer's axis toward its link x changes no gap change of the
+    /// session or the pool by more than 0.3σ in all (`effect_visibility` example). Not the
+    /// candidates a named effect cannot be told from: those are in its `ambiguous_with`.
+    #[serde(default)]
+    pub not_detectable: Vec<String>,
+    /// Candidates that no observation can see at any size, never named: those no observation
+    /// or pool motion depends on (dropped at the baseline), and, on observations from traces,
+    /// the fringe nonlinearity, which the fringe analysis removes (it fits the fringe's
+    /// harmonics).
+    #[serde(default)]
+    pub not_seen: Vec<String>,
+    /// Discriminating motions designed (and run, when a bench was given).
+    pub discriminating_motions: Vec<String>,
+    /// Whether the discriminating motions were run.
+    pub discriminating_motions_ran: bool,
+    /// Where the final residual lives, worst groups first (unexplained structure).
+    pub residual_where: Vec<ResidualGroup>,
+    /// Extrinsics of the final model.
+    pub extrinsics: Extrinsics,
+}
+
+/// Why a diagnosis cannot run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DiagnoseError {
+    /// Too few observations.
+    #[error("{0} usable observations: the diagnosis needs at least 20")]
+    TooFewObservations(usize),
+    /// The model cannot be evaluated.
+    #[error("model: {0}")]
+    Model(String),
+    /// The discriminating motions could not be run.
+    #[error("{0}")]
+    Bench(String),
+}

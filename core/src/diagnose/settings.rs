@@ -1,0 +1,42 @@
+//! The diagnosis' thresholds and extraction settings, shared by the workflow and the motions.
+
+use crate::identify::measurements::ExtractOptions;
+
+/// The residual counts as at the noise floor up to this multiple of it (whitened rms).
+pub const NOISE_FLOOR_FACTOR: f64 = 1.5;
+/// Expected score at typical size below which a candidate needs discriminating motions.
+pub const DETECTABLE_SCORE: f64 = 25.0;
+/// Absorbed share from which a candidate counts as equivalent to an extrinsic change.
+pub const EQUIVALENT_SHARE: f64 = 0.999;
+/// How the diagnosis turns traces into observations: σ floors at SPEC section 9's noise (dL
+/// 2 nm, absolute gaps 20 nm), what a bench reaches beyond the fringe analysis' own σ (stage
+/// noise, sweep-model limits); the identifier's floors are tighter.
+pub const EXTRACT_OPTIONS: ExtractOptions = ExtractOptions {
+    points_per_motion: 4,
+    sigma_floor_nm: 2.0,
+    rotation_sigma_floor_nm: 2.5,
+    gap_sigma_floor_um: 0.02,
+    amplitudes_from_rotations: true,
+    amplitude_neighbours: true,
+    gap_across_pauses: true,
+    shaped: false,
+    max_amplitudes_per_trace: None,
+};
+/// How the diagnosis analyses the traces again once an effect is named ([`EXTRACT_OPTIONS`],
+/// tracked with the model's fringe shape). The first extraction estimates the fringe's shape
+/// from the data, because the calibrated model's tilt can be a degree off and the shaped
+/// tracker then goes wrong (see `measure::analyse_with`); by the re-analysis the extrinsics are
+/// refitted and the named effects are in the model, optical ones included, so the model's shape
+/// is the better one: with the data-estimated shape a hidden q4 pivot offset drags a spurious
+/// joint scale error along with it (see docs/diagnosis.md).
+pub const REANALYSE_OPTIONS: ExtractOptions = ExtractOptions { shaped: true, ..EXTRACT_OPTIONS };
+/// Label prefix of the discriminating motions ([`motions::pool`]).
+pub const DISCRIMINATING_PREFIX: &str = "D ";
+/// At most this many discriminating motions per design: room for a reversal of each prismatic
+/// stage (out and back) beside the q6 rotations that show a pivot offset best.
+pub const MAX_MOTIONS: usize = 14;
+/// At most this many effects are added.
+pub const MAX_EFFECTS: usize = 4;
+/// An effect added earlier is removed again when, refitted with those added after it, its
+/// estimate is within this many σ of neutral: a later one explains what it took up.
+pub const REMOVE_BELOW_SIGMA: f64 = 3.0;

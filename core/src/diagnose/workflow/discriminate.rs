@@ -1,0 +1,237 @@
+//! The discriminating motions: each pool motion's contribution to telling candidates apart,
+//! the greedy choice, and running them.
+
+use super::{Diagnosis, Stage};
+use crate::diagnose::fit;
+use crate::diagnose::motions::{self, DesignedMotion, MotionRunner};
+use crate::diagnose::projection::Projector;
+use crate::diagnose::result::DiagnoseError;
+use crate::diagnose::scoring;
+use crate::diagnose::settings::{DETECTABLE_SCORE, EQUIVALENT_SHARE, MAX_MOTIONS};
+use crate::diagnose::step::Step;
+use crate::identify::Observation;
+use crate::measure::PhaseModel;
+use nalgebra::{DMatrix, DVector};
+
+/// The pool, each motion's contribution per target, and each target's absorbed share.
+type PoolContributions = (Vec<DesignedMotion>, Vec<Vec<f64>>, Vec<f64>);
+
+impl Diagnosis {
+    /// For each target (a candidate, and the candidates it must be told apart from), its
+    /// projected signature's contribution per pool motion at typical size, the extrinsics (and
+    /// the other candidates of the target) fitted on the data and the whole pool; and each
+    /// target's absorbed share on data and pool.
+    fn pool_contributions(&self, targets: &[(usize, Vec<usize>)]) -> Result<PoolContributions, DiagnoseError> {
+        let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("design before the baseline".into()))?;
+        let obs = self.fit_set();
+        let t_end = self.observations.iter().map(|o| o.time_s[1]).fold(0.0, f64::max);
+        let pool = motions::pool();
+        let templates = motions::templates(&pool, t_end + 10.0);
+        let all: Vec<Observation> = obs.iter().chain(&templates).cloned().collect();
+        let j = fit::jacobian_of(&self.predictor, &f.state, &all).map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
+            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let base_proj = Projector::new(&j);
+        let mut per_motion = vec![vec![0.0; targets.len()]; pool.len()];
+        let mut absorbed = Vec::new();
+        for (t, (c, others)) in targets.iter().enumerate() {
+            let s = &signatures[*c];
+            let sp = if others.is_empty() {
+                base_proj.orthogonal(s)
+            } else {
+                let mut cols: Vec<DVector<f64>> = j.column_iter().map(|c| c.into_owned()).collect();
+                cols.extend(others.iter().map(|&o| signatures[o].clone()));
+                Projector::new(&DMatrix::from_columns(&cols)).orthogonal(s)
+            };
+            absorbed.push(if s.norm_squared() > 0.0 { 1.0 - sp.norm_squared() / s.norm_squared() } else { 1.0 });
+            let typical = self.candidates[*c].typical;
+            for (k, o) in templates.iter().enumerate() {
+                let m = pool.iter().position(|p| p.label == o.label).unwrap_or(0);
+                per_motion[m][t] += sp[obs.len() + k].powi(2) * typical * typical;
+            }
+        }
+        Ok((pool, per_motion, absorbed))
+    }
+
+    /// When the observations come from tracked fringes, the pool motions whose gap turns inside
+    /// them (predicted by the current model, [`motions::gap_turns`]) add nothing to the design:
+    /// their contributions are zeroed. Returns their labels.
+    fn avoid_turns(
+        &self,
+        pool: &[DesignedMotion],
+        per_motion: &mut [Vec<f64>],
+        tracked: bool,
+    ) -> Result<Vec<String>, DiagnoseError> {
+        if !tracked {
+            return Ok(vec![]);
+        }
+        let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("design before the baseline".into()))?;
+        // Every move's points in one prediction (the model is built once).
+        let per: Vec<Vec<Observation>> = pool.iter().map(motions::turn_templates).collect();
+        let all: Vec<Observation> = per.iter().flatten().cloned().collect();
+        let dl = self
+            .predictor
+            .predict(&f.state.extrinsics, &f.state.library_effects(), &f.state.gains, &all)
+            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let mut avoided = Vec::new();
+        let mut at = 0;
+        for ((m, row), t) in pool.iter().zip(per_motion.iter_mut()).zip(&per) {
+            let (from, to) = (at, at + t.len());
+            at = to;
+            if !t.is_empty() && motions::gap_turns(&dl[from..to]) {
+                row.iter_mut().for_each(|v| *v = 0.0);
+                avoided.push(m.label.clone());
+            }
+        }
+        Ok(avoided)
+    }
+
+    /// Choose pool motions greedily: the ones adding the most detectability (capped at
+    /// [`DETECTABLE_SCORE`]) to targets that have `have` on the data.
+    fn choose(per_motion: &[Vec<f64>], have: &[f64]) -> Vec<usize> {
+        let mut have = have.to_vec();
+        let mut chosen: Vec<usize> = Vec::new();
+        loop {
+            let best = (0..per_motion.len()).filter(|m| !chosen.contains(m)).map(|m| {
+                let gain: f64 = (0..have.len())
+                    .map(|t| (have[t] + per_motion[m][t]).min(DETECTABLE_SCORE) - have[t].min(DETECTABLE_SCORE))
+                    .sum();
+                (m, gain)
+            });
+            match best.max_by(|a, b| a.1.total_cmp(&b.1)) {
+                Some((m, gain)) if gain > 1.0 && chosen.len() < MAX_MOTIONS => {
+                    for (t, h) in have.iter_mut().enumerate() {
+                        *h += per_motion[m][t];
+                    }
+                    chosen.push(m);
+                }
+                _ => return chosen,
+            }
+        }
+    }
+
+    /// Run motions on the runner, add their observations (all fitted), refit the current state, rescore.
+    fn run_motions<'r>(
+        &mut self,
+        runner: &mut (dyn MotionRunner + 'r),
+        motions: &[DesignedMotion],
+    ) -> Result<usize, DiagnoseError> {
+        let analysis = PhaseModel {
+            extrinsics: self.fit.as_ref().map_or(self.start, |f| f.state.extrinsics),
+            ..self.predictor.base().clone()
+        };
+        let new = runner.run(motions, &analysis).map_err(DiagnoseError::Bench)?;
+        let added = new.len();
+        self.predictor.extend(&new).map_err(DiagnoseError::Model)?;
+        self.held_out.extend(std::iter::repeat_n(false, new.len()));
+        self.observations.extend(new);
+        self.ran = true;
+        self.designed.extend(motions.iter().cloned());
+        let start = self.fit.as_ref().map(|f| f.state.clone()).ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
+        let f = self.refit(&start)?;
+        self.fit = Some(f);
+        self.rescore()?;
+        Ok(added)
+    }
+
+    /// Stage 3: for candidates the data cannot see at their typical size, pool motions whose
+    /// projected signature is large, run when a bench is given (otherwise proposed).
+    pub(super) fn design_discriminating_motions<'r>(
+        &mut self,
+        runner: Option<&mut (dyn MotionRunner + 'r)>,
+    ) -> Result<(), DiagnoseError> {
+        let needy: Vec<usize> = (0..self.candidates.len())
+            .filter(|&c| self.scores[c].detectability_at_typical < DETECTABLE_SCORE && !self.scores[c].significant)
+            .collect();
+        let targets: Vec<(usize, Vec<usize>)> = (0..self.candidates.len()).map(|c| (c, vec![])).collect();
+        let (pool, mut per_motion, absorbed) = self.pool_contributions(&targets)?;
+        let avoided = self.avoid_turns(&pool, &mut per_motion, runner.as_deref().is_none_or(|r| r.tracks_fringes()))?;
+        self.equivalent = (0..self.candidates.len())
+            .filter(|&c| absorbed[c] >= EQUIVALENT_SHARE)
+            .map(|c| self.candidates[c].name.clone())
+            .collect();
+        let needy_motion: Vec<Vec<f64>> = per_motion.iter().map(|m| needy.iter().map(|&c| m[c]).collect()).collect();
+        let have: Vec<f64> = needy.iter().map(|&c| self.scores[c].detectability_at_typical).collect();
+        let chosen = Self::choose(&needy_motion, &have);
+        let motions: Vec<DesignedMotion> = chosen.iter().map(|&m| pool[m].clone()).collect();
+        // Reported as needing motions: neither equivalent to an extrinsic change nor unseeable.
+        let reportable = |c: usize| {
+            !self.equivalent.contains(&self.candidates[c].name) && !self.not_seen.contains(&self.candidates[c].name)
+        };
+        let needy_names: Vec<String> =
+            needy.iter().filter(|&&c| reportable(c)).map(|&c| self.candidates[c].name.clone()).collect();
+        // Of those, the ones the chosen motions would make detectable at typical size.
+        let seen_with_motions: Vec<String> = needy
+            .iter()
+            .enumerate()
+            .filter(|&(t, &c)| {
+                reportable(c) && have[t] + chosen.iter().map(|&m| needy_motion[m][t]).sum::<f64>() >= DETECTABLE_SCORE
+            })
+            .map(|(_, &c)| self.candidates[c].name.clone())
+            .collect();
+        let labels: Vec<String> = motions.iter().map(|m| m.label.clone()).collect();
+        let mut added = 0;
+        let mut ran_on = None;
+        match (runner, motions.is_empty()) {
+            (Some(r), false) => {
+                added = self.run_motions(r, &motions)?;
+                ran_on = Some(r.name());
+            }
+            (None, false) => {
+                self.need_motions = seen_with_motions;
+                self.designed = motions.clone();
+            }
+            _ => {}
+        }
+        self.steps.push(Step::Designed {
+            needy: needy_names,
+            motions: labels,
+            ran_on,
+            added_observations: added,
+            rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
+            avoided,
+        });
+        self.stage = Stage::Name;
+        Ok(())
+    }
+
+    /// When the best candidate cannot be told apart from others, motions that separate them
+    /// (each pair's projected signature large), run once per candidate. True when motions ran.
+    pub(super) fn separate<'r>(
+        &mut self,
+        best: usize,
+        ambiguous: &[usize],
+        runner: &mut (dyn MotionRunner + 'r),
+    ) -> Result<bool, DiagnoseError> {
+        let name = self.candidates[best].name.clone();
+        if ambiguous.is_empty() || self.separated.contains(&name) {
+            return Ok(false);
+        }
+        self.separated.push(name.clone());
+        let targets: Vec<(usize, Vec<usize>)> =
+            ambiguous.iter().flat_map(|&o| [(best, vec![o]), (o, vec![best])]).collect();
+        let (pool, mut per_motion, _) = self.pool_contributions(&targets)?;
+        let tracked = runner.tracks_fringes();
+        let avoided = self.avoid_turns(&pool, &mut per_motion, tracked)?;
+        let have = vec![0.0; targets.len()];
+        let motions: Vec<DesignedMotion> = Self::choose(&per_motion, &have)
+            .into_iter()
+            .map(|m| pool[m].clone())
+            .filter(|m| !self.designed.contains(m))
+            .collect();
+        if motions.is_empty() {
+            return Ok(false);
+        }
+        let labels = motions.iter().map(|m| m.label.clone()).collect();
+        let added = self.run_motions(runner, &motions)?;
+        self.steps.push(Step::Designed {
+            needy: std::iter::once(name).chain(ambiguous.iter().map(|&o| self.candidates[o].name.clone())).collect(),
+            motions: labels,
+            ran_on: Some(runner.name()),
+            added_observations: added,
+            rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
+            avoided,
+        });
+        Ok(true)
+    }
+}
