@@ -84,7 +84,7 @@ fn session_round_trip_import_and_report() {
     let sim = root.path().join("sim");
     let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/small-plan.ron");
     cli(&["simulate", "--bench", "table2-ideal", "--seed", "7", "--plan", plan, "--out", &sim.display().to_string()]);
-    let sim_traces = photorobot_core::import::read_folder(&sim, None).unwrap();
+    let sim_traces = photorobot_core::trace::import::read_folder(&sim, None).unwrap();
     assert_eq!(sim_traces.len(), 9);
 
     // 3a. `calibrate --traces`: the virtual bench's traces through the identifier, a session written.

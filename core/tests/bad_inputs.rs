@@ -5,9 +5,9 @@
 
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::files::to_ron_string;
-use photorobot_core::import::{import_file, ColumnMapping};
 use photorobot_core::plan::Plan;
 use photorobot_core::session::{BenchInfo, DiagnosisRecord, EffectFinding, Session};
+use photorobot_core::trace::import::{import_file, ColumnMapping};
 use photorobot_core::trace::{ReadOptions, Trace};
 use std::path::{Path, PathBuf};
 

@@ -10,10 +10,10 @@
 use photorobot_core::bench::{BenchPreset, VirtualBench};
 use photorobot_core::hardware::controller_bench::HardwareConfig;
 use photorobot_core::hardware::smaract::parse_reply;
-use photorobot_core::import::ColumnMapping;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::robot::RobotDescription;
 use photorobot_core::plan::Plan;
+use photorobot_core::trace::import::ColumnMapping;
 use proptest::prelude::*;
 use std::path::Path;
 
