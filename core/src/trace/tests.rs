@@ -75,10 +75,29 @@ fn crlf_blank_lines_and_comments_are_accepted_and_counted() {
     assert_eq!(ok.t_s, [0.0, 1.0]);
 }
 
+/// A data row at time `t_s` (joints 0, 1560 nm, irradiance 0.5).
+fn data_row(t_s: &str) -> String {
+    format!("{t_s},0,0,0,0,0,0,1560,0.5")
+}
+
+/// A valid trace of two rows (times 0 and 0.1), without metadata.
+fn two_rows() -> String {
+    format!("{HEADER}\n{}\n{}\n", data_row("0"), data_row("0.1"))
+}
+
+/// Each named text must be refused with a message containing every wanted piece.
+fn assert_each_text_fails_naming_file_line_and_expectation(cases: &[(&str, String, Vec<&str>)]) {
+    for (name, text, wants) in cases {
+        let err = read_str(text).expect_err(name).to_string();
+        for want in wants {
+            assert!(err.contains(want), "{name}: got `{err}`, want `{want}`");
+        }
+    }
+}
+
+/// Truncated files and headers with missing, misplaced, duplicated, empty or non-text names.
 #[test]
-fn every_bad_input_class_names_file_line_and_expectation() {
-    let row = |t: &str| format!("{t},0,0,0,0,0,0,1560,0.5");
-    let ok2 = format!("{HEADER}\n{}\n{}\n", row("0"), row("0.1"));
+fn bad_headers_name_file_line_and_expectation() {
     let cases: Vec<(&str, String, Vec<&str>)> = vec![
         (
             "empty file",
@@ -93,7 +112,7 @@ fn every_bad_input_class_names_file_line_and_expectation() {
         ),
         (
             "unknown column in place of a required one",
-            format!("# c\n{}\n{}\n", HEADER.replace("t_s", "time"), row("0")),
+            format!("# c\n{}\n{}\n", HEADER.replace("t_s", "time"), data_row("0")),
             vec![
                 "bad.csv:2: missing required column(s) `t_s`; unknown column(s) in their place: `time`",
                 "found `time,q1_um",
@@ -101,7 +120,7 @@ fn every_bad_input_class_names_file_line_and_expectation() {
         ),
         (
             "misordered columns",
-            format!("{}\n{}\n", HEADER.replace("q1_um,q2_um", "q2_um,q1_um"), row("0")),
+            format!("{}\n{}\n", HEADER.replace("q1_um,q2_um", "q2_um,q1_um"), data_row("0")),
             vec!["bad.csv:1: column `q1_um` is column 3, expected column 2", "expected the header to start with"],
         ),
         (
@@ -119,53 +138,81 @@ fn every_bad_input_class_names_file_line_and_expectation() {
             format!("{HEADER},,b\n"),
             vec!["bad.csv:1: header column 10: expected a column name, found an empty one"],
         ),
+    ];
+    assert_each_text_fails_naming_file_line_and_expectation(&cases);
+    // Raw invalid UTF-8 in a header name.
+    let mut bytes = format!("{HEADER},").into_bytes();
+    bytes.extend_from_slice(b"\xff\xfe\n");
+    let err = Trace::from_csv_reader(&bytes[..], Path::new("bad.csv")).unwrap_err().to_string();
+    assert!(err.starts_with("bad.csv:1: header column 10: expected a column name in UTF-8 text"), "{err}");
+}
+
+/// Rows with the wrong field count, fields that are not finite numbers, and time that does not increase.
+#[test]
+fn bad_rows_name_file_line_and_expectation() {
+    let valid = two_rows();
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
         (
             "too few fields",
-            format!("{ok2}0.2,0,0,0,0,0,0,1560\n"),
+            format!("{valid}0.2,0,0,0,0,0,0,1560\n"),
             vec!["bad.csv:4: expected 9 fields (one per header column), found 8 (truncated row?)"],
         ),
         (
             "too many fields",
-            format!("{ok2}{},7\n", row("0.2")),
+            format!("{valid}{},7\n", data_row("0.2")),
             vec!["bad.csv:4: expected 9 fields (one per header column), found 10"],
         ),
         (
             "non-numeric",
-            format!("{ok2}0.2,0,0,abc,0,0,0,1560,0.5\n"),
+            format!("{valid}0.2,0,0,abc,0,0,0,1560,0.5\n"),
             vec!["bad.csv:4: column `q3_um`: expected a number, found `abc`"],
         ),
         (
             "empty field",
-            format!("{ok2}0.2,0,0,0,,0,0,1560,0.5\n"),
+            format!("{valid}0.2,0,0,0,,0,0,1560,0.5\n"),
             vec!["bad.csv:4: column `q4_deg`: expected a number, found an empty field"],
         ),
         (
             "NaN",
-            format!("{ok2}0.2,0,0,0,0,NaN,0,1560,0.5\n"),
+            format!("{valid}0.2,0,0,0,0,NaN,0,1560,0.5\n"),
             vec!["bad.csv:4: column `q5_deg`: expected a finite number, found NaN"],
         ),
         (
             "infinite",
-            format!("{ok2}0.2,0,0,0,0,0,0,1560,-inf\n"),
+            format!("{valid}0.2,0,0,0,0,0,0,1560,-inf\n"),
             vec!["bad.csv:4: column `irradiance`: expected a finite number, found -inf"],
         ),
         (
             "overflow",
-            format!("{ok2}0.2,0,0,0,0,0,0,1e999,0.5\n"),
+            format!("{valid}0.2,0,0,0,0,0,0,1e999,0.5\n"),
             vec!["bad.csv:4: column `wavelength_nm`: expected a finite number, found inf"],
         ),
         (
             "time goes back",
-            format!("{ok2}{}\n", row("0.05")),
+            format!("{valid}{}\n", data_row("0.05")),
             vec![
                 "bad.csv:4: column `t_s`: time 0.05 s is not after 0.1 s on line 3 (expected strictly increasing time)",
             ],
         ),
         (
             "time repeats",
-            format!("{HEADER}\n{}\n\n{}\n", row("2"), row("2")),
+            format!("{HEADER}\n{}\n\n{}\n", data_row("2"), data_row("2")),
             vec!["bad.csv:4: column `t_s`: time 2 s is not after 2 s on line 2"],
         ),
+        (
+            "not UTF-8 field",
+            format!("{valid}0.2,0,0,0,0,0,0,1560,\u{FFFD}\n"),
+            vec!["bad.csv:4: column `irradiance`: expected a number"],
+        ),
+    ];
+    assert_each_text_fails_naming_file_line_and_expectation(&cases);
+}
+
+/// A header without rows, a bad metadata value and a future format version.
+#[test]
+fn bad_metadata_and_empty_traces_name_file_line_and_expectation() {
+    let valid = two_rows();
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
         (
             "header only",
             format!("# photorobot trace v1\n{HEADER}\n"),
@@ -173,31 +220,16 @@ fn every_bad_input_class_names_file_line_and_expectation() {
         ),
         (
             "bad kind",
-            format!("# kind: Wobble\n{ok2}"),
+            format!("# kind: Wobble\n{valid}"),
             vec!["bad.csv:1: metadata `kind`: expected Motion, WavelengthSweep or Static, found `Wobble`"],
         ),
         (
             "future version",
-            format!("# photorobot trace v2\n{ok2}"),
+            format!("# photorobot trace v2\n{valid}"),
             vec!["bad.csv:1: unsupported format `# photorobot trace v2` (expected `# photorobot trace v1`)"],
         ),
-        (
-            "not UTF-8 field",
-            format!("{ok2}0.2,0,0,0,0,0,0,1560,\u{FFFD}\n"),
-            vec!["bad.csv:4: column `irradiance`: expected a number"],
-        ),
     ];
-    for (name, text, wants) in &cases {
-        let err = read_str(text).expect_err(name).to_string();
-        for want in wants {
-            assert!(err.contains(want), "{name}: got `{err}`, want `{want}`");
-        }
-    }
-    // Raw invalid UTF-8 in a header name.
-    let mut bytes = format!("{HEADER},").into_bytes();
-    bytes.extend_from_slice(b"\xff\xfe\n");
-    let err = Trace::from_csv_reader(&bytes[..], Path::new("bad.csv")).unwrap_err().to_string();
-    assert!(err.starts_with("bad.csv:1: header column 10: expected a column name in UTF-8 text"), "{err}");
+    assert_each_text_fails_naming_file_line_and_expectation(&cases);
 }
 
 #[test]
