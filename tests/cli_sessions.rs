@@ -145,7 +145,7 @@ fn assert_reidentify_is_bit_identical(
     sim_traces: &[Trace],
     calibration: &CalibrationReport,
 ) -> Vec<Trace> {
-    let t1 = std::time::Instant::now();
+    let reidentify_started = std::time::Instant::now();
     let traces = session.load_traces(session_dir).unwrap();
     assert_eq!(traces, sim_traces);
     let preset = session.bench.description.clone().unwrap();
@@ -158,7 +158,7 @@ fn assert_reidentify_is_bit_identical(
     )
     .unwrap();
     let again = report_from_traces(traces.clone(), 0.0, "again".into(), &nominal, Mode::Paper).unwrap();
-    eprintln!("re-identify: {:.1} s", t1.elapsed().as_secs_f64());
+    eprintln!("re-identify: {:.1} s", reidentify_started.elapsed().as_secs_f64());
     assert_eq!(again.extrinsics, calibration.extrinsics);
     assert_eq!(again.parameters, calibration.parameters);
     assert_eq!(again.identifiability, calibration.identifiability);
@@ -176,23 +176,23 @@ fn assert_reidentify_is_bit_identical(
 /// rounding (ms → s and nm → µm are not exact in binary), far inside σ; labels from the file
 /// names, sweeps recognised from the data.
 fn assert_remapped_traces_identify_alike(root: &Path, traces: &[Trace], measured: &Value, session: &Session) {
-    let t3 = std::time::Instant::now();
+    let remap_started = std::time::Instant::now();
     let mapping = write_foreign(traces, &root.join("foreign"));
-    let s3 = root.join("from-foreign");
+    let foreign_session_dir = root.join("from-foreign");
     let foreign_dir = root.join("foreign/run").display().to_string();
     let mapping = mapping.display().to_string();
-    let remapped = calibrate(&["--traces", &foreign_dir, "--mapping", &mapping], &s3);
-    eprintln!("--traces --mapping: {:.1} s", t3.elapsed().as_secs_f64());
+    let remapped = calibrate(&["--traces", &foreign_dir, "--mapping", &mapping], &foreign_session_dir);
+    eprintln!("--traces --mapping: {:.1} s", remap_started.elapsed().as_secs_f64());
     for (k, p) in measured["parameters"].as_array().unwrap().iter().enumerate() {
         let (a, b) = (p["value"].as_f64().unwrap(), remapped["parameters"][k]["value"].as_f64().unwrap());
         let sigma = p["sigma"].as_f64().unwrap_or(1.0);
         assert!((a - b).abs() <= 1e-3 * sigma + 1e-9 * a.abs(), "{}: {a} vs {b} (σ {sigma})", PARAMETER_NAMES[k].0);
         assert_eq!(p["determined"], remapped["parameters"][k]["determined"]);
     }
-    let s3_session = Session::load(&s3).unwrap();
-    let labels: Vec<&str> = s3_session.traces.iter().map(|r| r.label.as_str()).collect();
+    let foreign_session = Session::load(&foreign_session_dir).unwrap();
+    let labels: Vec<&str> = foreign_session.traces.iter().map(|r| r.label.as_str()).collect();
     assert!(labels[0].starts_with("rec 000 "), "labels from file names: {labels:?}");
-    let kinds: Vec<_> = s3_session.traces.iter().map(|r| r.kind).collect();
+    let kinds: Vec<_> = foreign_session.traces.iter().map(|r| r.kind).collect();
     let original: Vec<_> = session.traces.iter().map(|r| r.kind).collect();
     assert_eq!(kinds, original, "sweeps recognised from the data");
 }
@@ -231,31 +231,32 @@ fn assert_report_is_self_contained(root: &Path, session_dir: &Path, calibration:
 #[test]
 fn session_round_trip_import_and_report() {
     let root = tempfile::tempdir().unwrap();
-    let t0 = std::time::Instant::now();
+    let started = std::time::Instant::now();
     // Traces written by the virtual bench (a short plan: the identification is the cost here).
     let (sim, sim_traces) = simulate_traces(root.path());
 
     // 3a. `calibrate --traces`: the virtual bench's traces through the identifier, a session written.
-    let s1 = root.path().join("from-traces");
+    let traces_session_dir = root.path().join("from-traces");
     let sim_dir = sim.display().to_string();
-    let measured = calibrate(&["--traces", &sim_dir], &s1);
-    eprintln!("--traces (identify + predicted validation): {:.1} s", t0.elapsed().as_secs_f64());
+    let measured = calibrate(&["--traces", &sim_dir], &traces_session_dir);
+    eprintln!("--traces (identify + predicted validation): {:.1} s", started.elapsed().as_secs_f64());
     assert_eq!(measured["validation_predicted"], true);
     assert_eq!(measured["observations"].as_u64().unwrap() as usize, measured["residuals"].as_array().unwrap().len());
 
-    assert_occupied_folders_are_refused(root.path(), &sim_dir, &s1);
+    assert_occupied_folders_are_refused(root.path(), &sim_dir, &traces_session_dir);
 
     // 1. The session file.
-    let session = Session::load(&s1).unwrap();
-    let calibration = assert_session_holds_the_calibration(&session, &s1, &measured, sim_traces.len());
+    let session = Session::load(&traces_session_dir).unwrap();
+    let calibration = assert_session_holds_the_calibration(&session, &traces_session_dir, &measured, sim_traces.len());
 
     // 6. Round trip.
-    let traces = assert_reidentify_is_bit_identical(root.path(), &session, &s1, &sim_traces, &calibration);
+    let traces =
+        assert_reidentify_is_bit_identical(root.path(), &session, &traces_session_dir, &sim_traces, &calibration);
 
     // 3b. Another acquisition system's columns and units.
     assert_remapped_traces_identify_alike(root.path(), &traces, &measured, &session);
 
     // 7. The report.
-    assert_report_is_self_contained(root.path(), &s1, &calibration);
-    eprintln!("total: {:.1} s", t0.elapsed().as_secs_f64());
+    assert_report_is_self_contained(root.path(), &traces_session_dir, &calibration);
+    eprintln!("total: {:.1} s", started.elapsed().as_secs_f64());
 }

@@ -14,7 +14,7 @@ fn no_settle() -> MotionLimits {
     MotionLimits { settle_s: 0.0, ..MotionLimits::default() }
 }
 
-fn mv(to: JointTarget, label: &str) -> Segment {
+fn move_to(to: JointTarget, label: &str) -> Segment {
     Segment::Move { to, record: true, label: label.into() }
 }
 
@@ -38,7 +38,7 @@ fn move_timing_matches_the_trapezoid_and_triangle_closed_forms() {
     // revolute long and short. v²/a = 10 µm for the piezo, 0.2° for the goniometers.
     for (j, d) in [(2, 300.0), (0, 20.0), (1, 5.0), (2, 0.4), (3, 8.0), (4, 0.5), (5, 0.05)] {
         let (v, a) = if j < 3 { (100.0, 1000.0) } else { (2.0, 20.0) };
-        let p = plan(vec![mv(JointTarget::default().with(j, d / 2.0), "m")]);
+        let p = plan(vec![move_to(JointTarget::default().with(j, d / 2.0), "m")]);
         let start = {
             let mut q = [0.0; 6];
             q[j] = -d / 2.0;
@@ -57,7 +57,7 @@ fn move_timing_matches_the_trapezoid_and_triangle_closed_forms() {
         }
     }
     // The paper's 300 µm move at the defaults: 3 s cruise + 0.1 s of ramps + 0.05 s settling.
-    let p = plan(vec![mv(JointTarget::default().with(2, 150.0), "X_w")]);
+    let p = plan(vec![move_to(JointTarget::default().with(2, 150.0), "X_w")]);
     let segs = p.expand(&robot(), [0.0, 0.0, -150.0, 0.0, 0.0, 0.0], &MotionLimits::default()).unwrap();
     assert_relative_eq!(segs[0].duration_s, 3.15, max_relative = 1e-12);
 }
@@ -68,7 +68,7 @@ fn synchronized_joints_start_and_end_together_on_a_straight_line() {
     // q1 by 300 µm (3.1 s alone) with q4 by 1° (0.6 s alone) and q2 by 20 µm.
     let from = [-150.0, -10.0, 0.0, 0.0, 0.0, 0.0];
     let to = [150.0, 10.0, 0.0, 1.0, 0.0, 0.0];
-    let segs = plan(vec![mv(JointTarget::all(to), "sync")]).expand(&robot(), from, &l).unwrap();
+    let segs = plan(vec![move_to(JointTarget::all(to), "sync")]).expand(&robot(), from, &l).unwrap();
     let s = &segs[0];
     // The path limits are min(v_j/d_j) = 100/300 and min(a_j/d_j) = 1000/300, both from q1:
     // q1 alone sets the time.
@@ -95,7 +95,7 @@ fn same_type_joints_take_the_slowest_joints_time() {
     // Three translations of 300, 100 and 3 µm: the 300 µm one sets the duration.
     let from = [0.0; 6];
     let to = [100.0, 3.0, -150.0, 0.0, 0.0, 0.0];
-    let s = &plan(vec![mv(JointTarget::all(to), "xyz")]).expand(&robot(), from, &no_settle()).unwrap()[0];
+    let s = &plan(vec![move_to(JointTarget::all(to), "xyz")]).expand(&robot(), from, &no_settle()).unwrap()[0];
     assert_relative_eq!(s.duration_s, closed_form(150.0, 100.0, 1000.0), max_relative = 1e-12);
 }
 
@@ -103,9 +103,9 @@ fn same_type_joints_take_the_slowest_joints_time() {
 fn partial_target_keeps_the_other_joints() {
     let start = [12.5, -3.0, 140.0, 1.5, -2.5, 30.0];
     let p = plan(vec![
-        mv(JointTarget { q2_um: Some(7.0), q5_deg: Some(4.0), ..Default::default() }, "partial"),
+        move_to(JointTarget { q2_um: Some(7.0), q5_deg: Some(4.0), ..Default::default() }, "partial"),
         Segment::Dwell { duration_s: 1.0, record: false, label: "wait".into() },
-        mv(JointTarget { q6_deg: Some(-30.0), ..Default::default() }, "q6 only"),
+        move_to(JointTarget { q6_deg: Some(-30.0), ..Default::default() }, "q6 only"),
     ]);
     let segs = p.expand(&robot(), start, &MotionLimits::default()).unwrap();
     assert_eq!(segs[0].to_display, [12.5, 7.0, 140.0, 1.5, 4.0, 30.0]);
@@ -122,12 +122,12 @@ fn partial_target_keeps_the_other_joints() {
 #[test]
 fn position_is_continuous_within_and_across_segments() {
     let p = plan(vec![
-        mv(JointTarget::all([-150.0, 0.0, -150.0, 0.0, 0.0, 0.0]), "a"),
+        move_to(JointTarget::all([-150.0, 0.0, -150.0, 0.0, 0.0, 0.0]), "a"),
         Segment::Sweep { from_nm: 1550.0, to_nm: 1570.0, rate_nm_per_s: 10.0, label: "s".into() },
-        mv(JointTarget::default().with(2, 150.0), "b"),
-        mv(JointTarget::default().with(1, 0.3), "tiny"),
-        mv(JointTarget::default().with(1, 0.3), "zero-length"),
-        mv(JointTarget { q4_deg: Some(-4.0), q5_deg: Some(3.0), ..Default::default() }, "rot"),
+        move_to(JointTarget::default().with(2, 150.0), "b"),
+        move_to(JointTarget::default().with(1, 0.3), "tiny"),
+        move_to(JointTarget::default().with(1, 0.3), "zero-length"),
+        move_to(JointTarget { q4_deg: Some(-4.0), q5_deg: Some(3.0), ..Default::default() }, "rot"),
         Segment::Dwell { duration_s: 0.5, record: true, label: "d".into() },
     ]);
     let limits = MotionLimits::default();
@@ -166,8 +166,8 @@ fn position_is_continuous_within_and_across_segments() {
 
 #[test]
 fn limit_violations_name_the_segment_label_and_joint_before_anything_runs() {
-    let ok = mv(JointTarget::default().with(2, 150.0), "fine");
-    let p = plan(vec![ok.clone(), ok.clone(), mv(JointTarget::default().with(2, 200.0), "too far")]);
+    let ok = move_to(JointTarget::default().with(2, 150.0), "fine");
+    let p = plan(vec![ok.clone(), ok.clone(), move_to(JointTarget::default().with(2, 200.0), "too far")]);
     let err = p.expand(&robot(), [0.0; 6], &MotionLimits::default()).unwrap_err();
     match &err {
         PlanError::OutOfLimits { segment, label, violation } => {
@@ -183,7 +183,7 @@ fn limit_violations_name_the_segment_label_and_joint_before_anything_runs() {
     assert_eq!(err.field_path().as_deref(), Some("segments[2].to.q3_um"));
     // A revolute joint, below its lower limit, reached through a partial target from a start
     // that is itself fine.
-    let p = plan(vec![mv(JointTarget { q5_deg: Some(-12.0), ..Default::default() }, "")]);
+    let p = plan(vec![move_to(JointTarget { q5_deg: Some(-12.0), ..Default::default() }, "")]);
     let err = p.expand(&robot(), [0.0, 0.0, 0.0, 9.0, 0.0, 0.0], &MotionLimits::default()).unwrap_err();
     assert_eq!(
             err.to_string(),
@@ -223,7 +223,7 @@ fn bad_numbers_and_limits_are_refused_with_the_segment() {
                 "segments[0].duration_s: expected a finite number, found inf",
             ),
             (
-                mv(JointTarget { q4_deg: Some(f64::NAN), ..Default::default() }, "nan"),
+                move_to(JointTarget { q4_deg: Some(f64::NAN), ..Default::default() }, "nan"),
                 "segments[0].to.q4_deg: (segment \"nan\") expected a finite number, found NaN",
             ),
         ];
@@ -231,7 +231,7 @@ fn bad_numbers_and_limits_are_refused_with_the_segment() {
         let err = plan(vec![seg]).expand(&r, [0.0; 6], &l).unwrap_err();
         assert_eq!(err.to_string(), want);
     }
-    let ok = plan(vec![mv(JointTarget::default(), "")]);
+    let ok = plan(vec![move_to(JointTarget::default(), "")]);
     let bad_limits = MotionLimits { revolute_accel_deg_per_s2: 0.0, ..l };
     assert_eq!(
         ok.expand(&r, [0.0; 6], &bad_limits).unwrap_err().to_string(),
@@ -444,7 +444,7 @@ proptest! {
         let from: [f64; 6] = std::array::from_fn(|j| from[j] * scale[j]);
         let target: [Option<f64>; 6] = std::array::from_fn(|j| mask[j].then_some(to[j] * scale[j]));
         let l = no_settle();
-        let segs = plan(vec![mv(JointTarget::from_values(target), "r")]).expand(&robot(), from, &l).unwrap();
+        let segs = plan(vec![move_to(JointTarget::from_values(target), "r")]).expand(&robot(), from, &l).unwrap();
         let s = &segs[0];
         let end = JointTarget::from_values(target).resolve(from);
         prop_assert_eq!(s.position_at(s.duration_s), end);
