@@ -107,7 +107,7 @@ pub struct TraceRef {
     pub complete: bool,
 }
 
-/// A trace reference without `complete` predates partial traces: it is a complete one.
+/// A trace reference that does not say `complete` is a complete trace.
 fn complete_by_default() -> bool {
     true
 }
