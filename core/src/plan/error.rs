@@ -77,7 +77,7 @@ pub enum PlanError {
     EmptyPlan,
     /// A motion limit is not usable.
     BadMotionLimits {
-        /// Field of [`MotionLimits`].
+        /// Field of [`MotionLimits`](super::MotionLimits).
         field: &'static str,
         /// The value.
         value: f64,

@@ -41,7 +41,7 @@ fn check_required(names: &[String], file: &Path, line: usize) -> Result<(), Trac
 }
 
 impl Trace {
-    /// Read and validate a trace file (at most [`DEFAULT_MAX_ROWS`] rows).
+    /// Read and validate a trace file (at most [`DEFAULT_MAX_ROWS`](super::DEFAULT_MAX_ROWS) rows).
     pub fn read_csv(path: &Path) -> Result<Self, TraceError> {
         Self::read_csv_with(path, &ReadOptions::default())
     }

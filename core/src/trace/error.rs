@@ -148,7 +148,7 @@ pub enum TraceError {
         /// The file.
         file: PathBuf,
     },
-    /// More data rows than [`ReadOptions::max_rows`].
+    /// More data rows than [`ReadOptions::max_rows`](super::ReadOptions::max_rows).
     #[error("{file}:{line}: more than {max_rows} data rows; refusing to read further (expected at most {max_rows} rows, see ReadOptions::max_rows)", file = .file.display())]
     TooLarge {
         /// The file.
@@ -235,7 +235,7 @@ pub enum TraceError {
     /// In memory: an extra column's name cannot be written.
     #[error("trace extra column {index} (`{name}`): {problem}")]
     BadColumnName {
-        /// 0-based index in [`Trace::extra`].
+        /// 0-based index in [`Trace::extra`](super::Trace::extra).
         index: usize,
         /// The name.
         name: String,
