@@ -5,14 +5,15 @@
 //! HTML file. A short plan keeps the three identifications cheap.
 
 use photorobot_app::cli::{run, Outcome};
-use photorobot_core::calibration::{report_from_traces, Mode};
+use photorobot_core::calibration::{report_from_traces, CalibrationReport, Mode};
 use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use photorobot_core::session::Session;
 use photorobot_core::trace::Trace;
 use serde_json::Value;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
+/// Run the CLI with `args`; it must finish. Returns what it printed.
 fn cli(args: &[&str]) -> String {
     let mut out = Vec::new();
     let argv: Vec<String> = std::iter::once("photorobot").chain(args.iter().copied()).map(String::from).collect();
@@ -21,6 +22,8 @@ fn cli(args: &[&str]) -> String {
     String::from_utf8(out).unwrap()
 }
 
+/// `photorobot calibrate` in paper mode on `table2-ideal` into `out`, with `extra` arguments;
+/// returns its JSON output.
 fn calibrate(extra: &[&str], out: &Path) -> Value {
     let out = out.display().to_string();
     let mut args =
@@ -29,19 +32,20 @@ fn calibrate(extra: &[&str], out: &Path) -> Value {
     serde_json::from_str(&cli(&args)).unwrap()
 }
 
+/// The parameter values of a calibration's JSON output.
 fn values(doc: &Value) -> Vec<f64> {
     doc["parameters"].as_array().unwrap().iter().map(|p| p["value"].as_f64().unwrap()).collect()
 }
 
 /// Write the traces as another acquisition system would: other names, order and units, no
 /// metadata (labels only in the file names), and a mapping back.
-fn write_foreign(traces: &[Trace], dir: &Path) -> std::path::PathBuf {
+fn write_foreign(traces: &[Trace], dir: &Path) -> PathBuf {
     std::fs::create_dir_all(dir.join("run")).unwrap();
     for (i, t) in traces.iter().enumerate() {
-        let mut s = String::from("pd_mW,time_ms,Z_nm,Y_nm,X_nm,a_mrad,b_mrad,c_deg,lambda_um,temp_C\n");
+        let mut csv = String::from("pd_mW,time_ms,Z_nm,Y_nm,X_nm,a_mrad,b_mrad,c_deg,lambda_um,temp_C\n");
         for k in 0..t.len() {
             let q = t.joints_display(k);
-            s.push_str(&format!(
+            csv.push_str(&format!(
                 "{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},21.5\n",
                 t.irradiance[k],
                 t.t_s[k] * 1e3,
@@ -55,7 +59,7 @@ fn write_foreign(traces: &[Trace], dir: &Path) -> std::path::PathBuf {
             ));
         }
         let name = format!("rec {i:03} {}.csv", t.meta.label.replace(['/', ':', '>', '\\'], "_"));
-        std::fs::write(dir.join("run").join(name), s).unwrap();
+        std::fs::write(dir.join("run").join(name), csv).unwrap();
     }
     let mapping = r#"ColumnMapping(
         format_version: 1,
@@ -76,36 +80,28 @@ fn write_foreign(traces: &[Trace], dir: &Path) -> std::path::PathBuf {
     path
 }
 
-#[test]
-fn session_round_trip_import_and_report() {
-    let root = tempfile::tempdir().unwrap();
-    let t0 = std::time::Instant::now();
-    // Traces written by the virtual bench (a short plan: the identification is the cost here).
-    let sim = root.path().join("sim");
+/// The virtual bench's traces of the small plan, written to `root/sim` by `photorobot simulate`.
+fn simulate_traces(root: &Path) -> (PathBuf, Vec<Trace>) {
+    let sim = root.join("sim");
     let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/small-plan.ron");
     cli(&["simulate", "--bench", "table2-ideal", "--seed", "7", "--plan", plan, "--out", &sim.display().to_string()]);
-    let sim_traces = photorobot_core::import::read_folder(&sim, None).unwrap();
+    let sim_traces = photorobot_core::trace::import::read_folder(&sim, None).unwrap();
     assert_eq!(sim_traces.len(), 9);
+    (sim, sim_traces)
+}
 
-    // 3a. `calibrate --traces`: the virtual bench's traces through the identifier, a session written.
-    let s1 = root.path().join("from-traces");
-    let sim_dir = sim.display().to_string();
-    let measured = calibrate(&["--traces", &sim_dir], &s1);
-    eprintln!("--traces (identify + predicted validation): {:.1} s", t0.elapsed().as_secs_f64());
-    assert_eq!(measured["validation_predicted"], true);
-    assert_eq!(measured["observations"].as_u64().unwrap() as usize, measured["residuals"].as_array().unwrap().len());
-
-    // A folder holding a session is never overwritten.
+/// A folder holding a session is never overwritten; a folder holding an unfinished
+/// measurement is offered for --resume, not overwritten.
+fn assert_occupied_folders_are_refused(root: &Path, sim_dir: &str, session_dir: &Path) {
     let mut sink = Vec::new();
-    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", &sim_dir, "--out"];
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", sim_dir, "--out"];
     let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
-    argv.push(s1.display().to_string());
+    argv.push(session_dir.display().to_string());
     let err = run(argv, &mut sink).unwrap_err().to_string();
     assert!(err.contains("already holds a session (session.ron); choose another folder"), "{err}");
 
-    // A folder holding an unfinished measurement is offered for --resume, not overwritten.
-    let unfinished = root.path().join("unfinished");
-    let mut partial = Session::load(&s1).unwrap();
+    let unfinished = root.join("unfinished");
+    let mut partial = Session::load(session_dir).unwrap();
     partial.calibration = None;
     partial.autosave(&unfinished).unwrap();
     let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--mode", "paper", "--out"];
@@ -116,24 +112,41 @@ fn session_round_trip_import_and_report() {
         err.contains("holds an unfinished measurement (session.autosave.ron); add --resume to continue it"),
         "{err}"
     );
+}
 
-    // 1. The session file: bench, robot, every trace referenced and identical, the calibration.
-    let session = Session::load(&s1).unwrap();
+/// The session file: bench, robot, every trace referenced, the calibration as printed.
+/// Returns the calibration.
+fn assert_session_holds_the_calibration(
+    session: &Session,
+    session_dir: &Path,
+    measured: &Value,
+    trace_count: usize,
+) -> CalibrationReport {
     assert_eq!(session.format_version, 1);
     assert_eq!(session.bench.preset.as_deref(), Some("table2-ideal"));
-    assert_eq!(session.traces.len(), sim_traces.len());
+    assert_eq!(session.traces.len(), trace_count);
     assert!(session.traces.iter().all(|r| r.step.is_none() && r.complete));
     let calibration = session.calibration.clone().expect("a calibration in the session");
     // As printed (serde_json reads floats to within an ulp or two, not bit for bit).
-    assert_eq!(values(&measured).len(), calibration.parameters.len());
-    for (p, printed) in calibration.parameters.iter().zip(values(&measured)) {
+    assert_eq!(values(measured).len(), calibration.parameters.len());
+    for (p, printed) in calibration.parameters.iter().zip(values(measured)) {
         assert!((p.value - printed).abs() <= 1e-14 * p.value.abs().max(1e-12), "{}: {} vs {printed}", p.name, p.value);
     }
-    assert!(s1.join("extrinsics.ron").exists() && s1.join("report.json").exists());
+    assert!(session_dir.join("extrinsics.ron").exists() && session_dir.join("report.json").exists());
+    calibration
+}
 
-    // 6. Round trip: load, re-identify: identical results (bit for bit), the same traces.
-    let t1 = std::time::Instant::now();
-    let traces = session.load_traces(&s1).unwrap();
+/// Round trip: load the traces, re-identify: identical results (bit for bit), the same
+/// traces; saving what was loaded writes the same file. Returns the loaded traces.
+fn assert_reidentify_is_bit_identical(
+    root: &Path,
+    session: &Session,
+    session_dir: &Path,
+    sim_traces: &[Trace],
+    calibration: &CalibrationReport,
+) -> Vec<Trace> {
+    let reidentify_started = std::time::Instant::now();
+    let traces = session.load_traces(session_dir).unwrap();
     assert_eq!(traces, sim_traces);
     let preset = session.bench.description.clone().unwrap();
     let nominal = PhaseModel::new(
@@ -145,41 +158,50 @@ fn session_round_trip_import_and_report() {
     )
     .unwrap();
     let again = report_from_traces(traces.clone(), 0.0, "again".into(), &nominal, Mode::Paper).unwrap();
-    eprintln!("re-identify: {:.1} s", t1.elapsed().as_secs_f64());
+    eprintln!("re-identify: {:.1} s", reidentify_started.elapsed().as_secs_f64());
     assert_eq!(again.extrinsics, calibration.extrinsics);
     assert_eq!(again.parameters, calibration.parameters);
     assert_eq!(again.identifiability, calibration.identifiability);
     assert_eq!(again.residuals, calibration.residuals);
-    // Saving what was loaded writes the same file.
-    let copy = root.path().join("copy");
+    let copy = root.join("copy");
     session.save(&copy).unwrap();
-    assert_eq!(std::fs::read(copy.join("session.ron")).unwrap(), std::fs::read(s1.join("session.ron")).unwrap());
+    assert_eq!(
+        std::fs::read(copy.join("session.ron")).unwrap(),
+        std::fs::read(session_dir.join("session.ron")).unwrap()
+    );
+    traces
+}
 
-    // 3b. Re-mapped and renamed, as another acquisition system writes them: the same results to
-    // rounding (ms → s and nm → µm are not exact in binary), far inside σ.
-    let t3 = std::time::Instant::now();
-    let mapping = write_foreign(&traces, &root.path().join("foreign"));
-    let s3 = root.path().join("from-foreign");
-    let foreign_dir = root.path().join("foreign/run").display().to_string();
+/// Re-mapped and renamed, as another acquisition system writes them: the same results to
+/// rounding (ms → s and nm → µm are not exact in binary), far inside σ; labels from the file
+/// names, sweeps recognised from the data.
+fn assert_remapped_traces_identify_alike(root: &Path, traces: &[Trace], measured: &Value, session: &Session) {
+    let remap_started = std::time::Instant::now();
+    let mapping = write_foreign(traces, &root.join("foreign"));
+    let foreign_session_dir = root.join("from-foreign");
+    let foreign_dir = root.join("foreign/run").display().to_string();
     let mapping = mapping.display().to_string();
-    let remapped = calibrate(&["--traces", &foreign_dir, "--mapping", &mapping], &s3);
-    eprintln!("--traces --mapping: {:.1} s", t3.elapsed().as_secs_f64());
+    let remapped = calibrate(&["--traces", &foreign_dir, "--mapping", &mapping], &foreign_session_dir);
+    eprintln!("--traces --mapping: {:.1} s", remap_started.elapsed().as_secs_f64());
     for (k, p) in measured["parameters"].as_array().unwrap().iter().enumerate() {
         let (a, b) = (p["value"].as_f64().unwrap(), remapped["parameters"][k]["value"].as_f64().unwrap());
         let sigma = p["sigma"].as_f64().unwrap_or(1.0);
         assert!((a - b).abs() <= 1e-3 * sigma + 1e-9 * a.abs(), "{}: {a} vs {b} (σ {sigma})", PARAMETER_NAMES[k].0);
         assert_eq!(p["determined"], remapped["parameters"][k]["determined"]);
     }
-    let s3_session = Session::load(&s3).unwrap();
-    let labels: Vec<&str> = s3_session.traces.iter().map(|r| r.label.as_str()).collect();
+    let foreign_session = Session::load(&foreign_session_dir).unwrap();
+    let labels: Vec<&str> = foreign_session.traces.iter().map(|r| r.label.as_str()).collect();
     assert!(labels[0].starts_with("rec 000 "), "labels from file names: {labels:?}");
-    let kinds: Vec<_> = s3_session.traces.iter().map(|r| r.kind).collect();
+    let kinds: Vec<_> = foreign_session.traces.iter().map(|r| r.kind).collect();
     let original: Vec<_> = session.traces.iter().map(|r| r.kind).collect();
     assert_eq!(kinds, original, "sweeps recognised from the data");
+}
 
-    // 7. The report: one self-contained HTML file.
-    let html_path = root.path().join("report.html");
-    cli(&["report", &s1.display().to_string(), "--out", &html_path.display().to_string()]);
+/// The report: one self-contained HTML file with a row per parameter, the residual and
+/// validation plots, and the notes a reader needs.
+fn assert_report_is_self_contained(root: &Path, session_dir: &Path, calibration: &CalibrationReport) {
+    let html_path = root.join("report.html");
+    cli(&["report", &session_dir.display().to_string(), "--out", &html_path.display().to_string()]);
     let html = std::fs::read_to_string(&html_path).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
     assert!(!html.contains("http://") && !html.contains("https://"), "no external reference");
@@ -204,5 +226,37 @@ fn session_round_trip_import_and_report() {
     for w in &calibration.warnings {
         assert!(html.contains(&photorobot_core::report::escape(w)), "warning shown: {w}");
     }
-    eprintln!("total: {:.1} s", t0.elapsed().as_secs_f64());
+}
+
+#[test]
+fn session_round_trip_import_and_report() {
+    let root = tempfile::tempdir().unwrap();
+    let started = std::time::Instant::now();
+    // Traces written by the virtual bench (a short plan: the identification is the cost here).
+    let (sim, sim_traces) = simulate_traces(root.path());
+
+    // 3a. `calibrate --traces`: the virtual bench's traces through the identifier, a session written.
+    let traces_session_dir = root.path().join("from-traces");
+    let sim_dir = sim.display().to_string();
+    let measured = calibrate(&["--traces", &sim_dir], &traces_session_dir);
+    eprintln!("--traces (identify + predicted validation): {:.1} s", started.elapsed().as_secs_f64());
+    assert_eq!(measured["validation_predicted"], true);
+    assert_eq!(measured["observations"].as_u64().unwrap() as usize, measured["residuals"].as_array().unwrap().len());
+
+    assert_occupied_folders_are_refused(root.path(), &sim_dir, &traces_session_dir);
+
+    // 1. The session file.
+    let session = Session::load(&traces_session_dir).unwrap();
+    let calibration = assert_session_holds_the_calibration(&session, &traces_session_dir, &measured, sim_traces.len());
+
+    // 6. Round trip.
+    let traces =
+        assert_reidentify_is_bit_identical(root.path(), &session, &traces_session_dir, &sim_traces, &calibration);
+
+    // 3b. Another acquisition system's columns and units.
+    assert_remapped_traces_identify_alike(root.path(), &traces, &measured, &session);
+
+    // 7. The report.
+    assert_report_is_self_contained(root.path(), &traces_session_dir, &calibration);
+    eprintln!("total: {:.1} s", started.elapsed().as_secs_f64());
 }

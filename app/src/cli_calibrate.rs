@@ -1,7 +1,7 @@
 //! `photorobot calibrate --bench <preset> [--seed N] [--mode paper|joint] --out <session> [--json]`: measure,
 //! identify and validate end to end; with `--traces <dir> [--mapping <file>]`, identify from traces recorded
 //! elsewhere. Owns only argument parsing and printing; the work is `photorobot_core::calibration`,
-//! `photorobot_core::session` and `photorobot_core::import`.
+//! `photorobot_core::session` and `photorobot_core::trace::import`.
 //!
 //! The session folder gets `session.ron` (the session: bench, robot, plans, trace references,
 //! the calibration), every recorded trace (`traces/NNN.csv`, each saved as soon as it is
@@ -17,10 +17,10 @@ use photorobot_core::calibration::{
 use photorobot_core::files::{save_ron, write_atomic};
 use photorobot_core::identify::signs::{SignSource, TranslationSign};
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
-use photorobot_core::import::{read_folder, ColumnMapping};
 use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::session::{find_recovery, recording::record, BenchInfo, Session, AUTOSAVE_FILE};
+use photorobot_core::trace::import::{read_folder, ColumnMapping};
 use photorobot_core::trace::Trace;
 use std::io::Write;
 use std::path::PathBuf;

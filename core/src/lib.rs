@@ -9,7 +9,6 @@ pub mod files;
 pub mod fringes;
 pub mod hardware;
 pub mod identify;
-pub mod import;
 pub mod measure;
 pub mod model;
 pub mod plan;

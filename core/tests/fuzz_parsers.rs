@@ -10,10 +10,10 @@
 use photorobot_core::bench::{BenchPreset, VirtualBench};
 use photorobot_core::hardware::controller_bench::HardwareConfig;
 use photorobot_core::hardware::smaract::parse_reply;
-use photorobot_core::import::ColumnMapping;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::robot::RobotDescription;
 use photorobot_core::plan::Plan;
+use photorobot_core::trace::import::ColumnMapping;
 use proptest::prelude::*;
 use std::path::Path;
 
@@ -80,35 +80,36 @@ fn boundary(s: &str, at: usize) -> usize {
     i
 }
 
+/// The text with every edit applied in turn, each at a char boundary.
 fn apply(text: &str, edits: &[Edit]) -> String {
-    let mut s = text.to_string();
-    for e in edits {
-        match e {
+    let mut mutated = text.to_string();
+    for edit in edits {
+        match edit {
             Edit::Delete { at, len } => {
-                let a = boundary(&s, *at);
-                let b = boundary(&s, (a + len).min(s.len()));
+                let a = boundary(&mutated, *at);
+                let b = boundary(&mutated, (a + len).min(mutated.len()));
                 if b > a {
-                    s.replace_range(a..b, "");
+                    mutated.replace_range(a..b, "");
                 }
             }
             Edit::Insert { at, text } => {
-                let a = boundary(&s, *at);
-                s.insert_str(a, text);
+                let a = boundary(&mutated, *at);
+                mutated.insert_str(a, text);
             }
             Edit::Number { nth, with } => {
-                let spans: Vec<(usize, usize)> = number_spans(&s);
+                let spans: Vec<(usize, usize)> = number_spans(&mutated);
                 if !spans.is_empty() {
                     let (a, b) = spans[nth % spans.len()];
-                    s.replace_range(a..b, with);
+                    mutated.replace_range(a..b, with);
                 }
             }
             Edit::Truncate { at } => {
-                let a = boundary(&s, *at);
-                s.truncate(a);
+                let a = boundary(&mutated, *at);
+                mutated.truncate(a);
             }
         }
     }
-    s
+    mutated
 }
 
 /// Byte spans of the decimal numbers in `s`.

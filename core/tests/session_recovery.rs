@@ -90,9 +90,9 @@ fn plans() -> Vec<Plan> {
 
 fn new_session(bench: &dyn Bench) -> Session {
     let info = BenchInfo { name: bench.name(), preset: Some("table2-ideal".into()), description: None, seed: Some(11) };
-    let mut s = Session::new(info, bench.robot().clone());
-    s.plans = plans();
-    s
+    let mut session = Session::new(info, bench.robot().clone());
+    session.plans = plans();
+    session
 }
 
 fn virtual_bench() -> VirtualBench {
@@ -156,12 +156,15 @@ fn a_crash_mid_strategy_loses_no_completed_step_and_the_run_resumes() {
         let resumed = &traces[completed.len()];
         let from = |t: &Trace| t.joints_display(0);
         let again = {
-            let mut b = virtual_bench();
-            let mut s = new_session(&b);
-            let d = tempfile::tempdir().unwrap();
+            let mut uninterrupted_bench = virtual_bench();
+            let mut uninterrupted = new_session(&uninterrupted_bench);
+            let uninterrupted_dir = tempfile::tempdir().unwrap();
             let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-            record(&mut b, &mut s, d.path(), &mut control).unwrap().outcome.unwrap();
-            s.load_traces(d.path()).unwrap()
+            record(&mut uninterrupted_bench, &mut uninterrupted, uninterrupted_dir.path(), &mut control)
+                .unwrap()
+                .outcome
+                .unwrap();
+            uninterrupted.load_traces(uninterrupted_dir.path()).unwrap()
         };
         for (k, (a, b)) in from(resumed).iter().zip(from(&again[completed.len()])).enumerate() {
             assert!((a - b).abs() < 0.05, "joint {k}: resumed step starts at {a}, uninterrupted at {b}");

@@ -109,34 +109,34 @@ fn random_pose(rng: &mut StdRng, tilt_deg: f64) -> [f64; 6] {
 /// `pool` (the design's candidate pool: [`crate::identify::design::candidate_pool`]).
 pub fn random_plan(family: Family, seed: u64, pool: &[crate::identify::design::Candidate]) -> Plan {
     let mut rng = StdRng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
-    let mut b = Builder::new();
+    let mut builder = Builder::new();
     match family {
-        Family::Pool => pool_plan(&mut b, &mut rng, pool),
-        Family::PaperOneSweep => paper_one_sweep(&mut b, &mut rng),
-        Family::OtherOffsets => other_offsets(&mut b, &mut rng),
-        Family::RotationsOnly => rotations_only(&mut b, &mut rng),
-        Family::Chained => chained(&mut b, &mut rng),
+        Family::Pool => pool_plan(&mut builder, &mut rng, pool),
+        Family::PaperOneSweep => paper_one_sweep(&mut builder, &mut rng),
+        Family::OtherOffsets => other_offsets(&mut builder, &mut rng),
+        Family::RotationsOnly => rotations_only(&mut builder, &mut rng),
+        Family::Chained => chained(&mut builder, &mut rng),
     }
-    b.plan(family, seed)
+    builder.plan(family, seed)
 }
 
-fn pool_plan(b: &mut Builder, rng: &mut StdRng, pool: &[crate::identify::design::Candidate]) {
+fn pool_plan(builder: &mut Builder, rng: &mut StdRng, pool: &[crate::identify::design::Candidate]) {
     if pool.is_empty() {
         return;
     }
-    let n = rng.random_range(10..=30);
-    for _ in 0..n {
-        let c = &pool[rng.random_range(0..pool.len())];
-        b.setup(c.start_display);
-        match &c.segment {
-            Segment::Sweep { .. } => b.sweep(rng),
-            Segment::Move { to, .. } => b.record(*to),
+    let moves = rng.random_range(10..=30);
+    for _ in 0..moves {
+        let candidate = &pool[rng.random_range(0..pool.len())];
+        builder.setup(candidate.start_display);
+        match &candidate.segment {
+            Segment::Sweep { .. } => builder.sweep(rng),
+            Segment::Move { to, .. } => builder.record(*to),
             Segment::Dwell { .. } => {}
         }
     }
 }
 
-fn paper_one_sweep(b: &mut Builder, rng: &mut StdRng) {
+fn paper_one_sweep(builder: &mut Builder, rng: &mut StdRng) {
     // Strategy 1's translations without their sweeps.
     for held in 0..3 {
         for at in [-TRAVEL_UM, 0.0, TRAVEL_UM] {
@@ -151,8 +151,8 @@ fn paper_one_sweep(b: &mut Builder, rng: &mut StdRng) {
                 let span = if axis == 1 { 10.0 } else { TRAVEL_UM };
                 let mut from = start;
                 from[axis] = -span;
-                b.setup(from);
-                b.record(JointTarget::default().with(axis, span));
+                builder.setup(from);
+                builder.record(JointTarget::default().with(axis, span));
             }
         }
     }
@@ -162,17 +162,17 @@ fn paper_one_sweep(b: &mut Builder, rng: &mut StdRng) {
             let mut from = [0.0; 6];
             from[held] = at;
             from[turned] = -4.0;
-            b.setup(from);
-            b.record(JointTarget::default().with(turned, 4.0));
+            builder.setup(from);
+            builder.record(JointTarget::default().with(turned, 4.0));
         }
     }
-    b.setup(random_pose(rng, 2.0));
-    b.sweep(rng);
+    builder.setup(random_pose(rng, 2.0));
+    builder.sweep(rng);
 }
 
-fn other_offsets(b: &mut Builder, rng: &mut StdRng) {
-    let n = rng.random_range(8..=20);
-    for _ in 0..n {
+fn other_offsets(builder: &mut Builder, rng: &mut StdRng) {
+    let moves = rng.random_range(8..=20);
+    for _ in 0..moves {
         let tilt_deg = if rng.random_bool(0.3) { 2.0 } else { 0.0 };
         let mut from = random_pose(rng, tilt_deg);
         if rng.random_bool(0.6) {
@@ -180,59 +180,59 @@ fn other_offsets(b: &mut Builder, rng: &mut StdRng) {
             let axes: Vec<usize> = if rng.random_bool(0.7) {
                 vec![rng.random_range(0..3)]
             } else {
-                let a = rng.random_range(0..3);
-                vec![a, (a + rng.random_range(1..3)) % 3]
+                let first = rng.random_range(0..3);
+                vec![first, (first + rng.random_range(1..3)) % 3]
             };
             let mut to = JointTarget::default();
-            for &a in &axes {
-                let limit = if a == 1 { 100.0 } else { TRAVEL_UM };
+            for &axis in &axes {
+                let limit = if axis == 1 { 100.0 } else { TRAVEL_UM };
                 let span = rng.random_range(0.2..=1.0) * limit;
-                from[a] = if rng.random_bool(0.5) { -span } else { span };
-                to = to.with(a, -from[a]);
+                from[axis] = if rng.random_bool(0.5) { -span } else { span };
+                to = to.with(axis, -from[axis]);
             }
-            b.setup(from);
-            b.record(to);
+            builder.setup(from);
+            builder.record(to);
         } else {
             let joint = rng.random_range(3..5);
             from[5] = 0.0;
-            let a = rng.random_range(2.0..=TILT_DEG);
-            from[joint] = if rng.random_bool(0.5) { -a } else { a };
-            b.setup(from);
-            b.record(JointTarget::default().with(joint, -from[joint]));
+            let angle_deg = rng.random_range(2.0..=TILT_DEG);
+            from[joint] = if rng.random_bool(0.5) { -angle_deg } else { angle_deg };
+            builder.setup(from);
+            builder.record(JointTarget::default().with(joint, -from[joint]));
         }
     }
     for _ in 0..rng.random_range(2..=4) {
-        b.setup(random_pose(rng, 2.0));
-        b.sweep(rng);
+        builder.setup(random_pose(rng, 2.0));
+        builder.sweep(rng);
     }
 }
 
-fn rotations_only(b: &mut Builder, rng: &mut StdRng) {
+fn rotations_only(builder: &mut Builder, rng: &mut StdRng) {
     for _ in 0..rng.random_range(1..=3) {
-        b.setup(random_pose(rng, 2.0));
-        b.sweep(rng);
+        builder.setup(random_pose(rng, 2.0));
+        builder.sweep(rng);
     }
     for _ in 0..rng.random_range(6..=16) {
         let mut from = random_pose(rng, 0.0);
         let joint = rng.random_range(3..6);
-        let a = if joint == 5 { rng.random_range(10.0..=30.0) } else { rng.random_range(2.0..=TILT_DEG) };
-        from[joint] = if rng.random_bool(0.5) { -a } else { a };
+        let angle_deg = if joint == 5 { rng.random_range(10.0..=30.0) } else { rng.random_range(2.0..=TILT_DEG) };
+        from[joint] = if rng.random_bool(0.5) { -angle_deg } else { angle_deg };
         if joint != 3 && rng.random_bool(0.5) {
             from[3] = rng.random_range(-2.0..=2.0);
         }
-        b.setup(from);
-        b.record(JointTarget::default().with(joint, -from[joint]));
+        builder.setup(from);
+        builder.record(JointTarget::default().with(joint, -from[joint]));
     }
 }
 
-fn chained(b: &mut Builder, rng: &mut StdRng) {
-    b.setup([0.0; 6]);
-    b.sweep(rng);
+fn chained(builder: &mut Builder, rng: &mut StdRng) {
+    builder.setup([0.0; 6]);
+    builder.sweep(rng);
     for k in 0..rng.random_range(12..=30) {
         let to = random_pose(rng, TILT_DEG);
-        b.record(JointTarget::all(to));
+        builder.record(JointTarget::all(to));
         if k % 6 == 5 {
-            b.sweep(rng);
+            builder.sweep(rng);
         }
     }
 }

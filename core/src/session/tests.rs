@@ -1,6 +1,8 @@
 use super::*;
-use crate::trace::TraceMeta;
+use crate::files;
+use crate::trace::{Trace, TraceMeta};
 use proptest::prelude::*;
+use std::path::Path;
 
 fn small_trace(label: &str, n: usize) -> Trace {
     let mut t = Trace::new(TraceMeta { label: label.into(), ..TraceMeta::default() });

@@ -28,8 +28,9 @@
 //! row, and the scaled values finite: errors name the file, the line and the column.
 //! Columns the mapping does not read are kept as extra columns.
 
+use super::table::{open_limited, read_table, ReadOptions, Table};
+use super::{ExtraColumn, Trace, TraceError, TraceKind, REQUIRED_COLUMNS};
 use crate::files::{self, FieldError, FileError};
-use crate::trace::{read_table, ExtraColumn, ReadOptions, Trace, TraceError, TraceKind, REQUIRED_COLUMNS};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::io::Read;
@@ -60,14 +61,15 @@ pub struct ColumnSource {
     /// Unit of the source values (see the module documentation for the units known).
     pub unit: String,
     /// Further factor (a sensor gain, a sign), applied after the unit conversion. Default 1.
-    #[serde(default = "one")]
+    #[serde(default = "unit_scale")]
     pub scale: f64,
     /// Added after scaling, in our column's unit (a stage's zero). Default 0.
     #[serde(default)]
     pub offset: f64,
 }
 
-fn one() -> f64 {
+/// A column is taken as it is unless the mapping gives a scale.
+fn unit_scale() -> f64 {
     1.0
 }
 
@@ -149,9 +151,9 @@ impl ColumnMapping {
 
     /// Parse and check mapping text; `origin` names it in errors.
     pub fn from_ron_str(text: &str, origin: &Path) -> Result<Self, FileError> {
-        let m: Self = files::parse_ron(text, origin, EXPECTED)?;
-        m.validate().map_err(|e| e.in_file(origin))?;
-        Ok(m)
+        let mapping: Self = files::parse_ron(text, origin, EXPECTED)?;
+        mapping.validate().map_err(|e| e.in_file(origin))?;
+        Ok(mapping)
     }
 
     /// Save atomically as RON.
@@ -182,28 +184,35 @@ impl ColumnMapping {
         }
         for column in REQUIRED_COLUMNS {
             let field = |f: &str| format!("columns.\"{column}\"{f}");
-            let Some(c) = self.columns.get(column) else {
+            let Some(column_source) = self.columns.get(column) else {
                 return Err(FieldError::new(
                     field(""),
                     "missing: every one of our nine columns needs a source column or a constant".to_string(),
                 ));
             };
-            let Some(factor) = unit_factor(column, &c.unit) else {
+            let Some(factor) = unit_factor(column, &column_source.unit) else {
                 return Err(FieldError::new(
                     field(".unit"),
-                    format!("unknown unit `{}` for {column} (expected one of: {})", c.unit, known_units(column)),
+                    format!(
+                        "unknown unit `{}` for {column} (expected one of: {})",
+                        column_source.unit,
+                        known_units(column)
+                    ),
                 ));
             };
-            if !(c.scale.is_finite() && c.scale != 0.0) {
+            if !(column_source.scale.is_finite() && column_source.scale != 0.0) {
                 return Err(FieldError::new(
                     field(".scale"),
-                    format!("expected a finite, non-zero factor, found {}", c.scale),
+                    format!("expected a finite, non-zero factor, found {}", column_source.scale),
                 ));
             }
-            if !c.offset.is_finite() {
-                return Err(FieldError::new(field(".offset"), format!("expected a finite number, found {}", c.offset)));
+            if !column_source.offset.is_finite() {
+                return Err(FieldError::new(
+                    field(".offset"),
+                    format!("expected a finite number, found {}", column_source.offset),
+                ));
             }
-            match &c.source {
+            match &column_source.source {
                 Source::Constant(v) if column == "t_s" => {
                     return Err(FieldError::new(
                         field(".source"),
@@ -218,10 +227,10 @@ impl ColumnMapping {
                 }
                 _ => {}
             }
-            if column == "t_s" && factor * c.scale <= 0.0 {
+            if column == "t_s" && factor * column_source.scale <= 0.0 {
                 return Err(FieldError::new(
                     field(".scale"),
-                    format!("expected a positive factor for time (time must increase), found {}", c.scale),
+                    format!("expected a positive factor for time (time must increase), found {}", column_source.scale),
                 ));
             }
         }
@@ -262,31 +271,10 @@ pub fn import_reader<R: Read>(
                 }
             }
         }
-        let time = mapping.source_column("t_s").unwrap_or("t_s");
-        Ok(names.iter().position(|n| n == time).unwrap_or(0))
+        let time_column = mapping.source_column("t_s").unwrap_or("t_s");
+        Ok(names.iter().position(|n| n == time_column).unwrap_or(0))
     })?;
-    let rows = table.columns.first().map_or(0, Vec::len);
-    let mut out: Vec<Vec<f64>> = Vec::with_capacity(REQUIRED_COLUMNS.len());
-    for target in REQUIRED_COLUMNS {
-        let c = &mapping.columns[target];
-        let factor = unit_factor(target, &c.unit).unwrap_or(1.0) * c.scale;
-        let values: Vec<f64> = match &c.source {
-            Source::Constant(v) => vec![v * factor + c.offset; rows],
-            Source::Column(name) => {
-                let k = table.names.iter().position(|n| n == name.trim()).unwrap_or(0);
-                table.columns[k].iter().map(|v| v * factor + c.offset).collect()
-            }
-        };
-        if let Some(row) = values.iter().position(|v| !v.is_finite()) {
-            return Err(TraceError::ScaledNonFinite {
-                file: origin.to_path_buf(),
-                column: target.to_string(),
-                row: row + 1,
-                value: values[row],
-            });
-        }
-        out.push(values);
-    }
+    let converted = convert_mapped_columns(&table, mapping, origin)?;
     let used: Vec<&str> = REQUIRED_COLUMNS.iter().filter_map(|t| mapping.source_column(t)).collect();
     let mut meta = table.meta;
     if meta.label.is_empty() {
@@ -300,19 +288,47 @@ pub fn import_reader<R: Read>(
         .filter(|(n, _)| !used.contains(&n.as_str()) && !REQUIRED_COLUMNS.contains(&n.as_str()))
         .map(|(n, values)| ExtraColumn { name: n.clone(), values })
         .collect();
-    let mut trace = Trace::from_columns(meta, out, extra);
+    let mut trace = Trace::from_columns(meta, converted, extra);
     trace.meta.kind = if crate::measure::is_sweep(&trace) { TraceKind::WavelengthSweep } else { TraceKind::Motion };
     // Scaling keeps time increasing only up to rounding: say so rather than pass on a bad trace.
     trace.validate().map_err(|e| TraceError::Imported { file: origin.to_path_buf(), problem: e.to_string() })?;
     Ok(trace)
 }
 
+/// Our nine columns from a table read through `mapping`: each source column (or constant)
+/// converted to our unit, scaled and offset; every converted value must be finite.
+fn convert_mapped_columns(table: &Table, mapping: &ColumnMapping, origin: &Path) -> Result<Vec<Vec<f64>>, TraceError> {
+    let rows = table.columns.first().map_or(0, Vec::len);
+    let mut converted: Vec<Vec<f64>> = Vec::with_capacity(REQUIRED_COLUMNS.len());
+    for target in REQUIRED_COLUMNS {
+        let column_source = &mapping.columns[target];
+        let factor = unit_factor(target, &column_source.unit).unwrap_or(1.0) * column_source.scale;
+        let values: Vec<f64> = match &column_source.source {
+            Source::Constant(v) => vec![v * factor + column_source.offset; rows],
+            Source::Column(name) => {
+                let source_index = table.names.iter().position(|n| n == name.trim()).unwrap_or(0);
+                table.columns[source_index].iter().map(|v| v * factor + column_source.offset).collect()
+            }
+        };
+        if let Some(row) = values.iter().position(|v| !v.is_finite()) {
+            return Err(TraceError::ScaledNonFinite {
+                file: origin.to_path_buf(),
+                column: target.to_string(),
+                row: row + 1,
+                value: values[row],
+            });
+        }
+        converted.push(values);
+    }
+    Ok(converted)
+}
+
 /// [`import_reader`] on a file, refused unread above [`ReadOptions::max_bytes`]; the label
 /// defaults to the file's stem.
 pub fn import_file(path: &Path, mapping: &ColumnMapping, options: &ReadOptions) -> Result<Trace, TraceError> {
-    let f = crate::trace::open_limited(path, options)?;
+    let file = open_limited(path, options)?;
     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    import_reader(f, path, mapping, &stem, options)
+    import_reader(file, path, mapping, &stem, options)
 }
 
 /// The `.csv` files of a folder, sorted by name (one motion or sweep per file).

@@ -1,0 +1,279 @@
+//! Reading a numeric CSV table under the trace format's rules: the `# key: value` metadata
+//! lines, the header, finite numbers, strictly increasing time and size limits. Both our own
+//! format and foreign imports read through [`read_table`].
+
+use super::{unescape_meta, TraceError, TraceKind, TraceMeta, DEFAULT_MAX_BYTES, DEFAULT_MAX_ROWS};
+use crate::files::FileError;
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+
+/// Longest metadata line accepted (bytes); longer ones are refused rather than read whole.
+const MAX_META_LINE_BYTES: u64 = 64 * 1024;
+
+/// Options for reading a trace.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// Largest number of data rows accepted; a file with more is refused. Default [`DEFAULT_MAX_ROWS`].
+    pub max_rows: usize,
+    /// Largest file accepted (bytes), checked from the file's size before reading. Default
+    /// [`DEFAULT_MAX_BYTES`].
+    pub max_bytes: u64,
+}
+
+impl Default for ReadOptions {
+    fn default() -> Self {
+        Self { max_rows: DEFAULT_MAX_ROWS, max_bytes: DEFAULT_MAX_BYTES }
+    }
+}
+
+/// Shorten a field for an error message (at most 40 characters).
+fn field_text(bytes: &[u8]) -> String {
+    let s = String::from_utf8_lossy(bytes);
+    let s = s.trim();
+    if s.chars().count() > 40 {
+        format!("{}…", s.chars().take(40).collect::<String>())
+    } else {
+        s.to_string()
+    }
+}
+
+/// Parse a numeric field: UTF-8, surrounding whitespace (including a `\r`) ignored.
+#[inline]
+fn parse_field(bytes: &[u8]) -> Option<f64> {
+    std::str::from_utf8(bytes.trim_ascii()).ok()?.parse::<f64>().ok()
+}
+
+/// Read the metadata lines (and blank lines) before the header. Returns the metadata and the
+/// number of lines consumed.
+fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usize), TraceError> {
+    let io_err = |source| TraceError::File(FileError::Io { file: file.to_path_buf(), action: "cannot read", source });
+    let mut meta = TraceMeta::default();
+    let mut lines = 0usize;
+    let mut line = Vec::new();
+    // A UTF-8 byte-order mark (spreadsheet exports) is skipped.
+    if reader.fill_buf().map_err(io_err)?.starts_with(b"\xEF\xBB\xBF") {
+        reader.consume(3);
+    }
+    loop {
+        let buf = reader.fill_buf().map_err(io_err)?;
+        match buf.first() {
+            Some(b'#') | Some(b'\n') | Some(b'\r') => {}
+            _ => break,
+        }
+        line.clear();
+        reader.by_ref().take(MAX_META_LINE_BYTES).read_until(b'\n', &mut line).map_err(io_err)?;
+        lines += 1;
+        if line.len() as u64 >= MAX_META_LINE_BYTES && line.last() != Some(&b'\n') {
+            return Err(TraceError::BadMeta {
+                file: file.to_path_buf(),
+                line: lines,
+                key: "(comment line)".into(),
+                expected: format!("a line shorter than {MAX_META_LINE_BYTES} bytes"),
+                found: field_text(&line),
+            });
+        }
+        let text = String::from_utf8_lossy(&line);
+        let text = text.trim_end_matches(['\n', '\r']);
+        let Some(body) = text.strip_prefix('#') else {
+            continue; // a blank line
+        };
+        let trimmed = body.trim();
+        if let Some(version) = trimmed.strip_prefix("photorobot trace v") {
+            if version.trim() != "1" {
+                return Err(TraceError::UnsupportedFormat {
+                    file: file.to_path_buf(),
+                    line: lines,
+                    found: text.to_string(),
+                });
+            }
+            continue;
+        }
+        let Some((key, value)) = body.split_once(':') else {
+            continue; // a free comment
+        };
+        let value = unescape_meta(value.strip_prefix(' ').unwrap_or(value));
+        match key.trim().to_ascii_lowercase().as_str() {
+            "label" => meta.label = value,
+            "bench" => meta.bench = value,
+            "irradiance_unit" => meta.irradiance_unit = value,
+            "notes" => meta.notes = value,
+            "kind" => {
+                meta.kind = TraceKind::parse(&value).ok_or_else(|| TraceError::BadMeta {
+                    file: file.to_path_buf(),
+                    line: lines,
+                    key: "kind".into(),
+                    expected: "Motion, WavelengthSweep or Static".into(),
+                    found: value.clone(),
+                })?
+            }
+            _ => {} // unknown keys are ignored (forward compatibility, other systems)
+        }
+    }
+    Ok((meta, lines))
+}
+
+/// Check the header row's names: UTF-8, non-empty, on one line, unique. Returns them trimmed.
+fn check_names(header: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<String>, TraceError> {
+    let mut names = Vec::with_capacity(header.len());
+    for (i, field) in header.iter().enumerate() {
+        let name = std::str::from_utf8(field).map_err(|_| TraceError::BadHeader {
+            file: file.to_path_buf(),
+            line,
+            position: i + 1,
+            problem: format!("expected a column name in UTF-8 text, found bytes `{}`", field_text(field)),
+        })?;
+        let name = name.trim();
+        if name.is_empty() {
+            return Err(TraceError::BadHeader {
+                file: file.to_path_buf(),
+                line,
+                position: i + 1,
+                problem: "expected a column name, found an empty one".into(),
+            });
+        }
+        if name.contains(['\n', '\r']) {
+            return Err(TraceError::BadHeader {
+                file: file.to_path_buf(),
+                line,
+                position: i + 1,
+                problem: "expected a column name on one line, found a line break in it".into(),
+            });
+        }
+        if let Some(first) = names.iter().position(|n: &&str| *n == name) {
+            return Err(TraceError::BadHeader {
+                file: file.to_path_buf(),
+                line,
+                position: i + 1,
+                problem: format!("column `{name}` appears twice (also column {}); expected unique names", first + 1),
+            });
+        }
+        names.push(name);
+    }
+    Ok(names.into_iter().map(str::to_string).collect())
+}
+
+/// A numeric CSV table as read from a file: the `#` metadata lines, the column names and one
+/// vector per column. Every value is finite, every row has one field per column, the time
+/// column strictly increases and there is at least one row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Table {
+    /// Metadata from the `# key: value` lines (defaults where absent).
+    pub meta: TraceMeta,
+    /// 1-based line of the header row.
+    pub header_line: usize,
+    /// Column names, trimmed, unique, in file order.
+    pub names: Vec<String>,
+    /// One vector per column, in file order.
+    pub columns: Vec<Vec<f64>>,
+}
+
+/// Open a file for [`read_table`], refusing it from its size when above [`ReadOptions::max_bytes`].
+pub fn open_limited(path: &Path, options: &ReadOptions) -> Result<std::fs::File, TraceError> {
+    crate::files::check_size(
+        path,
+        options.max_bytes,
+        "a trace file",
+        "split the recording into one file per motion, or raise ReadOptions::max_bytes",
+    )?;
+    Ok(std::fs::File::open(path).map_err(|source| FileError::Io {
+        file: path.to_path_buf(),
+        action: "cannot open",
+        source,
+    })?)
+}
+
+/// Read a numeric CSV table with the trace format's rules (metadata lines, comments, blank
+/// lines, `\r\n`, a byte-order mark, line numbers in errors). `header` checks the column
+/// names (given with the header's line) and returns the index of the time column, which must
+/// strictly increase. Never panics, whatever the bytes.
+pub fn read_table<R: Read>(
+    reader: R,
+    origin: &Path,
+    options: &ReadOptions,
+    header: impl FnOnce(&[String], usize) -> Result<usize, TraceError>,
+) -> Result<Table, TraceError> {
+    let file = || origin.to_path_buf();
+    let mut input = BufReader::with_capacity(64 * 1024, reader);
+    let (meta, meta_lines) = read_meta(&mut input, origin)?;
+    // A final '\n' makes every record end with one, so the reader's line count after a
+    // record is always one past the record's (last) line. `\r` before it is trimmed as space.
+    let mut csv_reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .terminator(csv::Terminator::Any(b'\n'))
+        .comment(Some(b'#'))
+        .buffer_capacity(64 * 1024)
+        .from_reader(input.chain(&b"\n"[..]));
+    let mut record = csv::ByteRecord::new();
+    let mut next_record = |record: &mut csv::ByteRecord| -> Result<Option<usize>, TraceError> {
+        loop {
+            let more = csv_reader.read_byte_record(record).map_err(|e| {
+                let line = meta_lines + csv_reader.position().line() as usize;
+                match e.into_kind() {
+                    csv::ErrorKind::Io(source) => {
+                        TraceError::File(FileError::Io { file: file(), action: "cannot read", source })
+                    }
+                    other => TraceError::Csv { file: file(), line, message: format!("{other:?}") },
+                }
+            })?;
+            if !more {
+                return Ok(None);
+            }
+            // A blank line ending in "\r\n" arrives as one field holding "\r": skip it.
+            if record.len() == 1 && record[0].iter().all(|b| b.is_ascii_whitespace()) {
+                continue;
+            }
+            let line = meta_lines + (csv_reader.position().line() as usize).saturating_sub(1);
+            return Ok(Some(line));
+        }
+    };
+
+    let Some(header_line) = next_record(&mut record)? else {
+        return Err(TraceError::NoHeader { file: file() });
+    };
+    let names = check_names(&record, origin, header_line)?;
+    let time_column = header(&names, header_line)?;
+    let n_cols = names.len();
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); n_cols];
+    let mut rows = 0usize;
+    let mut previous: Option<(usize, f64)> = None;
+    while let Some(line) = next_record(&mut record)? {
+        if rows >= options.max_rows {
+            return Err(TraceError::TooLarge { file: file(), line, max_rows: options.max_rows });
+        }
+        if record.len() != n_cols {
+            return Err(TraceError::FieldCount { file: file(), line, expected: n_cols, found: record.len() });
+        }
+        for (column, field) in record.iter().enumerate() {
+            let value = parse_field(field).ok_or_else(|| TraceError::NotANumber {
+                file: file(),
+                line,
+                column: names[column].clone(),
+                text: field_text(field),
+            })?;
+            if !value.is_finite() {
+                return Err(TraceError::NonFinite { file: file(), line, column: names[column].clone(), value });
+            }
+            columns[column].push(value);
+        }
+        let t = columns[time_column][rows];
+        if let Some((previous_line, previous_t)) = previous {
+            if t <= previous_t {
+                return Err(TraceError::NonMonotonicTime {
+                    file: file(),
+                    line,
+                    column: names[time_column].clone(),
+                    t,
+                    previous_line,
+                    previous_t,
+                });
+            }
+        }
+        previous = Some((line, t));
+        rows += 1;
+    }
+    if rows == 0 {
+        return Err(TraceError::EmptyTrace { file: file() });
+    }
+    Ok(Table { meta, header_line, names, columns })
+}
