@@ -105,9 +105,18 @@ fn random_pose(rng: &mut StdRng, tilt_deg: f64) -> [f64; 6] {
     ]
 }
 
+/// A motion a random plan of [`Family::Pool`] may draw: where it starts and what it records.
+/// The experiment design's candidates are such motions.
+pub trait PoolMotion {
+    /// Joints at the start of the recorded segment (µm, °).
+    fn start_display(&self) -> [f64; 6];
+    /// The recorded segment.
+    fn segment(&self) -> &Segment;
+}
+
 /// A random plan of `family`, reproducible from `seed`. Plans of [`Family::Pool`] draw from
-/// `pool` (the design's candidate pool: [`crate::identify::design::candidate_pool`]).
-pub fn random_plan(family: Family, seed: u64, pool: &[crate::identify::design::Candidate]) -> Plan {
+/// `pool` (typically the design's candidate pool).
+pub fn random_plan<M: PoolMotion>(family: Family, seed: u64, pool: &[M]) -> Plan {
     let mut rng = StdRng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
     let mut builder = Builder::new();
     match family {
@@ -120,15 +129,15 @@ pub fn random_plan(family: Family, seed: u64, pool: &[crate::identify::design::C
     builder.plan(family, seed)
 }
 
-fn pool_plan(builder: &mut Builder, rng: &mut StdRng, pool: &[crate::identify::design::Candidate]) {
+fn pool_plan<M: PoolMotion>(builder: &mut Builder, rng: &mut StdRng, pool: &[M]) {
     if pool.is_empty() {
         return;
     }
     let moves = rng.random_range(10..=30);
     for _ in 0..moves {
         let candidate = &pool[rng.random_range(0..pool.len())];
-        builder.setup(candidate.start_display);
-        match &candidate.segment {
+        builder.setup(candidate.start_display());
+        match candidate.segment() {
             Segment::Sweep { .. } => builder.sweep(rng),
             Segment::Move { to, .. } => builder.record(*to),
             Segment::Dwell { .. } => {}
