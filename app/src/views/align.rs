@@ -4,7 +4,7 @@
 
 use crate::state::AppState;
 use egui::{Color32, RichText};
-use photorobot_core::alignment::{MIN_FRINGE_SNR, MIN_VISIBILITY};
+use photorobot_core::measure::alignment::{MIN_FRINGE_SNR, MIN_VISIBILITY};
 use std::sync::atomic::Ordering;
 
 fn gauge(ui: &mut egui::Ui, label: &str, value: f64, full_scale: f64, threshold: Option<f64>, text: String) {

@@ -8,13 +8,21 @@
 //! distance, `L·cos γ`) and the Gouy phase. The identifier predicts the same quantity from the
 //! same model, so bench and fit cannot disagree on conventions.
 
-use crate::fringes::{self, CountDirection, FringeCount, Harmonic, HysteresisConfig, PhaseTrack, TrackConfig};
+pub mod alignment;
+pub mod extrema;
+pub mod signal;
+pub mod sweep;
+pub mod track;
+
+use self::extrema::{CountDirection, FringeCount, HysteresisConfig};
+use self::signal::FringeError;
+use self::sweep::{GapEstimate, SweepConfig, SweepFit};
+use self::track::{Harmonic, PhaseTrack, TrackConfig};
 use crate::model::air::{air_index_ciddor, AmbientConditions};
 use crate::model::extrinsics::Extrinsics;
 use crate::model::kinematics::Chain;
 use crate::model::optics::{FabryPerot, FringeExpansion, OpticalParams};
 use crate::model::robot::RobotDescription;
-use crate::sweep::{self, GapEstimate, SweepConfig, SweepFit};
 use crate::trace::Trace;
 use std::f64::consts::PI;
 use thiserror::Error;
@@ -36,7 +44,7 @@ pub enum MeasureError {
         /// The trace's label.
         label: String,
         /// The analysis error.
-        source: fringes::FringeError,
+        source: FringeError,
     },
     /// Sweep analysis failed.
     #[error("trace `{label}`: wavelength sweep: {source}")]
@@ -158,8 +166,8 @@ pub struct FringeShapeTrace {
 
 impl FringeShapeTrace {
     /// The view the phase tracker takes.
-    pub fn as_model(&self) -> fringes::FringeModel<'_> {
-        fringes::FringeModel { harmonics: &self.harmonics, offset: &self.offset, amplitude: &self.amplitude }
+    pub fn as_model(&self) -> track::FringeModel<'_> {
+        track::FringeModel { harmonics: &self.harmonics, offset: &self.offset, amplitude: &self.amplitude }
     }
 }
 
@@ -190,7 +198,7 @@ pub struct MotionMeasurement {
 /// Motions shorter than this many fringes of hint travel are tracked with the free start
 /// whatever the options say. Their harmonic windows do not fit, and the smoother traded the
 /// unmodelled harmonic against the hint scale: a 1.5-fringe synthetic motion ended 8.79 nm
-/// off without it and 1.55 nm off with it (`fringes::tests::a_free_start_tracks_short_motions`).
+/// off without it and 1.55 nm off with it (`measure::track::tests::a_free_start_tracks_short_motions`).
 /// On `tests/cli_diagnose.rs`'s hidden-pivot session the diagnosis then named the hidden
 /// pivot itself, q4 along Z_w, at 19.93 ± 0.19 µm (an equivalent and a second pivot without).
 pub const SHORT_MOTION_FRINGES: f64 = 2.0;
@@ -259,7 +267,7 @@ pub struct AnalyseOptions {
     /// `validate::tests::a_validation_circle_tracks_its_small_gap_change`). A motion whose
     /// hint moves by more keeps the default: its fringes pin the phase (see [`crate::validate`]).
     pub free_phase_after: Option<usize>,
-    /// Track with the model's fringe shape at every sample (`fringes::track_phase_shaped`
+    /// Track with the model's fringe shape at every sample (`track::track_phase_shaped`
     /// with [`PhaseModel::fringe_shape`]) instead of a harmonic profile estimated from the data.
     pub shaped: bool,
 }
@@ -315,7 +323,7 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         ..TrackConfig::default()
     };
     // By default the harmonics are estimated along the path, not taken from the optics model: the
-    // shaped tracker (`fringes::track_phase_shaped` with `PhaseModel::fringe_shape`) is far
+    // shaped tracker (`track::track_phase_shaped` with `PhaseModel::fringe_shape`) is far
     // better when the model is right (table2-ideal, tracked dL against the truth: rotations
     // 2.3 → 0.18 nm rms, tilt scans 9.6 → 0.06 nm), but fragile when it is not: with the
     // design extrinsics the modelled tilt is off by ~1°, the 2nd harmonic's phase (it turns by
@@ -328,18 +336,18 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
     // the better estimate, not for losing the trace.
     let shaped_track = options.shaped.then(|| {
         let shape = model.fringe_shape(trace, wavelength_nm)?;
-        fringes::track_phase_shaped(&trace.irradiance, &hint, &shape.as_model(), wavelength_nm, model.n_air, &track_cfg)
+        track::track_phase_shaped(&trace.irradiance, &hint, &shape.as_model(), wavelength_nm, model.n_air, &track_cfg)
             .map_err(|e| e.to_string())
     });
     let (track, shaped, shaped_fallback) = match shaped_track {
         Some(Ok(track)) => (track, true, None),
         other => {
-            let track = fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
+            let track = track::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
                 .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
             (track, false, other.and_then(Result::err))
         }
     };
-    let count = fringes::count_extrema(
+    let count = extrema::count_extrema(
         &trace.irradiance,
         CountDirection::Hint(&hint),
         wavelength_nm,
