@@ -27,8 +27,8 @@ pub mod scoring;
 pub mod validation;
 
 use crate::identify::{Observation, ObservationKind, N_EXTRINSICS};
-use crate::measure::PhaseModel;
 use crate::model::extrinsics::Extrinsics;
+use crate::model::phase::PhaseModel;
 use candidates::Candidate;
 use fit::{Fit, ModelState, Predictor};
 use motions::{DesignedMotion, MotionRunner};

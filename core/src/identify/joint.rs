@@ -2,9 +2,9 @@
 //! by Levenberg-Marquardt, with per-parameter masks and priors. Owns the convergence report.
 
 use crate::identify::{parameter_scale, predict, Observation, ObservationKind, N_EXTRINSICS};
-use crate::measure::PhaseModel;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::optics::FabryPerot;
+use crate::model::phase::PhaseModel;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
 use serde::Serialize;

@@ -3,8 +3,9 @@
 
 use crate::identify::{parabola_top, AmplitudeNeighbours, Observation, ObservationKind, VERTEX_WINDOW_HALF_FRINGE};
 use crate::measure::extrema::{detect_extrema, Extremum, ExtremumKind, HysteresisConfig};
-use crate::measure::{self, AnalyseOptions, MeasureError, Measurement, PhaseModel};
+use crate::measure::{self, AnalyseOptions, MeasureError, Measurement};
 use crate::model::effects::update_approach;
+use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
 
 /// How traces become observations.

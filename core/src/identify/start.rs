@@ -13,9 +13,9 @@
 
 use crate::identify::{parameter_scale, predict, Observation, ObservationKind, N_EXTRINSICS};
 use crate::measure::extrema::{detect_extrema, HysteresisConfig};
-use crate::measure::PhaseModel;
 use crate::model::extrinsics::Extrinsics;
 use crate::model::optics::FabryPerot;
+use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
