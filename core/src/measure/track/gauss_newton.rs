@@ -2,12 +2,15 @@
 //! solve of the linearised model with its priors, and a noise variance re-estimated from the
 //! predicted residuals.
 
-use super::config::TrackConfig;
-use super::envelope::fit_offset_gain;
+use super::config::{FringeModel, TrackConfig};
+use super::envelope::{fit_offset_gain, model_envelope_shape};
 use super::factor::{add_diag, sym_to_mat, Factor, Sym3};
+use super::grid::Grid;
 use super::harmonic::Harmonic;
-use super::kernel::{accumulate, Decimated, NormalEq, Samples, State};
+use super::inputs::TrackScale;
+use super::kernel::{accumulate, Decimated, NormalEq, Samples, ShapeView, State};
 use super::priors::Priors;
+use super::Workspace;
 use crate::measure::signal::FringeError;
 use nalgebra::Vector3;
 
@@ -295,4 +298,68 @@ fn refit_model_envelope(prior: &mut PriorMeans, state: &State) -> bool {
         return true;
     }
     false
+}
+
+/// What the smoother starts from besides the state.
+pub(super) struct Smoothing<'a> {
+    /// A fringe model's (offset, amplitude) at the knots (empty when not used).
+    pub(super) knot_model: &'a [(f64, f64)],
+    /// The detector gain fitted to the fringe model's envelope.
+    pub(super) model_gain: Option<f64>,
+    /// The priors.
+    pub(super) priors: &'a Priors,
+    /// Mean initial amplitude B over the knots.
+    pub(super) b_typ: f64,
+    /// Initial noise variance.
+    pub(super) r_meas: f64,
+    /// The hint's largest excursion from its first sample, nm.
+    pub(super) excursion: f64,
+}
+
+/// The smoother: the samples (full and decimated) with a fringe model's envelope shape, the
+/// system's buffers, then [`gauss_newton`].
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(super) fn smooth(
+    ws: &mut Workspace,
+    grid: &Grid,
+    cgrid: &[f64],
+    state: &mut State,
+    from: &Smoothing,
+    intensity: &[f64],
+    hint_dl_nm: &[f64],
+    model: Option<&FringeModel>,
+    scale: &TrackScale,
+    cfg: &TrackConfig,
+) -> Result<Convergence, FringeError> {
+    let n_knots = grid.knot_k.len();
+    let shape = model.map(|m| m.harmonics);
+    model_envelope_shape(model, from.model_gain, from.knot_model, grid, cgrid, &mut ws.env_r, &mut ws.env_ca);
+    let dec = scale.decimation;
+    if dec > 1 && model.is_some() {
+        ws.decimated.r.extend(ws.env_r.iter().step_by(dec));
+        ws.decimated.ca.extend(ws.env_ca.iter().step_by(dec));
+    }
+    if dec > 1 {
+        ws.decimated.seg_first.extend(grid.seg_first.iter().map(|&k| k.div_ceil(dec)));
+    }
+    let shape_view = shape.map(|harm| ShapeView { harm, r: &ws.env_r, ca: &ws.env_ca });
+    let samples = Samples { y: intensity, hint: hint_dl_nm, c: cgrid, seg_first: &grid.seg_first, shape: shape_view };
+    let mut system = System::sized(
+        n_knots,
+        &mut ws.data,
+        [&mut ws.diag, &mut ws.off],
+        [&mut ws.rhs, &mut ws.border, &mut ws.dx, &mut ws.z_border],
+        &mut ws.factor,
+    );
+    let mut prior =
+        PriorMeans { x0: &mut ws.x0, seg_prec: &ws.seg_prec, priors: from.priors, knot_model: from.knot_model };
+    let iteration = IterationScale {
+        decimation: dec,
+        r_meas: from.r_meas,
+        r_floor: (1e-7 * from.b_typ).powi(2),
+        u_max: from.excursion * state.rad_per_hint_nm, // largest phase lever of γ over the trace
+        b_typ: from.b_typ,
+    };
+    gauss_newton(state, &samples, &ws.decimated, &ws.seg_harm, &mut system, &mut prior, cfg, &iteration)
 }

@@ -39,20 +39,18 @@ pub use config::{EnvelopeSource, FringeModel, GouyCorrection, KnownEnvelope, Tra
 pub use harmonic::Harmonic;
 pub use result::PhaseTrack;
 
-use envelope::{
-    envelope_coordinate, initial_envelope, model_envelope_at_knots, model_envelope_shape, Knot, MAX_EXTRAP,
-};
+use envelope::{initial_envelope, Knot};
 use factor::{Factor, Sym3};
-use gauss_newton::{gauss_newton, Convergence, IterationScale, PriorMeans, System};
+use gauss_newton::{smooth, Convergence, Smoothing};
 use grid::{grid_pass, motion_windows, Grid, GridRecord, PathView};
 use hint_scale::hint_scale;
 use inputs::{check_inputs, scan_intensity, TrackScale};
-use kernel::{Decimated, NormalEq, Samples, ShapeView, State};
+use kernel::{Decimated, NormalEq, State};
 use output::{apply_gouy, phase_and_dl, reported_harmonic, total_phase_variance, OutputScale};
-use priors::{priors, start_phase, StartWindow};
+use priors::{initial_state, Start, StartFrom, StartWindow};
 use window::fit_harmonics;
 
-use crate::measure::extrema::{estimate_noise_sigma, extrema_into_scaled, Extremum};
+use crate::measure::extrema::{extrema_into_scaled, Extremum};
 use crate::measure::signal::{check_optics, FringeError};
 use nalgebra::Vector3;
 
@@ -287,6 +285,37 @@ fn run_tracker_impl(
     n_air: f64,
     cfg: &TrackConfig,
 ) -> Result<(), FringeError> {
+    // The grid and the envelope's knots stay borrowed while later stages change the rest of
+    // the workspace: they are out of it for the run.
+    let mut grid = std::mem::take(&mut ws.grid);
+    let mut levels = (std::mem::take(&mut ws.upper), std::mem::take(&mut ws.lower));
+    let inputs = TrackInputs { intensity, hint_dl_nm, model, wavelength_nm, n_air, cfg };
+    let result = run_stages(ws, &mut grid, (&mut levels.0, &mut levels.1), out, &inputs);
+    (ws.grid, ws.upper, ws.lower) = (grid, levels.0, levels.1);
+    result
+}
+
+/// The inputs of one tracking run.
+struct TrackInputs<'a> {
+    intensity: &'a [f64],
+    hint_dl_nm: &'a [f64],
+    model: Option<&'a FringeModel<'a>>,
+    wavelength_nm: f64,
+    n_air: f64,
+    cfg: &'a TrackConfig,
+}
+
+/// The stages of [`run_tracker_impl`], with the grid and the envelope's extremum levels
+/// (upper, lower) outside the workspace.
+#[inline(always)]
+fn run_stages(
+    ws: &mut Workspace,
+    grid: &mut Grid,
+    levels: (&mut Vec<Knot>, &mut Vec<Knot>),
+    out: &mut PhaseTrack,
+    inputs: &TrackInputs,
+) -> Result<(), FringeError> {
+    let TrackInputs { intensity, hint_dl_nm, model, wavelength_nm, n_air, cfg } = *inputs;
     check_inputs(intensity, hint_dl_nm, model)?;
     let scale = TrackScale::new(hint_dl_nm, wavelength_nm, n_air, cfg);
     let (kappa, fringe_nm) = (scale.kappa, scale.fringe_nm);
@@ -304,7 +333,7 @@ fn run_tracker_impl(
     let mut cgrid = std::mem::take(&mut out.phase_rad);
     cgrid.clear();
     let record = GridRecord {
-        grid: &mut ws.grid,
+        grid,
         extrema: &ws.extrema,
         ext_hint: &mut ws.ext_hint,
         ext_path: &mut ws.ext_path,
@@ -318,7 +347,7 @@ fn run_tracker_impl(
             return Err(err);
         }
     };
-    let grid = &ws.grid;
+    let grid = &*grid;
     let path = PathView { c: &cgrid, ds: fringe_nm, refine: scale.refine };
     let n_knots = grid.knot_k.len();
 
@@ -336,7 +365,7 @@ fn run_tracker_impl(
     let g0 = scale_fit.as_ref().map_or(1.0, |f| f.scale);
     let rad_per_hint_nm = g0 * kappa;
 
-    let envelope = match initial_envelope(&cfg.envelope, &ws.extrema, &path, &mut ws.upper, &mut ws.lower) {
+    let envelope = match initial_envelope(&cfg.envelope, &ws.extrema, &path, levels.0, levels.1) {
         Ok(envelope) => envelope,
         Err(err) => {
             out.phase_rad = cgrid;
@@ -361,30 +390,6 @@ fn run_tracker_impl(
     let mut cur = 0usize;
     ws.seg_harm.extend((0..n_knots - 1).map(|j| harm.at(0.5 * (grid.knot_s[j] + grid.knot_s[j + 1]), &mut cur)));
 
-    // Initial state on the grid.
-    let mut state = State {
-        intercept: 0.0,
-        rad_per_hint_nm,
-        hint_ref: hint_dl_nm[0],
-        gamma: 0.0,
-        delta: std::mem::take(&mut ws.delta),
-        a: std::mem::take(&mut ws.a),
-        b: std::mem::take(&mut ws.b),
-    };
-    let knot_c: Vec<f64> =
-        grid.knot_s.iter().zip(&grid.knot_k).map(|(&s, &k)| envelope_coordinate(s, k, fringe_nm)).collect();
-    envelope.eval_into(&knot_c, &grid.knot_s, &harm, MAX_EXTRAP, &mut state.a, &mut state.b);
-    let (knot_model, model_gain) = model_envelope_at_knots(
-        model,
-        &cfg.envelope,
-        grid,
-        &cgrid,
-        &ws.extrema,
-        &mut state.a,
-        &mut state.b,
-        &mut warnings,
-    );
-    let b_typ = state.b.iter().sum::<f64>() / n_knots as f64;
     let start = StartWindow {
         path: &path,
         intensity,
@@ -394,54 +399,11 @@ fn run_tracker_impl(
         window: win_s,
         reference: iref_s,
     };
-    let (intercept, r_anchor) = start_phase(
-        scale_fit.as_ref(),
-        &ws.residuals,
-        &ws.ext_path,
-        &mut ws.resid_knots,
-        grid,
-        &start,
-        kappa,
-        rad_per_hint_nm,
-        &mut state.delta,
-    );
-    state.intercept = intercept + rad_per_hint_nm * state.hint_ref;
-    let r_meas = noise_ls
-        .or(r_anchor)
-        .unwrap_or_else(|| estimate_noise_sigma(intensity, &mut ws.scratch).powi(2))
-        .max((1e-7 * b_typ).powi(2));
-    ws.x0.clear();
-    ws.x0.extend((0..n_knots).map(|j| Vector3::new(state.delta[j], state.a[j], state.b[j])));
-    let priors = priors(cfg, grid, &scale, &state.b, b_typ, scale_fit.as_ref(), &mut ws.seg_prec);
-
-    model_envelope_shape(model, model_gain, &knot_model, grid, &cgrid, &mut ws.env_r, &mut ws.env_ca);
-    let dec = scale.decimation;
-    if dec > 1 && model.is_some() {
-        ws.decimated.r.extend(ws.env_r.iter().step_by(dec));
-        ws.decimated.ca.extend(ws.env_ca.iter().step_by(dec));
-    }
-    if dec > 1 {
-        ws.decimated.seg_first.extend(grid.seg_first.iter().map(|&k| k.div_ceil(dec)));
-    }
-    let shape_view = shape.map(|harm| ShapeView { harm, r: &ws.env_r, ca: &ws.env_ca });
-    let samples = Samples { y: intensity, hint: hint_dl_nm, c: &cgrid, seg_first: &grid.seg_first, shape: shape_view };
-    let mut system = System::sized(
-        n_knots,
-        &mut ws.data,
-        [&mut ws.diag, &mut ws.off],
-        [&mut ws.rhs, &mut ws.border, &mut ws.dx, &mut ws.z_border],
-        &mut ws.factor,
-    );
-    let mut prior = PriorMeans { x0: &mut ws.x0, seg_prec: &ws.seg_prec, priors: &priors, knot_model: &knot_model };
-    let iteration = IterationScale {
-        decimation: dec,
-        r_meas,
-        r_floor: (1e-7 * b_typ).powi(2),
-        u_max: excursion * rad_per_hint_nm, // largest phase lever of γ over the trace
-        b_typ,
-    };
-    let conv =
-        gauss_newton(&mut state, &samples, &ws.decimated, &ws.seg_harm, &mut system, &mut prior, cfg, &iteration);
+    let from = StartFrom { grid, cgrid: &cgrid, model, scale_fit: scale_fit.as_ref(), noise_ls, rad_per_hint_nm };
+    let Start { mut state, knot_model, model_gain, b_typ, r_meas, priors } =
+        initial_state(ws, &from, &start, cfg, &scale, &mut warnings);
+    let smoothing = Smoothing { knot_model: &knot_model, model_gain, priors: &priors, b_typ, r_meas, excursion };
+    let conv = smooth(ws, grid, &cgrid, &mut state, &smoothing, intensity, hint_dl_nm, model, &scale, cfg);
     let conv = match conv {
         Ok(conv) => conv,
         Err(err) => {
@@ -451,7 +413,7 @@ fn run_tracker_impl(
         }
     };
     let fit = FitSummary { g0, harm_sigma, harmonic: reported_harmonic(shape, &harm), counted };
-    let result = finish(ws, out, cgrid, &state, &conv, &fit, hint_dl_nm, cfg, kappa, warnings);
+    let result = finish(ws, grid, out, cgrid, &state, &conv, &fit, hint_dl_nm, cfg, kappa, warnings);
     (ws.delta, ws.a, ws.b) = (state.delta, state.a, state.b);
     result
 }
@@ -474,6 +436,7 @@ struct FitSummary {
 #[allow(clippy::too_many_arguments)]
 fn finish(
     ws: &mut Workspace,
+    grid: &Grid,
     out: &mut PhaseTrack,
     cgrid: Vec<f64>,
     state: &State,
@@ -518,7 +481,7 @@ fn finish(
     }
     let scale = OutputScale { dvar: &ws.dvar, z_border: &ws.z_border, schur, inflate, kappa };
     let per_sample_sigma = cfg.per_sample_sigma.then_some(&mut sigma);
-    phase_and_dl(state, &ws.grid, hint_dl_nm, &scale, &mut phase, &mut dl, per_sample_sigma);
+    phase_and_dl(state, grid, hint_dl_nm, &scale, &mut phase, &mut dl, per_sample_sigma);
     if let Some(g) = &cfg.gouy {
         apply_gouy(&mut dl, g, kappa);
     }

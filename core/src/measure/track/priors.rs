@@ -1,13 +1,16 @@
 //! The smoother's starting point and priors: the phase correction at the knots, the noise
 //! variance to weigh the samples with, and the random walks between knots.
 
-use super::config::{EnvelopeSource, TrackConfig};
-use super::envelope::{knot_value, Envelope, Knot, MAX_EXTRAP};
+use super::config::{EnvelopeSource, FringeModel, TrackConfig};
+use super::envelope::{envelope_coordinate, knot_value, model_envelope_at_knots, Envelope, Knot, MAX_EXTRAP};
 use super::grid::{Grid, PathView};
 use super::harmonic::HarmonicProfile;
 use super::hint_scale::ScaleFit;
 use super::inputs::TrackScale;
+use super::kernel::State;
 use super::window::{anchor_phase, window_data};
+use super::Workspace;
+use crate::measure::extrema::estimate_noise_sigma;
 use nalgebra::Vector3;
 
 /// Where the phase at the start of the motion is fitted when the extrema give no phase.
@@ -139,4 +142,97 @@ pub(super) fn priors(
         None => cfg.scale_prior_sigma,
     };
     Priors { abs_prec, sigma_gamma }
+}
+
+/// What the initial state is built from besides the workspace and the start window.
+pub(super) struct StartFrom<'a> {
+    /// The knots.
+    pub(super) grid: &'a Grid,
+    /// The grid coordinate of every sample.
+    pub(super) cgrid: &'a [f64],
+    /// The fringe model, if any.
+    pub(super) model: Option<&'a FringeModel<'a>>,
+    /// The extrema's regression on the hint phase, when usable.
+    pub(super) scale_fit: Option<&'a ScaleFit>,
+    /// The noise variance of the harmonic window fits, if any.
+    pub(super) noise_ls: Option<f64>,
+    /// The hint's phase per nm, g·κ.
+    pub(super) rad_per_hint_nm: f64,
+}
+
+/// The initial state on the grid and what the smoother needs with it.
+pub(super) struct Start {
+    /// Phase correction, envelope and hint scale at the start.
+    pub(super) state: State,
+    /// A fringe model's (offset, amplitude) at the knots (empty when not used).
+    pub(super) knot_model: Vec<(f64, f64)>,
+    /// The detector gain fitted to the fringe model's envelope.
+    pub(super) model_gain: Option<f64>,
+    /// Mean initial amplitude B over the knots.
+    pub(super) b_typ: f64,
+    /// Initial noise variance.
+    pub(super) r_meas: f64,
+    /// The priors.
+    pub(super) priors: Priors,
+}
+
+/// The initial state on the grid: the envelope at the knots (the initial envelope, or a
+/// fringe model's scaled to the extrema), the start phase, the noise variance to start
+/// with, the prior means (`ws.x0`) and the priors. The state's buffers come from the
+/// workspace.
+#[inline(always)]
+pub(super) fn initial_state(
+    ws: &mut Workspace,
+    from: &StartFrom,
+    start: &StartWindow,
+    cfg: &TrackConfig,
+    scale: &TrackScale,
+    warnings: &mut Vec<String>,
+) -> Start {
+    let (grid, rad_per_hint_nm) = (from.grid, from.rad_per_hint_nm);
+    let n_knots = grid.knot_k.len();
+    let mut state = State {
+        intercept: 0.0,
+        rad_per_hint_nm,
+        hint_ref: start.hint_dl_nm[0],
+        gamma: 0.0,
+        delta: std::mem::take(&mut ws.delta),
+        a: std::mem::take(&mut ws.a),
+        b: std::mem::take(&mut ws.b),
+    };
+    let knot_c: Vec<f64> =
+        grid.knot_s.iter().zip(&grid.knot_k).map(|(&s, &k)| envelope_coordinate(s, k, scale.fringe_nm)).collect();
+    start.envelope.eval_into(&knot_c, &grid.knot_s, start.harm, MAX_EXTRAP, &mut state.a, &mut state.b);
+    let (knot_model, model_gain) = model_envelope_at_knots(
+        from.model,
+        &cfg.envelope,
+        grid,
+        from.cgrid,
+        &ws.extrema,
+        &mut state.a,
+        &mut state.b,
+        warnings,
+    );
+    let b_typ = state.b.iter().sum::<f64>() / n_knots as f64;
+    let (intercept, r_anchor) = start_phase(
+        from.scale_fit,
+        &ws.residuals,
+        &ws.ext_path,
+        &mut ws.resid_knots,
+        grid,
+        start,
+        scale.kappa,
+        rad_per_hint_nm,
+        &mut state.delta,
+    );
+    state.intercept = intercept + rad_per_hint_nm * state.hint_ref;
+    let r_meas = from
+        .noise_ls
+        .or(r_anchor)
+        .unwrap_or_else(|| estimate_noise_sigma(start.intensity, &mut ws.scratch).powi(2))
+        .max((1e-7 * b_typ).powi(2));
+    ws.x0.clear();
+    ws.x0.extend((0..n_knots).map(|j| Vector3::new(state.delta[j], state.a[j], state.b[j])));
+    let priors = priors(cfg, grid, scale, &state.b, b_typ, from.scale_fit, &mut ws.seg_prec);
+    Start { state, knot_model, model_gain, b_typ, r_meas, priors }
 }
