@@ -199,10 +199,8 @@ fn sign_tol(x: f64, tol: f64) -> i8 {
 /// phase goes through a fringe extremum only while the gap moves on both sides of it in the
 /// same direction. Where the motion turns (opposite signs) it is a turning point; where the
 /// hint stands still on one side, the intensity's swing there is not the motion's (noise, the
-/// envelope, a gap the model misses by a few nm). A validation circle planned well, whose
-/// model gap stands still after its envelope dither, ended on a 0.5 µW bump (a fringe swings
-/// 15 µW) that was confirmed as a maximum and became a level of the envelope: its figure read
-/// 39.5 nm where the real gap moved by 8.1 nm (`validation_truth` example; test
+/// envelope, a gap the model misses by a few nm): counted, such a bump becomes a level of the
+/// envelope and biases the phase by tens of nm on a motion whose gap hardly moves (test
 /// `validate::tests::a_validation_circle_tracks_its_small_gap_change`).
 fn fringe_direction(before: i8, after: i8) -> i8 {
     if before * after <= 0 {

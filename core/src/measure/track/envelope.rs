@@ -125,14 +125,10 @@ pub(super) const T_ENVELOPE: f64 = 4096.0;
 /// envelope: fringes of path travelled plus time in units of [`T_ENVELOPE`] samples (the
 /// grid's own mix). The envelope follows the coupling, which follows the joints; along the
 /// path alone, a motion whose gap stands still while a goniometer turns (a turning point of
-/// the gap) squeezes the coupling's change into no path at all. The virtual bench's q4
-/// rotation at q1 = 150 µm with a hidden 20 µm pivot offset starts so: tracked with the
-/// exact hint it came out 17-20 nm off along the path, 7-9.5 nm with time added
-/// (`diagnose::motions` test `a_rotation_that_starts_on_a_gap_turning_point_...`). Not
-/// better everywhere: on a synthetic rotation through zero tilt at 900 µm the worst error
-/// went from 4.5 to 8.8 nm. Over the 27 pool motions on table2-ideal, with and without that
-/// pivot (`effect_visibility -- 5 --hinted --tracks`), the rms error at the quarters went
-/// from 3.3 to 2.2 nm, and is 2.2 nm either way leaving out the pivot's rotation.
+/// the gap) squeezes the coupling's change into no path at all (`diagnose::motions` test
+/// `a_rotation_that_starts_on_a_gap_turning_point_...`). Time costs accuracy on some
+/// synthetic rotations; over the pool motions of table2-ideal it is the better coordinate
+/// (`effect_visibility -- 5 --hinted --tracks`).
 pub(super) fn envelope_coordinate(path_nm: f64, k: f64, fringe_nm: f64) -> f64 {
     path_nm / fringe_nm + k / T_ENVELOPE
 }

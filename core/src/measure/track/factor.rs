@@ -102,32 +102,32 @@ pub(super) struct Factor {
 // Recursions over neighbouring blocks read clearest with explicit indices.
 #[allow(clippy::needless_range_loop)]
 impl Factor {
-    pub(super) fn new(jn: usize) -> Self {
+    pub(super) fn new(n_knots: usize) -> Self {
         Self {
-            s_inv: vec![[0.0; 6]; jn],
-            multiplier: vec![[[0.0; 3]; 3]; jn],
-            forward: vec![Vector3::zeros(); jn],
-            forward2: vec![Vector3::zeros(); jn],
+            s_inv: vec![[0.0; 6]; n_knots],
+            multiplier: vec![[[0.0; 3]; 3]; n_knots],
+            forward: vec![Vector3::zeros(); n_knots],
+            forward2: vec![Vector3::zeros(); n_knots],
         }
     }
 
-    pub(super) fn resize(&mut self, jn: usize) {
-        self.s_inv.resize(jn, [0.0; 6]);
-        self.multiplier.resize(jn, [[0.0; 3]; 3]);
-        self.forward.resize(jn, Vector3::zeros());
-        self.forward2.resize(jn, Vector3::zeros());
+    pub(super) fn resize(&mut self, n_knots: usize) {
+        self.s_inv.resize(n_knots, [0.0; 6]);
+        self.multiplier.resize(n_knots, [[0.0; 3]; 3]);
+        self.forward.resize(n_knots, Vector3::zeros());
+        self.forward2.resize(n_knots, Vector3::zeros());
     }
 
     /// Factorise; false if a pivot block is singular.
     pub(super) fn factor(&mut self, diag: &[Sym3], off: &[Sym3]) -> bool {
-        let jn = diag.len();
+        let n_knots = diag.len();
         let mut s = std::array::from_fn(|r| sym_row(&diag[0], r));
-        for j in 0..jn {
+        for j in 0..n_knots {
             let Some(si) = sym_inverse(&s) else {
                 return false;
             };
             self.s_inv[j] = si;
-            if j + 1 < jn {
+            if j + 1 < n_knots {
                 let gj = sym_mul(&si, &off[j]);
                 s = sym_sub_mul(&diag[j + 1], &off[j], &gj);
                 self.multiplier[j] = gj;
@@ -139,13 +139,13 @@ impl Factor {
     }
 
     pub(super) fn solve_into(&mut self, r: &[Vector3<f64>], x: &mut [Vector3<f64>]) {
-        let jn = r.len();
+        let n_knots = r.len();
         self.forward[0] = r[0];
-        for j in 1..jn {
+        for j in 1..n_knots {
             self.forward[j] = r[j] - mat_tr_mul_vec(&self.multiplier[j - 1], &self.forward[j - 1]);
         }
-        x[jn - 1] = sym_mul_vec(&self.s_inv[jn - 1], &self.forward[jn - 1]);
-        for j in (0..jn - 1).rev() {
+        x[n_knots - 1] = sym_mul_vec(&self.s_inv[n_knots - 1], &self.forward[n_knots - 1]);
+        for j in (0..n_knots - 1).rev() {
             x[j] = sym_mul_vec(&self.s_inv[j], &self.forward[j]) - mat_mul_vec(&self.multiplier[j], &x[j + 1]);
         }
     }
@@ -158,17 +158,17 @@ impl Factor {
         x: &mut [Vector3<f64>],
         z: &mut [Vector3<f64>],
     ) {
-        let jn = r.len();
+        let n_knots = r.len();
         self.forward[0] = r[0];
         self.forward2[0] = q[0];
-        for j in 1..jn {
+        for j in 1..n_knots {
             let g = &self.multiplier[j - 1];
             self.forward[j] = r[j] - mat_tr_mul_vec(g, &self.forward[j - 1]);
             self.forward2[j] = q[j] - mat_tr_mul_vec(g, &self.forward2[j - 1]);
         }
-        x[jn - 1] = sym_mul_vec(&self.s_inv[jn - 1], &self.forward[jn - 1]);
-        z[jn - 1] = sym_mul_vec(&self.s_inv[jn - 1], &self.forward2[jn - 1]);
-        for j in (0..jn - 1).rev() {
+        x[n_knots - 1] = sym_mul_vec(&self.s_inv[n_knots - 1], &self.forward[n_knots - 1]);
+        z[n_knots - 1] = sym_mul_vec(&self.s_inv[n_knots - 1], &self.forward2[n_knots - 1]);
+        for j in (0..n_knots - 1).rev() {
             let (si, g) = (&self.s_inv[j], &self.multiplier[j]);
             x[j] = sym_mul_vec(si, &self.forward[j]) - mat_mul_vec(g, &x[j + 1]);
             z[j] = sym_mul_vec(si, &self.forward2[j]) - mat_mul_vec(g, &z[j + 1]);
@@ -203,12 +203,12 @@ impl Factor {
 
     /// δδ element of the diagonal blocks of the inverse, into `out`.
     pub(super) fn delta_variances_into(&self, out: &mut Vec<f64>) {
-        let jn = self.s_inv.len();
+        let n_knots = self.s_inv.len();
         out.clear();
-        out.resize(jn, 0.0);
-        let mut sig = sym_to_mat(&self.s_inv[jn - 1]);
-        out[jn - 1] = sig[(0, 0)];
-        for j in (0..jn - 1).rev() {
+        out.resize(n_knots, 0.0);
+        let mut sig = sym_to_mat(&self.s_inv[n_knots - 1]);
+        out[n_knots - 1] = sig[(0, 0)];
+        for j in (0..n_knots - 1).rev() {
             let g = Matrix3::from_fn(|r, c| self.multiplier[j][r][c]);
             sig = sym_to_mat(&self.s_inv[j]) + g * sig * g.transpose();
             out[j] = sig[(0, 0)];

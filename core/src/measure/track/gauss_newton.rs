@@ -224,14 +224,16 @@ fn weighted_system(system: &mut System, state: &State, prior: &PriorMeans, weigh
     let s_gg = data.s_gg * w + 1.0 / (sigma_gamma * sigma_gamma);
     let r_g = data.r_g * w - state.gamma / (sigma_gamma * sigma_gamma);
     for j in 0..n_knots {
-        let xj = Vector3::new(state.delta[j], state.a[j], state.b[j]);
+        let xj = Vector3::new(state.delta[j], state.offset[j], state.amplitude[j]);
         add_diag(&mut diag[j], abs_prec, 1.0);
         rhs[j] -= abs_prec.component_mul(&(xj - x0[j]));
         if j + 1 < n_knots {
             let p = seg_prec[j];
             // random walk of the deviation from the initial profile (which already
             // follows the drift seen by the extrema)
-            let d = Vector3::new(state.delta[j + 1], state.a[j + 1], state.b[j + 1]) - x0[j + 1] - (xj - x0[j]);
+            let d = Vector3::new(state.delta[j + 1], state.offset[j + 1], state.amplitude[j + 1])
+                - x0[j + 1]
+                - (xj - x0[j]);
             let pd = p.component_mul(&d);
             add_diag(&mut diag[j], &p, 1.0);
             add_diag(&mut diag[j + 1], &p, 1.0);
@@ -271,8 +273,8 @@ fn apply_step(state: &mut State, dx: &[Vector3<f64>], dgamma: f64, u_max: f64, b
         let dd = d[0].clamp(-0.5, 0.5);
         maxd = maxd.max(dd.abs());
         state.delta[j] += dd;
-        state.a[j] += d[1];
-        state.b[j] = (state.b[j] + d[2]).max(1e-3 * b_typ);
+        state.offset[j] += d[1];
+        state.amplitude[j] = (state.amplitude[j] + d[2]).max(1e-3 * b_typ);
     }
     maxd
 }
@@ -288,7 +290,7 @@ fn refit_model_envelope(prior: &mut PriorMeans, state: &State) -> bool {
     let knot_model = prior.knot_model;
     let n_knots = state.delta.len();
     let pts: Vec<(f64, f64, f64)> = (0..n_knots - 1)
-        .flat_map(|j| [(1.0, knot_model[j].0, state.a[j]), (0.0, knot_model[j].1, state.b[j])])
+        .flat_map(|j| [(1.0, knot_model[j].0, state.offset[j]), (0.0, knot_model[j].1, state.amplitude[j])])
         .collect();
     if let Some((o, g)) = fit_offset_gain(&pts) {
         for (x, &(p0, p1)) in prior.x0.iter_mut().zip(knot_model) {

@@ -13,13 +13,12 @@ use crate::measure::signal::FringeError;
 pub(super) const T_KNOT: f64 = 4096.0;
 
 /// Knots over the first unit of the plain grid coordinate c₀ = path/Δs + k/T (the first
-/// fringe of travel) when [`TrackConfig::start_walk_rad`] is set: REFINE_START + 1 knots
+/// fringe of travel) when [`super::TrackConfig::start_walk_rad`] is set: REFINE_START + 1 knots
 /// instead of 2, each segment with that loose phase walk. A stage that reverses takes up its
 /// play first: its reading moves, its platform does not, and the fringe phase stays while the
-/// hint moves (10–20 nm of hint for a µm of lateral play, more along the axis). With one knot
-/// per fringe and a stiff walk the start phase was a compromise over the whole first fringe
-/// that missed that step (0.8 nm seen of 21 nm); with these knots the samples before the play
-/// is taken up set the start phase.
+/// hint moves (10–20 nm of hint for a µm of lateral play, more along the axis). One knot per
+/// fringe with a stiff walk makes the start phase a compromise over the whole first fringe that
+/// misses that step; with these knots the samples before the play is taken up set it.
 pub(super) const REFINE_START: usize = 64;
 
 /// Grid coordinate with `r` knot intervals over the first unit: c₀ ↦ r·c₀ on [0, 1),

@@ -26,13 +26,20 @@ pub(super) struct NormalEq {
 /// Current estimate: φ(k) = intercept + g·κ·(1 + γ)·(hint(k) - hint_ref) + δ(c_k), and the
 /// envelope A, B per knot.
 pub(super) struct State {
+    /// Phase at zero hint, rad.
     pub(super) intercept: f64,
+    /// The hint's phase per nm, g·κ, rad/nm.
     pub(super) rad_per_hint_nm: f64,
+    /// The hint at the first sample, nm.
     pub(super) hint_ref: f64,
+    /// Relative hint-scale correction γ.
     pub(super) gamma: f64,
+    /// Phase correction δ per knot, rad.
     pub(super) delta: Vec<f64>,
-    pub(super) a: Vec<f64>,
-    pub(super) b: Vec<f64>,
+    /// Envelope offset A per knot.
+    pub(super) offset: Vec<f64>,
+    /// Envelope amplitude B per knot.
+    pub(super) amplitude: Vec<f64>,
 }
 
 /// Number of per-sample sums of one grid segment.
@@ -190,12 +197,12 @@ pub(super) fn chunk_sums<const FMA: bool>(chunk: &Chunk, m: usize, acc: &mut [[f
 }
 
 impl NormalEq {
-    pub(super) fn new(jn: usize) -> Self {
+    pub(super) fn new(n_knots: usize) -> Self {
         Self {
-            diag: vec![[0.0; 6]; jn],
-            off: vec![[0.0; 6]; jn],
-            rhs: vec![Vector3::zeros(); jn],
-            border: vec![Vector3::zeros(); jn],
+            diag: vec![[0.0; 6]; n_knots],
+            off: vec![[0.0; 6]; n_knots],
+            rhs: vec![Vector3::zeros(); n_knots],
+            border: vec![Vector3::zeros(); n_knots],
             s_gg: 0.0,
             r_g: 0.0,
             nu2: 0.0,
@@ -203,11 +210,11 @@ impl NormalEq {
         }
     }
 
-    pub(super) fn resize(&mut self, jn: usize) {
-        self.diag.resize(jn, [0.0; 6]);
-        self.off.resize(jn, [0.0; 6]);
-        self.rhs.resize(jn, Vector3::zeros());
-        self.border.resize(jn, Vector3::zeros());
+    pub(super) fn resize(&mut self, n_knots: usize) {
+        self.diag.resize(n_knots, [0.0; 6]);
+        self.off.resize(n_knots, [0.0; 6]);
+        self.rhs.resize(n_knots, Vector3::zeros());
+        self.border.resize(n_knots, Vector3::zeros());
     }
 
     pub(super) fn reset(&mut self) {
@@ -257,7 +264,7 @@ pub(super) fn accumulate_kernel<const FMA: bool, const SHAPED: bool>(
 ) {
     let (y, hint, c, seg_first) = (samples.y, samples.hint, samples.c, samples.seg_first);
     let n = y.len().min(hint.len()).min(c.len());
-    let jn = state.delta.len();
+    let n_knots = state.delta.len();
     normal.reset();
     let mut chunk = Chunk {
         w0: [0.0; CHUNK],
@@ -277,7 +284,7 @@ pub(super) fn accumulate_kernel<const FMA: bool, const SHAPED: bool>(
     // with zeros (the padding lanes of the others read the following samples in place)
     let mut tail = [[0.0; CHUNK]; 3];
     let shape = samples.shape.unwrap_or(ShapeView { harm: &[], r: &[], ca: &[] });
-    for j in 0..jn - 1 {
+    for j in 0..n_knots - 1 {
         let (mut k, k1) = (seg_first[j], seg_first[j + 1]);
         if k >= k1 {
             continue;
@@ -286,10 +293,10 @@ pub(super) fn accumulate_kernel<const FMA: bool, const SHAPED: bool>(
             jf: j as f64,
             d0: state.delta[j],
             d1: state.delta[j + 1],
-            a0: state.a[j],
-            a1: state.a[j + 1],
-            b0: state.b[j],
-            b1: state.b[j + 1],
+            a0: state.offset[j],
+            a1: state.offset[j + 1],
+            b0: state.amplitude[j],
+            b1: state.amplitude[j + 1],
             intercept: state.intercept,
             rad_per_hint_nm: state.rad_per_hint_nm,
             hint_ref: state.hint_ref,

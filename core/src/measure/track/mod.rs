@@ -72,8 +72,8 @@ struct Workspace {
     lower: Vec<Knot>,
     resid_knots: Vec<Knot>,
     delta: Vec<f64>,
-    a: Vec<f64>,
-    b: Vec<f64>,
+    offset: Vec<f64>,
+    amplitude: Vec<f64>,
     x0: Vec<Vector3<f64>>,
     seg_prec: Vec<Vector3<f64>>,
     decimated: Decimated,
@@ -408,13 +408,13 @@ fn run_stages(
         Ok(conv) => conv,
         Err(err) => {
             out.phase_rad = cgrid;
-            (ws.delta, ws.a, ws.b) = (state.delta, state.a, state.b);
+            (ws.delta, ws.offset, ws.amplitude) = (state.delta, state.offset, state.amplitude);
             return Err(err);
         }
     };
     let fit = FitSummary { g0, harm_sigma, harmonic: reported_harmonic(shape, &harm), counted };
     let result = finish(ws, grid, out, cgrid, &state, &conv, &fit, hint_dl_nm, cfg, kappa, warnings);
-    (ws.delta, ws.a, ws.b) = (state.delta, state.a, state.b);
+    (ws.delta, ws.offset, ws.amplitude) = (state.delta, state.offset, state.amplitude);
     result
 }
 

@@ -197,23 +197,23 @@ pub(super) fn initial_state(
         hint_ref: start.hint_dl_nm[0],
         gamma: 0.0,
         delta: std::mem::take(&mut ws.delta),
-        a: std::mem::take(&mut ws.a),
-        b: std::mem::take(&mut ws.b),
+        offset: std::mem::take(&mut ws.offset),
+        amplitude: std::mem::take(&mut ws.amplitude),
     };
     let knot_c: Vec<f64> =
         grid.knot_s.iter().zip(&grid.knot_k).map(|(&s, &k)| envelope_coordinate(s, k, scale.fringe_nm)).collect();
-    start.envelope.eval_into(&knot_c, &grid.knot_s, start.harm, MAX_EXTRAP, &mut state.a, &mut state.b);
+    start.envelope.eval_into(&knot_c, &grid.knot_s, start.harm, MAX_EXTRAP, &mut state.offset, &mut state.amplitude);
     let (knot_model, model_gain) = model_envelope_at_knots(
         from.model,
         &cfg.envelope,
         grid,
         from.cgrid,
         &ws.extrema,
-        &mut state.a,
-        &mut state.b,
+        &mut state.offset,
+        &mut state.amplitude,
         warnings,
     );
-    let b_typ = state.b.iter().sum::<f64>() / n_knots as f64;
+    let b_typ = state.amplitude.iter().sum::<f64>() / n_knots as f64;
     let (intercept, r_anchor) = start_phase(
         from.scale_fit,
         &ws.residuals,
@@ -232,7 +232,7 @@ pub(super) fn initial_state(
         .unwrap_or_else(|| estimate_noise_sigma(start.intensity, &mut ws.scratch).powi(2))
         .max((1e-7 * b_typ).powi(2));
     ws.x0.clear();
-    ws.x0.extend((0..n_knots).map(|j| Vector3::new(state.delta[j], state.a[j], state.b[j])));
-    let priors = priors(cfg, grid, scale, &state.b, b_typ, from.scale_fit, &mut ws.seg_prec);
+    ws.x0.extend((0..n_knots).map(|j| Vector3::new(state.delta[j], state.offset[j], state.amplitude[j])));
+    let priors = priors(cfg, grid, scale, &state.amplitude, b_typ, from.scale_fit, &mut ws.seg_prec);
     Start { state, knot_model, model_gain, b_typ, r_meas, priors }
 }

@@ -80,7 +80,13 @@ pub(super) fn window_regressors(delta: f64, u: f64) -> SVector<f64, WINDOW_P> {
 /// The fit is linear. Without the trend terms, a hint-scale error ε biases the harmonics by
 /// about ε·(phase span of the window) (a 0.06 % scale error over two fringes: 4e-4, 2.5 % of a
 /// 2.8 % harmonic), which the smoother then folds into envelope swings and nm of phase error.
-pub(super) fn window_harmonic(y: &[f64], hint: &[f64], a: &[f64], b: &[f64], gk: f64) -> Option<WindowFit> {
+pub(super) fn window_harmonic(
+    y: &[f64],
+    hint: &[f64],
+    a: &[f64],
+    b: &[f64],
+    rad_per_hint_nm: f64,
+) -> Option<WindowFit> {
     const P: usize = WINDOW_P;
     let m = y.len();
     if m < 40 {
@@ -102,7 +108,7 @@ pub(super) fn window_harmonic(y: &[f64], hint: &[f64], a: &[f64], b: &[f64], gk:
     let mut aty = SVector::<f64, P>::zeros();
     let mut cnt = 0usize;
     for i in (0..m).step_by(stride) {
-        let x = window_regressors(gk * (hint[i] - h0), pos(i));
+        let x = window_regressors(rad_per_hint_nm * (hint[i] - h0), pos(i));
         let yn = (y[i] - a[i]) / b[i];
         ata += x * x.transpose();
         aty += x * yn;
@@ -136,7 +142,7 @@ pub(super) fn window_harmonic(y: &[f64], hint: &[f64], a: &[f64], b: &[f64], gk:
     let mut rss = 0.0;
     let mut rss_raw = 0.0;
     for i in (0..m).step_by(stride) {
-        let x = window_regressors(gk * (hint[i] - h0), pos(i));
+        let x = window_regressors(rad_per_hint_nm * (hint[i] - h0), pos(i));
         let r = (y[i] - a[i]) / b[i] - p.dot(&x);
         rss += r * r;
         rss_raw += (r * b[i]).powi(2);
