@@ -38,6 +38,7 @@ pub(super) struct System<'a> {
 impl<'a> System<'a> {
     /// The buffers sized for `n_knots` knots: the blocks and vectors zeroed, the normal
     /// equations and the factor resized.
+    #[inline(always)]
     pub(super) fn sized(
         n_knots: usize,
         data: &'a mut NormalEq,
