@@ -195,7 +195,11 @@ fn every_arrow_between_core_stages_points_down_the_data_flow() {
             }
         }
     }
-    assert!(wrong.is_empty(), "arrows from a lower stage to a higher one:\n{}", wrong.into_iter().collect::<Vec<_>>().join("\n"));
+    assert!(
+        wrong.is_empty(),
+        "arrows from a lower stage to a higher one:\n{}",
+        wrong.into_iter().collect::<Vec<_>>().join("\n")
+    );
 }
 
 #[test]

@@ -4,8 +4,8 @@
 
 use photorobot_app::cli::run;
 use photorobot_core::bench::BenchPreset;
-use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::validate::{waypoints, ValidationMotion};
 use photorobot_e2e::independent::{cavity, lab_records, Profile, Recorder, TABLE2};
 use serde_json::Value;

@@ -6,8 +6,8 @@
 
 use photorobot_app::cli::{run, Outcome};
 use photorobot_core::calibration::{report_from_traces, CalibrationReport, Mode};
-use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::session::Session;
 use photorobot_core::trace::Trace;
 use serde_json::Value;

@@ -2,9 +2,10 @@
 //! goes through fringe analysis and is compared with the hidden truth (issue: optics, bench, fringes).
 
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
-use photorobot_core::measure::{self, Measurement, PhaseModel};
+use photorobot_core::measure::{self, Measurement};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::optics::FabryPerot;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::RobotDescription;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
 use photorobot_core::trace::Trace;

@@ -6,8 +6,8 @@
 use photorobot_app::cli::run;
 use photorobot_core::bench::{BenchPreset, VirtualBench};
 use photorobot_core::identify::design::candidate_pool;
-use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::random::{random_plan, Family};
 use photorobot_core::validate::{run_validation, waypoints, ValidationMotion};
 use serde_json::Value;

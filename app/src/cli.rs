@@ -4,12 +4,13 @@
 use clap::{Parser, Subcommand};
 use photorobot_core::bench::{run_plan, Bench, BenchError, RunControl, RunError, VirtualBench};
 use photorobot_core::files::FileError;
-use photorobot_core::measure::{self, MeasureError, Measurement, PhaseModel};
+use photorobot_core::measure::{self, MeasureError, Measurement};
 use photorobot_core::model::air::AmbientConditions;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::frames::FrameTree;
 use photorobot_core::model::kinematics::{Chain, LimitViolation};
 use photorobot_core::model::optics::OpticalParams;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::RobotDescription;
 use photorobot_core::plan::Plan;
 use photorobot_core::trace::{Trace, TraceError};

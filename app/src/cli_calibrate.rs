@@ -17,8 +17,8 @@ use photorobot_core::calibration::{
 use photorobot_core::files::{save_ron, write_atomic};
 use photorobot_core::identify::signs::{SignSource, TranslationSign};
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
-use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::session::{find_recovery, recording::record, BenchInfo, Session, AUTOSAVE_FILE};
 use photorobot_core::trace::import::{read_folder, ColumnMapping};
 use photorobot_core::trace::Trace;

@@ -5,8 +5,8 @@
 use crate::decimate::Decimator;
 use crate::dialogs::Dialogs;
 use crate::worker::{Command, EffectValidation, Event, Pace, ValidationPair, Worker};
-use photorobot_core::alignment::SignalQuality;
 use photorobot_core::calibration::{CalibrationReport, Mode};
+use photorobot_core::measure::alignment::SignalQuality;
 use photorobot_core::measure::Measurement;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::kinematics::Chain;

@@ -2,9 +2,9 @@
 //! Traces are synthetic two-beam signals: a dense back-and-forth scan (worst case) and a calibration-like move.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use photorobot_core::fringes::{
-    count_extrema, track_phase, CountDirection, HysteresisConfig, PhaseTracker, TrackConfig, TwoBeamSignal,
-};
+use photorobot_core::measure::extrema::{count_extrema, CountDirection, HysteresisConfig};
+use photorobot_core::measure::signal::TwoBeamSignal;
+use photorobot_core::measure::track::{track_phase, PhaseTracker, TrackConfig};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::hint::black_box;

@@ -7,10 +7,10 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use photorobot_core::calibration::{plans, Mode};
 use photorobot_core::identify::joint::{estimate, JointOptions};
 use photorobot_core::identify::{predict, Observation, ObservationKind};
-use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::air::AmbientConditions;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::optics::{FabryPerot, OpticalParams};
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::RobotDescription;
 use photorobot_core::plan::{MotionLimits, TimedMotion};
 

@@ -2,7 +2,7 @@
 //! path like a Gaussian (as on a ±4° goniometer scan, where the tilt coupling exp(-(k·w0·θ)²/2)
 //! changes B by up to 50 % per fringe). Exact hint, white noise 3.5e-6 (virtual bench level).
 //! `cargo run --release -p photorobot-core --example envelope_gauss`
-use photorobot_core::fringes::{track_phase, TrackConfig};
+use photorobot_core::measure::track::{track_phase, TrackConfig};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};

@@ -10,8 +10,8 @@
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::identify::measurements::observations_from_traces;
 use photorobot_core::identify::multistart::extract_options;
-use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::model::phase::PhaseModel;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

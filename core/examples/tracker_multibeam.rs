@@ -1,8 +1,8 @@
 //! Debug: tracker error on exact multi-beam signals along a bench motion, vs beam count.
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
-use photorobot_core::fringes::{self, TrackConfig};
-use photorobot_core::measure::PhaseModel;
+use photorobot_core::measure::track::{self, TrackConfig};
 use photorobot_core::model::optics::FabryPerot;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
 use std::sync::atomic::AtomicBool;
 
@@ -42,7 +42,7 @@ fn main() {
         ..TrackConfig::default()
     };
     let report = |name: &str, y: &[f64]| {
-        let tr = match fringes::track_phase(y, &truth, 1560.0, m.n_air, &cfg) {
+        let tr = match track::track_phase(y, &truth, 1560.0, m.n_air, &cfg) {
             Ok(t) => t,
             Err(e) => {
                 println!("{name}: {e}");

@@ -8,9 +8,9 @@
 //! `cargo run --release -p photorobot-core --example validation_truth [-- 0 1 ...]`
 use photorobot_core::bench::{BenchPreset, VirtualBench};
 use photorobot_core::diagnose::validation::extended_model;
-use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::validate::{run_validation_planned, ValidationMotion};
 
 fn main() {

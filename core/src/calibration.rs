@@ -16,8 +16,8 @@ use crate::identify::verdict::{
     differing_parameters, jackknife_sigma, rms_threshold, worst_traces, FitCheck, Verdict, WORST_TRACES,
 };
 use crate::identify::N_EXTRINSICS;
-use crate::measure::PhaseModel;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use crate::model::phase::PhaseModel;
 use crate::plan::Plan;
 use crate::trace::Trace;
 use crate::validate::forecast::{forecast, ValidationForecast};

@@ -15,7 +15,8 @@ use photorobot_core::hardware::emulator::{
     SmarActEmulatorConfig,
 };
 use photorobot_core::hardware::{ControllerBench, HardwareConfig, PiGcs, SmarActMcs, StageController, VirtualStages};
-use photorobot_core::measure::{self, Measurement, PhaseModel};
+use photorobot_core::measure::{self, Measurement};
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::RobotDescription;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
 use photorobot_core::trace::Trace;

@@ -27,7 +27,8 @@ use photorobot_core::diagnose::validation::extended_model;
 use photorobot_core::diagnose::EXTRACT_OPTIONS;
 use photorobot_core::identify::measurements::observations_from_traces;
 use photorobot_core::identify::{Observation, ObservationKind};
-use photorobot_core::measure::{self, Measurement, PhaseModel};
+use photorobot_core::measure::{self, Measurement};
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_e2e::{library_effects_at_typical_size, session_plan};
 use std::sync::atomic::AtomicBool;
 

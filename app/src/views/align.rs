@@ -1,10 +1,10 @@
 //! Pre-alignment: a large live gauge of reflected power and fringe visibility that guides the
 //! technician's manual positioning of the fiber (or the lamella tilt) until the signal is good
-//! enough to calibrate, with the thresholds stated (`photorobot_core::alignment`).
+//! enough to calibrate, with the thresholds stated (`photorobot_core::measure::alignment`).
 
 use crate::state::AppState;
 use egui::{Color32, RichText};
-use photorobot_core::alignment::{MIN_FRINGE_SNR, MIN_VISIBILITY};
+use photorobot_core::measure::alignment::{MIN_FRINGE_SNR, MIN_VISIBILITY};
 use std::sync::atomic::Ordering;
 
 fn gauge(ui: &mut egui::Ui, label: &str, value: f64, full_scale: f64, threshold: Option<f64>, text: String) {

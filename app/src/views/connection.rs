@@ -13,8 +13,8 @@ use photorobot_core::hardware::controller_bench::{ControllerKind, FixedLaser, Ha
 use photorobot_core::hardware::emulator::{EmuClock, LocalEmulators};
 use photorobot_core::hardware::probe::{identify, Identity};
 use photorobot_core::hardware::{ControllerBench, HwError};
-use photorobot_core::measure::PhaseModel;
 use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::{Drive, RobotDescription};
 use serde::{Deserialize, Serialize};
 use std::sync::mpsc::{channel, Receiver, Sender};

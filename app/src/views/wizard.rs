@@ -5,7 +5,7 @@
 use crate::state::{AppState, StepState};
 use egui::RichText;
 use egui_plot::{Line, Plot, PlotPoints};
-use photorobot_core::alignment::SignalQuality;
+use photorobot_core::measure::alignment::SignalQuality;
 
 /// Draw the wizard.
 pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {

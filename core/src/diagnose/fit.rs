@@ -9,10 +9,10 @@
 use crate::diagnose::candidates::Candidate;
 use crate::diagnose::projection::{Projector, RANK_TOLERANCE};
 use crate::identify::{parameter_scale, predict_with_path, Observation, ObservationKind, N_EXTRINSICS};
-use crate::measure::PhaseModel;
 use crate::model::effects::{apply_optics, Effect, EffectError};
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::optics::FabryPerot;
+use crate::model::phase::PhaseModel;
 use nalgebra::{DMatrix, DVector};
 
 /// The model under diagnosis: extrinsics, the effects added so far with their values (in the

@@ -3,11 +3,11 @@
 use super::motions::{paper_calibration, SimulatedBench};
 use super::*;
 use crate::identify::{Observation, ObservationKind};
-use crate::measure::PhaseModel;
 use crate::model::air::AmbientConditions;
 use crate::model::effects::Effect;
 use crate::model::extrinsics::Extrinsics;
 use crate::model::optics::{BackFace, OpticalParams};
+use crate::model::phase::PhaseModel;
 use crate::model::robot::RobotDescription;
 
 fn base() -> PhaseModel {

@@ -9,9 +9,9 @@
 
 use crate::bench::Bench;
 use crate::calibration::{thin, CURVE_POINTS};
-use crate::measure::PhaseModel;
 use crate::model::effects::{apply_all, apply_optics, Effect, EffectError};
 use crate::model::extrinsics::Extrinsics;
+use crate::model::phase::PhaseModel;
 use crate::validate::{run_validation_planned, Compensation, ValidationMotion};
 use serde::{Deserialize, Serialize};
 

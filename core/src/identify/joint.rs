@@ -3,9 +3,9 @@
 
 use crate::identify::observability::{analyse, IdentifiabilityReport, Options, ParamInfo};
 use crate::identify::{parameter_scale, predict, Observation, ObservationKind, N_EXTRINSICS};
-use crate::measure::PhaseModel;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::optics::FabryPerot;
+use crate::model::phase::PhaseModel;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
 use serde::Serialize;

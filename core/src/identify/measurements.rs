@@ -1,10 +1,11 @@
 //! Recorded traces → observations for the identifiers: gap changes along motions, absolute gaps
 //! from sweeps, fringe amplitudes along tilt scans. Owns how a trace is cut into observations and what σ each gets.
 
-use crate::fringes::{detect_extrema, Extremum, ExtremumKind, HysteresisConfig};
 use crate::identify::{parabola_top, AmplitudeNeighbours, Observation, ObservationKind, VERTEX_WINDOW_HALF_FRINGE};
-use crate::measure::{self, AnalyseOptions, MeasureError, Measurement, PhaseModel};
+use crate::measure::extrema::{detect_extrema, Extremum, ExtremumKind, HysteresisConfig};
+use crate::measure::{self, AnalyseOptions, MeasureError, Measurement};
 use crate::model::effects::update_approach;
+use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
 
 /// How traces become observations.
@@ -126,7 +127,7 @@ fn gap_across_pause(
     if !dphi.is_finite() {
         return None;
     }
-    let dl_nm = dphi / crate::fringes::rad_per_nm(ends_after.wavelength_nm, ends_after.n_air);
+    let dl_nm = dphi / crate::measure::signal::rad_per_nm(ends_after.wavelength_nm, ends_after.n_air);
     Some(Observation {
         label: after.meta.label.clone(),
         kind: ObservationKind::GapChange { from_display: from, to_display: to, dl_nm },

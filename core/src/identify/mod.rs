@@ -2,7 +2,7 @@
 //! identifiability, experiment design. Owns the observation types and the forward prediction shared by every estimator.
 //!
 //! Every observation is predicted by the same forward model the virtual bench uses
-//! ([`crate::measure::PhaseModel`]): phase-equivalent gap changes from the fringes, absolute
+//! ([`crate::model::phase::PhaseModel`]): phase-equivalent gap changes from the fringes, absolute
 //! gaps from sweeps, fringe amplitudes (reflected power) from tilt scans.
 
 pub mod design;
@@ -15,10 +15,10 @@ pub mod signs;
 pub mod start;
 pub mod verdict;
 
-use crate::measure::PhaseModel;
 use crate::model::effects::Effect;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::optics::FabryPerot;
+use crate::model::phase::{PathForward, PhaseModel};
 use serde::{Deserialize, Serialize};
 
 /// Number of extrinsic parameters.
@@ -311,11 +311,8 @@ pub fn predict(model: &PhaseModel, fp: &FabryPerot, e: &Extrinsics, obs: &Observ
     predict_with_path(model, fp, e, obs, gain, &[])
 }
 
-/// [`predict`] with path effects (drift, path scale: [`Effect::gap_change_nm`]) acting on the
-/// gap at the observation's times, in the order given, as the virtual bench applies them, and
-/// cyclic errors ([`Effect::cyclic_error_nm`]) on the phase-equivalent gaps.
-/// Geometric effects act through `model.chain` (see [`crate::model::effects::apply_all`]),
-/// optical ones through `fp` (see [`crate::model::effects::apply_optics`]).
+/// [`predict`] with path effects (drift, path scale, cyclic errors, reversal play) acting
+/// as the virtual bench applies them ([`PathForward`]).
 pub fn predict_with_path(
     model: &PhaseModel,
     fp: &FabryPerot,
@@ -324,41 +321,13 @@ pub fn predict_with_path(
     gain: f64,
     path: &[Effect],
 ) -> f64 {
-    let optical_gap_um = |length_um: f64, t_s: f64| {
-        let mut gap_um = length_um.abs();
-        for p in path {
-            gap_um += p.gap_change_nm(t_s, gap_um) * 1e-3;
-        }
-        gap_um
-    };
+    let forward = PathForward::new(model, fp, e, path);
+    let optical_gap_um = |length_um: f64, t_s: f64| forward.optical_gap_um(length_um, t_s);
     let t_mid = 0.5 * (obs.time_s[0] + obs.time_s[1]);
-    let play = crate::model::effects::reversal_play(path, model.chain.description());
-    let reversal = play.iter().any(|p| *p != 0.0);
     // The end poses' real joints: the reading moved by any reversal error (start, end).
-    let real = |q: &[f64; 6], end: usize| {
-        if reversal {
-            crate::model::effects::real_joints(q, &obs.approach[end], &play)
-        } else {
-            *q
-        }
-    };
-    let cavity = |q: &[f64; 6]| {
-        let q = model.chain.description().q_from_display(q);
-        e.cavity(&model.chain.end_effector(&q)).ok()
-    };
-    let phase_gap_nm = |q: &[f64; 6], t_s: f64| match cavity(q) {
-        Some(c) => {
-            let gap_um = optical_gap_um(c.length_um, t_s);
-            let mut nm = fp.fundamental_phase_rad(gap_um, c.tilt_rad) * fp.wavelength_nm()
-                / (4.0 * std::f64::consts::PI * fp.medium_index());
-            let phase_rad = 2.0 * std::f64::consts::PI * gap_um / fp.fringe_period_um();
-            for p in path {
-                nm += p.cyclic_error_nm(phase_rad);
-            }
-            nm
-        }
-        None => f64::NAN,
-    };
+    let real = |q: &[f64; 6], end: usize| forward.real_joints(q, &obs.approach[end]);
+    let cavity = |q: &[f64; 6]| forward.cavity(q);
+    let phase_gap_nm = |q: &[f64; 6], t_s: f64| forward.phase_gap_nm(q, t_s);
     match &obs.kind {
         ObservationKind::GapChange { from_display, to_display, .. } => {
             phase_gap_nm(&real(to_display, 1), obs.time_s[1]) - phase_gap_nm(&real(from_display, 0), obs.time_s[0])

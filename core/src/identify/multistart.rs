@@ -13,8 +13,8 @@ use crate::identify::measurements::{observations_from_traces, ExtractOptions, Ex
 use crate::identify::start::{same_branch, start_branches, travels};
 use crate::identify::verdict::{BranchSummary, TIE_DELTA_CHI2};
 use crate::identify::{paper, Observation, ObservationKind};
-use crate::measure::PhaseModel;
 use crate::model::extrinsics::Extrinsics;
+use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
 
 /// Which identifier.

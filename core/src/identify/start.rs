@@ -11,11 +11,11 @@
 //! branch of the discrete ambiguities (a travel is blind to the sign of each tilt component),
 //! and the full identification starts from each one and keeps the one that fits the signed data.
 
-use crate::fringes::{detect_extrema, HysteresisConfig};
 use crate::identify::{parameter_scale, predict, Observation, ObservationKind, N_EXTRINSICS};
-use crate::measure::PhaseModel;
+use crate::measure::extrema::{detect_extrema, HysteresisConfig};
 use crate::model::extrinsics::Extrinsics;
 use crate::model::optics::FabryPerot;
+use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};

@@ -7,4 +7,5 @@ pub mod extrinsics;
 pub mod frames;
 pub mod kinematics;
 pub mod optics;
+pub mod phase;
 pub mod robot;

@@ -8,8 +8,8 @@
 //! peak to peak of `G·δ` over draws of δ: above a motion's target, the data do not determine
 //! the extrinsics well enough for that validation, whatever the run then shows.
 
-use crate::measure::PhaseModel;
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use crate::model::phase::PhaseModel;
 use crate::validate::{waypoints, ValidationMotion};
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use rand::SeedableRng;

@@ -10,10 +10,11 @@
 pub mod forecast;
 
 use crate::bench::{run_plan, Bench, RunControl};
-use crate::measure::{self, Measurement, PhaseModel};
+use crate::measure::{self, Measurement};
 use crate::model::effects::Backlash;
 use crate::model::extrinsics::Extrinsics;
 use crate::model::kinematics::{IgmError, LimitViolation};
+use crate::model::phase::PhaseModel;
 use crate::plan::{JointTarget, Plan, Segment};
 use crate::trace::Trace;
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};

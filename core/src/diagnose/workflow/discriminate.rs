@@ -10,7 +10,7 @@ use crate::diagnose::scoring;
 use crate::diagnose::settings::{DETECTABLE_SCORE, EQUIVALENT_SHARE, MAX_MOTIONS};
 use crate::diagnose::step::Step;
 use crate::identify::Observation;
-use crate::measure::PhaseModel;
+use crate::model::phase::PhaseModel;
 use nalgebra::{DMatrix, DVector};
 
 /// The pool, each motion's contribution per target, and each target's absorbed share.

@@ -13,8 +13,8 @@ use crate::diagnose::scoring::{self, CandidateScore};
 use crate::diagnose::settings::{DETECTABLE_SCORE, DISCRIMINATING_PREFIX, EXTRACT_OPTIONS, NOISE_FLOOR_FACTOR};
 use crate::diagnose::step::Step;
 use crate::identify::{Observation, ObservationKind, N_EXTRINSICS};
-use crate::measure::PhaseModel;
 use crate::model::extrinsics::Extrinsics;
+use crate::model::phase::PhaseModel;
 use nalgebra::DVector;
 
 /// Where the workflow stands: the next thing [`Diagnosis::step`] does.

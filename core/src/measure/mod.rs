@@ -1,22 +1,26 @@
 //! Trace → measurement: the motion hint from the recorded joints, then fringe analysis (motions) or the absolute gap (sweeps).
-//! Owns the choice of analysis for a trace and the phase convention shared with the identifier.
+//! Owns the choice of analysis for a trace. Lengths from fringes are phase-equivalent
+//! ([`crate::model::phase`]), the quantity the identifier predicts from the same model, so
+//! bench and fit cannot disagree on conventions.
 //!
-//! Phase convention: every length measured from fringes is *phase-equivalent*:
-//! `Δφ·λ/(4π·n_air)`, with φ the phase of the fringe's fundamental
-//! ([`FabryPerot::fundamental_phase_rad`]: the first beam's phase pulled by the higher beams),
-//! which includes the tilt path term (the fringes follow the perpendicular fiber-to-lamella
-//! distance, `L·cos γ`) and the Gouy phase. The identifier predicts the same quantity from the
-//! same model, so bench and fit cannot disagree on conventions.
+//! The analyses: extremum counting ([`extrema`]), sub-fringe phase tracking ([`track`]),
+//! the absolute gap from a wavelength sweep ([`sweep`]), the signal quality before
+//! calibration ([`alignment`]), and what they share ([`signal`]).
 
-use crate::fringes::{self, CountDirection, FringeCount, Harmonic, HysteresisConfig, PhaseTrack, TrackConfig};
-use crate::model::air::{air_index_ciddor, AmbientConditions};
-use crate::model::extrinsics::Extrinsics;
-use crate::model::kinematics::Chain;
-use crate::model::optics::{FabryPerot, FringeExpansion, OpticalParams};
-use crate::model::robot::RobotDescription;
-use crate::sweep::{self, GapEstimate, SweepConfig, SweepFit};
+pub mod alignment;
+pub mod extrema;
+pub mod hint;
+pub mod signal;
+pub mod sweep;
+pub mod track;
+
+use self::extrema::{CountDirection, FringeCount, HysteresisConfig};
+use self::signal::FringeError;
+use self::sweep::{GapEstimate, SweepConfig, SweepFit};
+use self::track::{PhaseTrack, TrackConfig};
+use crate::model::optics::FabryPerot;
+use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
-use std::f64::consts::PI;
 use thiserror::Error;
 
 /// Why a trace could not be analysed.
@@ -36,7 +40,7 @@ pub enum MeasureError {
         /// The trace's label.
         label: String,
         /// The analysis error.
-        source: fringes::FringeError,
+        source: FringeError,
     },
     /// Sweep analysis failed.
     #[error("trace `{label}`: wavelength sweep: {source}")]
@@ -46,121 +50,6 @@ pub enum MeasureError {
         /// The analysis error.
         source: sweep::SweepError,
     },
-}
-
-/// The model the analysis uses to predict the phase from the joints: the nominal (or current
-/// best) robot and extrinsics, the optics and the air.
-#[derive(Debug, Clone)]
-pub struct PhaseModel {
-    /// Robot chain.
-    pub chain: Chain,
-    /// Extrinsics (nominal before calibration).
-    pub extrinsics: Extrinsics,
-    /// Optics.
-    pub optics: OpticalParams,
-    /// Air index.
-    pub n_air: f64,
-}
-
-impl PhaseModel {
-    /// The model with the given parts; the air index from the ambient conditions at `wavelength_nm`.
-    pub fn new(
-        robot: RobotDescription,
-        extrinsics: Extrinsics,
-        optics: OpticalParams,
-        ambient: &AmbientConditions,
-        wavelength_nm: f64,
-    ) -> Result<Self, String> {
-        let n_air = air_index_ciddor(wavelength_nm, ambient).map_err(|e| format!("ambient conditions: {e}"))?;
-        Ok(Self { chain: Chain::new(robot), extrinsics, optics, n_air })
-    }
-
-    /// The model of a bench preset (its robot, optics, ambient conditions and laser) with the
-    /// given extrinsics.
-    pub fn of_preset(preset: &crate::bench::BenchPreset, extrinsics: Extrinsics) -> Result<Self, String> {
-        let robot = preset.robot_description().map_err(|e| e.to_string())?;
-        Self::new(robot, extrinsics, preset.optics, &preset.ambient, preset.laser.wavelength_nm)
-    }
-
-    /// The phase-equivalent gap (nm) at joints `q_display` (µm, °) and vacuum wavelength
-    /// `wavelength_nm`: `φ·λ/(4π·n)`.
-    pub fn phase_gap_nm(&self, fp: &FabryPerot, q_display: &[f64; 6]) -> f64 {
-        match self.gap_and_tilt(q_display) {
-            Some((gap_um, tilt_rad)) => {
-                fp.fundamental_phase_rad(gap_um, tilt_rad) * fp.wavelength_nm() / (4.0 * PI * fp.medium_index())
-            }
-            None => f64::NAN,
-        }
-    }
-
-    /// |L| (µm) and the tilt (rad) of the cavity at joints `q_display` (µm, °); None when the
-    /// beam misses the lamella.
-    pub fn gap_and_tilt(&self, q_display: &[f64; 6]) -> Option<(f64, f64)> {
-        let q = self.chain.description().q_from_display(q_display);
-        let c = self.extrinsics.cavity(&self.chain.end_effector(&q)).ok()?;
-        Some((c.length_um.abs(), c.tilt_rad))
-    }
-
-    /// The motion hint of a trace: predicted phase-equivalent gap change (nm) per sample,
-    /// relative to the first sample.
-    pub fn hint_nm(&self, trace: &Trace, wavelength_nm: f64) -> Result<Vec<f64>, String> {
-        let fp = FabryPerot::new(&self.optics, wavelength_nm, self.n_air).map_err(|e| e.to_string())?;
-        let mut out = Vec::with_capacity(trace.len());
-        let mut first = None;
-        for i in 0..trace.len() {
-            let g = self.phase_gap_nm(&fp, &trace.joints_display(i));
-            if !g.is_finite() {
-                return Err(format!("sample {i}: the beam misses the lamella at these joints"));
-            }
-            let g0 = *first.get_or_insert(g);
-            out.push(g - g0);
-        }
-        Ok(out)
-    }
-
-    /// The fringe's shape at every sample of a trace (`FabryPerot::fringe_shape` at the
-    /// model's gap and tilt): harmonics relative to the fundamental, offset and amplitude
-    /// (relative to the input power). On rotations the tilt phase turns the multi-beam
-    /// harmonics against the fundamental and the tilt coupling changes the amplitude by up
-    /// to 50 % per fringe; the model knows both at every joint position.
-    pub fn fringe_shape(&self, trace: &Trace, wavelength_nm: f64) -> Result<FringeShapeTrace, String> {
-        let fp = FabryPerot::new(&self.optics, wavelength_nm, self.n_air).map_err(|e| e.to_string())?;
-        let mut ex = FringeExpansion::default();
-        let n = trace.len();
-        let mut out = FringeShapeTrace {
-            harmonics: Vec::with_capacity(n),
-            offset: Vec::with_capacity(n),
-            amplitude: Vec::with_capacity(n),
-        };
-        for i in 0..n {
-            let (gap_um, tilt_rad) = self
-                .gap_and_tilt(&trace.joints_display(i))
-                .ok_or_else(|| format!("sample {i}: the beam misses the lamella at these joints"))?;
-            let s = fp.fringe_shape(gap_um, tilt_rad, &mut ex);
-            out.harmonics.push(Harmonic::from_phasors(s.second, s.third));
-            out.offset.push(s.offset);
-            out.amplitude.push(s.fundamental.max(f64::MIN_POSITIVE));
-        }
-        Ok(out)
-    }
-}
-
-/// The optics model's fringe along a trace ([`PhaseModel::fringe_shape`]).
-#[derive(Debug, Clone, Default)]
-pub struct FringeShapeTrace {
-    /// Harmonics relative to the fundamental, per sample.
-    pub harmonics: Vec<Harmonic>,
-    /// Fringe offset / input power, per sample.
-    pub offset: Vec<f64>,
-    /// Fundamental's amplitude / input power, per sample.
-    pub amplitude: Vec<f64>,
-}
-
-impl FringeShapeTrace {
-    /// The view the phase tracker takes.
-    pub fn as_model(&self) -> fringes::FringeModel<'_> {
-        fringes::FringeModel { harmonics: &self.harmonics, offset: &self.offset, amplitude: &self.amplitude }
-    }
 }
 
 /// What a motion trace gave.
@@ -190,7 +79,7 @@ pub struct MotionMeasurement {
 /// Motions shorter than this many fringes of hint travel are tracked with the free start
 /// whatever the options say. Their harmonic windows do not fit, and the smoother traded the
 /// unmodelled harmonic against the hint scale: a 1.5-fringe synthetic motion ended 8.79 nm
-/// off without it and 1.55 nm off with it (`fringes::tests::a_free_start_tracks_short_motions`).
+/// off without it and 1.55 nm off with it (`measure::track::tests::a_free_start_tracks_short_motions`).
 /// On `tests/cli_diagnose.rs`'s hidden-pivot session the diagnosis then named the hidden
 /// pivot itself, q4 along Z_w, at 19.93 ± 0.19 µm (an equivalent and a second pivot without).
 pub const SHORT_MOTION_FRINGES: f64 = 2.0;
@@ -259,7 +148,7 @@ pub struct AnalyseOptions {
     /// `validate::tests::a_validation_circle_tracks_its_small_gap_change`). A motion whose
     /// hint moves by more keeps the default: its fringes pin the phase (see [`crate::validate`]).
     pub free_phase_after: Option<usize>,
-    /// Track with the model's fringe shape at every sample (`fringes::track_phase_shaped`
+    /// Track with the model's fringe shape at every sample (`track::track_phase_shaped`
     /// with [`PhaseModel::fringe_shape`]) instead of a harmonic profile estimated from the data.
     pub shaped: bool,
 }
@@ -315,7 +204,7 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         ..TrackConfig::default()
     };
     // By default the harmonics are estimated along the path, not taken from the optics model: the
-    // shaped tracker (`fringes::track_phase_shaped` with `PhaseModel::fringe_shape`) is far
+    // shaped tracker (`track::track_phase_shaped` with `PhaseModel::fringe_shape`) is far
     // better when the model is right (table2-ideal, tracked dL against the truth: rotations
     // 2.3 → 0.18 nm rms, tilt scans 9.6 → 0.06 nm), but fragile when it is not: with the
     // design extrinsics the modelled tilt is off by ~1°, the 2nd harmonic's phase (it turns by
@@ -328,18 +217,18 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
     // the better estimate, not for losing the trace.
     let shaped_track = options.shaped.then(|| {
         let shape = model.fringe_shape(trace, wavelength_nm)?;
-        fringes::track_phase_shaped(&trace.irradiance, &hint, &shape.as_model(), wavelength_nm, model.n_air, &track_cfg)
+        track::track_phase_shaped(&trace.irradiance, &hint, &shape.as_model(), wavelength_nm, model.n_air, &track_cfg)
             .map_err(|e| e.to_string())
     });
     let (track, shaped, shaped_fallback) = match shaped_track {
         Some(Ok(track)) => (track, true, None),
         other => {
-            let track = fringes::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
+            let track = track::track_phase(&trace.irradiance, &hint, wavelength_nm, model.n_air, &track_cfg)
                 .map_err(|source| MeasureError::Fringes { label: label.clone(), source })?;
             (track, false, other.and_then(Result::err))
         }
     };
-    let count = fringes::count_extrema(
+    let count = extrema::count_extrema(
         &trace.irradiance,
         CountDirection::Hint(&hint),
         wavelength_nm,

@@ -1,0 +1,449 @@
+//! Absolute gap from a wavelength sweep: irradiance against wavelength, joints fixed → cavity gap (µm) with a standard uncertainty.
+//! Owns the wavenumber resampling and FFT seed, the nonlinear model fit (levenberg-marquardt), the paper's peak-FSR method, the Cramér-Rao references and a two-beam sweep test signal.
+//!
+//! Model fitted (two-beam, k = 2π/λ, x = (k - k0)/(half the k span)):
+//! `I(k) = A·(1 + a1·x + a2·x²) + B·cos(2·n·L·(k - k0) + ψ0 - [G(k, L) - G(k0, L)])`, with the
+//! optional Gouy phase `G = arctan(L/z_R(k))`, `z_R = π·w0²/λ = w0²·k/2`. The absolute
+//! phase 2·n·L·k0 is absorbed in ψ0 (the fringe order is not resolved), so the gap comes
+//! from the fringe frequency across the sweep.
+
+mod fit;
+mod peak_fsr;
+mod sign;
+#[cfg(test)]
+mod tests;
+
+pub use fit::fit_gap;
+pub use peak_fsr::peak_fsr_gap;
+pub use sign::{sign_from_sweeps, SweepSign};
+
+use crate::measure::signal::sincos;
+use nalgebra::{SMatrix, SVector};
+use rand::Rng;
+use rand_distr::{Distribution, Normal};
+use realfft::RealFftPlanner;
+use std::f64::consts::{PI, TAU};
+use thiserror::Error;
+
+/// Fewest samples a sweep may have.
+pub const MIN_SAMPLES: usize = 16;
+/// Fewest fringes across the sweep for the model fit.
+pub const MIN_FRINGES: f64 = 1.0;
+
+/// What is wrong with a sweep or its analysis.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SweepError {
+    /// No samples.
+    #[error("empty sweep: no samples")]
+    EmptySweep,
+    /// Too few samples to analyse.
+    #[error("sweep has {n} samples, at least {min} are needed")]
+    TooFewSamples {
+        /// Samples given.
+        n: usize,
+        /// Minimum.
+        min: usize,
+    },
+    /// Wavelength and irradiance arrays differ in length.
+    #[error("sweep has {wavelengths} wavelengths but {irradiances} irradiance samples")]
+    LengthMismatch {
+        /// Length of the wavelength array.
+        wavelengths: usize,
+        /// Length of the irradiance array.
+        irradiances: usize,
+    },
+    /// A sample is NaN or infinite.
+    #[error("non-finite {what} at sample {index}: {value}")]
+    NonFinite {
+        /// Which array.
+        what: &'static str,
+        /// Sample index.
+        index: usize,
+        /// The offending value.
+        value: f64,
+    },
+    /// The wavelengths are not strictly increasing or strictly decreasing.
+    #[error("wavelengths are not strictly monotonic at sample {index} ({previous} nm then {value} nm)")]
+    NonMonotonicWavelength {
+        /// Index of the offending sample.
+        index: usize,
+        /// The sample before.
+        previous: f64,
+        /// The offending value.
+        value: f64,
+    },
+    /// A scalar parameter is out of range.
+    #[error("invalid parameter {name} = {value}: {reason}")]
+    InvalidParameter {
+        /// Parameter name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// Why it is rejected.
+        reason: &'static str,
+    },
+    /// Too few fringes across the sweep for the method.
+    #[error("only {fringes:.2} fringes across the sweep, {min} needed: widen the sweep")]
+    TooFewFringes {
+        /// Fringes found.
+        fringes: f64,
+        /// Minimum.
+        min: f64,
+    },
+    /// The peak-FSR method needs two reflection peaks.
+    #[error("found {found} reflection peak(s) in the sweep, at least 2 are needed for the FSR")]
+    TooFewPeaks {
+        /// Peaks found.
+        found: usize,
+    },
+    /// The fitted fringe amplitude is not significant.
+    #[error("no fringe contrast: amplitude {amplitude:.3e} vs its uncertainty {sigma:.3e}")]
+    NoFringeContrast {
+        /// Fitted amplitude B.
+        amplitude: f64,
+        /// Its standard uncertainty.
+        sigma: f64,
+    },
+    /// The numerical fit failed.
+    #[error("fit failed: {0}")]
+    FitFailed(String),
+}
+
+/// Which method produced a gap estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GapMethod {
+    /// Peak of the FFT of the spectrum resampled uniformly in wavenumber (the seed).
+    FftPeak,
+    /// Nonlinear least-squares fit of the two-beam model.
+    ModelFit,
+    /// Free spectral range from the spacing of reflection peaks (paper eq. 35/36).
+    PeakFsr,
+}
+
+impl GapMethod {
+    /// Human-readable method name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            GapMethod::FftPeak => "FFT peak (wavenumber-resampled)",
+            GapMethod::ModelFit => "two-beam model fit (Levenberg-Marquardt)",
+            GapMethod::PeakFsr => "reflection-peak FSR (paper eq. 35/36)",
+        }
+    }
+}
+
+/// An absolute gap from one sweep.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GapEstimate {
+    /// Method used.
+    pub method: GapMethod,
+    /// Gap |L|, µm.
+    pub gap_um: f64,
+    /// Standard uncertainty of the gap, µm (statistical; for `FftPeak` a resolution).
+    pub sigma_um: f64,
+    /// Number of fringes across the sweep, 2·n·L·Δk/(2π).
+    pub fringes_across_sweep: f64,
+    /// RMS of the residuals of the method's fit, irradiance units.
+    pub fit_rms: f64,
+}
+
+/// Settings of the model fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SweepConfig {
+    /// Refractive index of air.
+    pub n_air: f64,
+    /// Mode-field radius w0 of the fiber for the Gouy phase, nm (None: no Gouy term).
+    /// With a fixed z_R the Gouy term is a constant phase and has no effect; with
+    /// z_R = π·w0²/λ it varies across the sweep and biases L by up to ~50 nm at 100 µm if
+    /// ignored.
+    pub gouy_waist_nm: Option<f64>,
+}
+
+impl Default for SweepConfig {
+    fn default() -> Self {
+        Self { n_air: 1.000_268, gouy_waist_nm: None }
+    }
+}
+
+/// Full result of the model fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepFit {
+    /// The gap estimate of the fit.
+    pub estimate: GapEstimate,
+    /// The FFT seed it started from.
+    pub seed: GapEstimate,
+    /// A: mean irradiance.
+    pub offset: f64,
+    /// a1: relative change of the offset from the centre to the short-wavelength end.
+    pub offset_slope: f64,
+    /// a2: relative curvature of the offset across the sweep.
+    pub offset_curvature: f64,
+    /// B: fringe amplitude (≥ 0).
+    pub amplitude: f64,
+    /// ψ0: fringe phase at the centre wavenumber k0, rad in [0, 2π).
+    pub phase_rad: f64,
+    /// Centre wavenumber k0 = 2π/λ0, rad/nm.
+    pub center_wavenumber: f64,
+    /// Standard uncertainty of B.
+    pub sigma_amplitude: f64,
+    /// Residual evaluations used by the optimiser.
+    pub evaluations: usize,
+}
+
+/// A validated sweep sorted by increasing wavenumber.
+struct Spectrum {
+    /// Wavenumber 2π/λ, rad/nm, increasing.
+    k: Vec<f64>,
+    /// Irradiance at each wavenumber.
+    y: Vec<f64>,
+}
+
+fn check_n_air(n_air: f64) -> Result<(), SweepError> {
+    if n_air.is_finite() && (1.0..2.0).contains(&n_air) {
+        Ok(())
+    } else {
+        Err(SweepError::InvalidParameter { name: "n_air", value: n_air, reason: "must be finite, in [1, 2)" })
+    }
+}
+
+fn validate(wavelength_nm: &[f64], irradiance: &[f64]) -> Result<Spectrum, SweepError> {
+    let n = wavelength_nm.len();
+    if n == 0 && irradiance.is_empty() {
+        return Err(SweepError::EmptySweep);
+    }
+    if n != irradiance.len() {
+        return Err(SweepError::LengthMismatch { wavelengths: n, irradiances: irradiance.len() });
+    }
+    if n < MIN_SAMPLES {
+        return Err(SweepError::TooFewSamples { n, min: MIN_SAMPLES });
+    }
+    for (what, xs) in [("wavelength", wavelength_nm), ("irradiance", irradiance)] {
+        if let Some(index) = xs.iter().position(|v| !v.is_finite()) {
+            return Err(SweepError::NonFinite { what, index, value: xs[index] });
+        }
+    }
+    if let Some(index) = wavelength_nm.iter().position(|&l| l <= 0.0) {
+        return Err(SweepError::InvalidParameter {
+            name: "wavelength_nm",
+            value: wavelength_nm[index],
+            reason: "wavelengths must be positive",
+        });
+    }
+    let increasing = wavelength_nm[1] > wavelength_nm[0];
+    for i in 1..n {
+        let ok =
+            if increasing { wavelength_nm[i] > wavelength_nm[i - 1] } else { wavelength_nm[i] < wavelength_nm[i - 1] };
+        if !ok {
+            return Err(SweepError::NonMonotonicWavelength {
+                index: i,
+                previous: wavelength_nm[i - 1],
+                value: wavelength_nm[i],
+            });
+        }
+    }
+    // increasing k = decreasing λ
+    let mut k: Vec<f64> = wavelength_nm.iter().map(|l| TAU / l).collect();
+    let mut y = irradiance.to_vec();
+    if increasing {
+        k.reverse();
+        y.reverse();
+    }
+    Ok(Spectrum { k, y })
+}
+
+/// Gouy phase G(k, L) = arctan(L/z_R(k)) and ∂G/∂L, with z_R = w0²·k/2.
+#[inline]
+fn gouy(k: f64, l: f64, w0: Option<f64>) -> (f64, f64) {
+    match w0 {
+        None => (0.0, 0.0),
+        Some(w) => {
+            let zr = 0.5 * w * w * k;
+            let x = l / zr;
+            (x.atan(), 1.0 / (zr * (1.0 + x * x)))
+        }
+    }
+}
+
+/// Fringe phase relative to the centre (without ψ0) and its derivative in L.
+#[inline]
+fn fringe_phase(k: f64, k0: f64, l: f64, n_air: f64, w0: Option<f64>, g0: (f64, f64)) -> (f64, f64) {
+    let (g, dg) = gouy(k, l, w0);
+    (2.0 * n_air * l * (k - k0) - (g - g0.0), 2.0 * n_air * (k - k0) - (dg - g0.1))
+}
+
+/// FFT seed: spectrum resampled uniformly in k by linear interpolation, detrended,
+/// Hann-windowed, zero-padded 16×; the peak (above 0.5 fringe) with parabolic
+/// interpolation. Returns (L in nm, fringes across the sweep).
+fn fft_seed(sp: &Spectrum, n_air: f64) -> Result<(f64, f64), SweepError> {
+    let n = sp.k.len();
+    let (kmin, kmax) = (sp.k[0], sp.k[n - 1]);
+    let dk = (kmax - kmin) / (n - 1) as f64;
+    let mut u = Vec::with_capacity(n);
+    let mut j = 0usize;
+    for i in 0..n {
+        let kk = kmin + dk * i as f64;
+        while j + 2 < n && sp.k[j + 1] < kk {
+            j += 1;
+        }
+        let t = ((kk - sp.k[j]) / (sp.k[j + 1] - sp.k[j])).clamp(0.0, 1.0);
+        u.push(sp.y[j] + t * (sp.y[j + 1] - sp.y[j]));
+    }
+    // detrend
+    let nf = n as f64;
+    let xm = (nf - 1.0) / 2.0;
+    let ym = u.iter().sum::<f64>() / nf;
+    let sxx: f64 = (0..n).map(|i| (i as f64 - xm).powi(2)).sum();
+    let sxy: f64 = u.iter().enumerate().map(|(i, v)| (i as f64 - xm) * (v - ym)).sum();
+    let slope = sxy / sxx;
+    let m = (16 * n).next_power_of_two();
+    let mut planner = RealFftPlanner::<f64>::new();
+    let r2c = planner.plan_fft_forward(m);
+    let mut input = r2c.make_input_vec();
+    for (i, v) in u.iter().enumerate() {
+        let w = 0.5 - 0.5 * (TAU * i as f64 / (nf - 1.0)).cos();
+        input[i] = (v - ym - slope * (i as f64 - xm)) * w;
+    }
+    let mut spec = r2c.make_output_vec();
+    r2c.process(&mut input, &mut spec).map_err(|e| SweepError::FitFailed(format!("FFT: {e}")))?;
+    let mag: Vec<f64> = spec.iter().map(|c| c.norm()).collect();
+    // fringes across the sweep for bin b: b·(n-1)/m
+    let bin_of_fringes = |f: f64| f * m as f64 / (n - 1) as f64;
+    let lo = bin_of_fringes(0.5).ceil() as usize;
+    let hi = mag.len() - 1;
+    if lo + 2 >= hi {
+        return Err(SweepError::TooFewSamples { n, min: MIN_SAMPLES });
+    }
+    let (mut best, mut bi) = (f64::NEG_INFINITY, lo);
+    for (b, &v) in mag.iter().enumerate().take(hi).skip(lo) {
+        if v > best {
+            best = v;
+            bi = b;
+        }
+    }
+    let (a, b, c) = (mag[bi - 1], mag[bi], mag[bi + 1]);
+    let den = a - 2.0 * b + c;
+    let delta = if den < 0.0 { (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { 0.0 };
+    let fringes = (bi as f64 + delta) * (n - 1) as f64 / m as f64;
+    let l = PI * fringes / (n_air * (kmax - kmin));
+    Ok((l, fringes))
+}
+
+/// Samples kept for the variable-projection grid that seeds the sweep fit.
+const GRID_SAMPLES: usize = 8192;
+
+/// Linear least squares of the model at fixed L: basis 1, x, x², cos θ, sin θ.
+/// Returns (coefficients, RSS).
+fn linear_at(sp: &Spectrum, k0: f64, half: f64, l: f64, n_air: f64, w0: Option<f64>) -> (SVector<f64, 5>, f64) {
+    let g0 = gouy(k0, l, w0);
+    let mut ata = SMatrix::<f64, 5, 5>::zeros();
+    let mut aty = SVector::<f64, 5>::zeros();
+    let mut yy = 0.0;
+    for (&k, &y) in sp.k.iter().zip(sp.y.iter()) {
+        let (th, _) = fringe_phase(k, k0, l, n_air, w0, g0);
+        let (s, c) = sincos(th);
+        let x = (k - k0) / half;
+        let v = SVector::<f64, 5>::from([1.0, x, x * x, c, s]);
+        ata += v * v.transpose();
+        aty += v * y;
+        yy += y * y;
+    }
+    match ata.cholesky() {
+        Some(ch) => {
+            let p = ch.solve(&aty);
+            (p, (yy - p.dot(&aty)).max(0.0))
+        }
+        None => (SVector::zeros(), f64::INFINITY),
+    }
+}
+
+/// FFT-peak gap (the seed of the fit, biased by leakage when there are few fringes). Its
+/// σ is a resolution: a uniform error over ± half a bin of the unpadded FFT.
+pub fn fft_gap(wavelength_nm: &[f64], irradiance: &[f64], n_air: f64) -> Result<GapEstimate, SweepError> {
+    check_n_air(n_air)?;
+    let sp = validate(wavelength_nm, irradiance)?;
+    fft_estimate(&sp, n_air)
+}
+
+fn fft_estimate(sp: &Spectrum, n_air: f64) -> Result<GapEstimate, SweepError> {
+    let n = sp.k.len();
+    let (l, fringes) = fft_seed(sp, n_air)?;
+    let span = sp.k[n - 1] - sp.k[0];
+    let k0 = 0.5 * (sp.k[0] + sp.k[n - 1]);
+    let (_, rss) = linear_at(sp, k0, 0.5 * span, l, n_air, None);
+    let l_per_fringe = PI / (n_air * span);
+    Ok(GapEstimate {
+        method: GapMethod::FftPeak,
+        gap_um: l * 1e-3,
+        sigma_um: 0.5 / 3f64.sqrt() * l_per_fringe * 1e-3,
+        fringes_across_sweep: fringes,
+        fit_rms: (rss / n as f64).sqrt(),
+    })
+}
+
+/// Cramér-Rao bound on the gap from the fringe frequency across a sweep (SPEC §5):
+/// σ_L ≥ √3/(n·K·√(η·N)), K = 2π·Δλ/λ², η = B²/(2σ²). nm.
+pub fn crlb_frequency_nm(span_nm: f64, center_nm: f64, eta: f64, samples: usize, n_air: f64) -> f64 {
+    let k = TAU * span_nm / (center_nm * center_nm);
+    3f64.sqrt() / (n_air * k * (eta * samples as f64).sqrt())
+}
+
+/// Cramér-Rao bound on the gap from the absolute fringe phase (once the order is known):
+/// σ_L ≥ λ/(4π·n·√(η·N)). nm.
+pub fn crlb_phase_nm(center_nm: f64, eta: f64, samples: usize, n_air: f64) -> f64 {
+    center_nm / (4.0 * PI * n_air * (eta * samples as f64).sqrt())
+}
+
+/// Two-beam sweep test signal:
+/// `I(λ) = A·(1 + s·(λ - λc)) + B·cos(4π·n·L/λ + φ0 - arctan(L/z_R(λ))) + N(0, σ²)`,
+/// with z_R = π·w0²/λ when a waist is given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwoBeamSweep {
+    /// Gap L, nm.
+    pub gap_nm: f64,
+    /// Refractive index of air.
+    pub n_air: f64,
+    /// Offset A at the centre wavelength.
+    pub offset: f64,
+    /// Relative slope s of the offset, per nm of wavelength.
+    pub offset_slope_per_nm: f64,
+    /// Centre wavelength λc of the slope, nm.
+    pub center_nm: f64,
+    /// Fringe amplitude B.
+    pub amplitude: f64,
+    /// Phase φ0, rad.
+    pub phase_rad: f64,
+    /// Mode-field radius w0 for the Gouy phase, nm.
+    pub gouy_waist_nm: Option<f64>,
+    /// White-noise σ, irradiance units.
+    pub noise_sigma: f64,
+}
+
+impl TwoBeamSweep {
+    /// Render the irradiance at the given wavelengths.
+    pub fn render<R: Rng + ?Sized>(&self, wavelength_nm: &[f64], rng: &mut R) -> Result<Vec<f64>, SweepError> {
+        if !(self.noise_sigma.is_finite() && self.noise_sigma >= 0.0) {
+            return Err(SweepError::InvalidParameter {
+                name: "noise_sigma",
+                value: self.noise_sigma,
+                reason: "must be finite and non-negative",
+            });
+        }
+        let noise = Normal::new(0.0, self.noise_sigma).map_err(|_| SweepError::InvalidParameter {
+            name: "noise_sigma",
+            value: self.noise_sigma,
+            reason: "invalid normal distribution",
+        })?;
+        Ok(wavelength_nm
+            .iter()
+            .map(|&l| {
+                let gouy = self.gouy_waist_nm.map_or(0.0, |w| {
+                    let zr = PI * w * w / l;
+                    (self.gap_nm / zr).atan()
+                });
+                let th = 4.0 * PI * self.n_air * self.gap_nm / l + self.phase_rad - gouy;
+                self.offset * (1.0 + self.offset_slope_per_nm * (l - self.center_nm))
+                    + self.amplitude * th.cos()
+                    + noise.sample(rng)
+            })
+            .collect())
+    }
+}
