@@ -116,23 +116,6 @@ impl Envelope<'_> {
     }
 }
 
-// --- The smoother: block-tridiagonal least squares on a knot grid ----------------------
-
-/// Samples per unit of the envelope's coordinate in time ([`envelope_coordinate`]).
-pub(super) const T_ENVELOPE: f64 = 4096.0;
-
-/// Where the levels of the fringe extrema are placed to be interpolated into the initial
-/// envelope: fringes of path travelled plus time in units of [`T_ENVELOPE`] samples (the
-/// grid's own mix). The envelope follows the coupling, which follows the joints; along the
-/// path alone, a motion whose gap stands still while a goniometer turns (a turning point of
-/// the gap) squeezes the coupling's change into no path at all (`diagnose::motions` test
-/// `a_rotation_that_starts_on_a_gap_turning_point_...`). Time costs accuracy on some
-/// synthetic rotations; over the pool motions of table2-ideal it is the better coordinate
-/// (`effect_visibility -- 5 --hinted --tracks`).
-pub(super) fn envelope_coordinate(path_nm: f64, k: f64, fringe_nm: f64) -> f64 {
-    path_nm / fringe_nm + k / T_ENVELOPE
-}
-
 /// Least squares of y ≈ o·w + g·x over (w, x, y) points (w = 1 for an offset row, 0 for a
 /// row without offset): (o, g), or None when singular or g ≤ 0.
 pub(super) fn fit_offset_gain(pts: &[(f64, f64, f64)]) -> Option<(f64, f64)> {

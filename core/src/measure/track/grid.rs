@@ -2,45 +2,12 @@
 //! travel or per [`T_KNOT`] samples of time), the start refinement, and the one full pass
 //! over the hint that builds it.
 
-use super::envelope::envelope_coordinate;
+use super::coordinates::{envelope_coordinate, refine_start, unrefine_start, T_KNOT};
 use super::harmonic::Harmonic;
 use super::inputs::TrackScale;
 use super::kernel::Decimated;
 use crate::measure::extrema::Extremum;
 use crate::measure::signal::FringeError;
-
-/// Samples per time knot: the grid coordinate is c = path/Δs + k/T_KNOT.
-pub(super) const T_KNOT: f64 = 4096.0;
-
-/// Knots over the first unit of the plain grid coordinate c₀ = path/Δs + k/T (the first
-/// fringe of travel) when [`super::TrackConfig::start_walk_rad`] is set: REFINE_START + 1 knots
-/// instead of 2, each segment with that loose phase walk. A stage that reverses takes up its
-/// play first: its reading moves, its platform does not, and the fringe phase stays while the
-/// hint moves (10–20 nm of hint for a µm of lateral play, more along the axis). One knot per
-/// fringe with a stiff walk makes the start phase a compromise over the whole first fringe that
-/// misses that step; with these knots the samples before the play is taken up set it.
-pub(super) const REFINE_START: usize = 64;
-
-/// Grid coordinate with `r` knot intervals over the first unit: c₀ ↦ r·c₀ on [0, 1),
-/// c₀ + r − 1 beyond. Continuous and strictly increasing; the identity for r = 1.
-#[inline]
-pub(super) fn refine_start(c0: f64, r: f64) -> f64 {
-    if c0 >= 1.0 {
-        c0 + (r - 1.0)
-    } else {
-        c0 * r
-    }
-}
-
-/// Inverse of [`refine_start`].
-#[inline]
-pub(super) fn unrefine_start(c: f64, r: f64) -> f64 {
-    if c >= r {
-        c - (r - 1.0)
-    } else {
-        c / r
-    }
-}
 
 /// Knot grid along c = path/Δs + k/T: knot j sits at c = j.
 #[derive(Default)]

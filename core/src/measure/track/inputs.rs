@@ -1,7 +1,7 @@
 //! Input checks and the scales of a trace: the first stages of the tracker.
 
 use super::config::{FringeModel, TrackConfig};
-use super::grid::{REFINE_START, T_KNOT};
+use super::coordinates::{REFINE_START, T_KNOT};
 use crate::measure::signal::{check_finite, rad_per_nm, FringeError};
 
 /// The trace's length and the scales every stage works in.
@@ -12,7 +12,7 @@ pub(super) struct TrackScale {
     pub(super) kappa: f64,
     /// One fringe of length change, nm; also the path travelled per knot of the grid.
     pub(super) fringe_nm: f64,
-    /// Knot intervals over the first fringe of travel ([`super::grid::refine_start`]).
+    /// Knot intervals over the first fringe of travel ([`super::coordinates::refine_start`]).
     pub(super) refine: f64,
     /// Decimation of the first Gauss-Newton iterations: every `decimation`-th sample.
     pub(super) decimation: usize,

@@ -19,6 +19,7 @@
 //! per-sample `kernel` and the block `factor`), and the uncertainty and outputs (`output`).
 
 mod config;
+mod coordinates;
 mod envelope;
 mod factor;
 mod gauss_newton;

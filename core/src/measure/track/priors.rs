@@ -2,7 +2,8 @@
 //! variance to weigh the samples with, and the random walks between knots.
 
 use super::config::{EnvelopeSource, FringeModel, TrackConfig};
-use super::envelope::{envelope_coordinate, knot_value, model_envelope_at_knots, Envelope, Knot, MAX_EXTRAP};
+use super::coordinates::envelope_coordinate;
+use super::envelope::{knot_value, model_envelope_at_knots, Envelope, Knot, MAX_EXTRAP};
 use super::grid::{Grid, PathView};
 use super::harmonic::HarmonicProfile;
 use super::hint_scale::ScaleFit;

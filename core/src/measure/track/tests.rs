@@ -1,8 +1,8 @@
 //! Tests of the phase tracker and of extremum counting on synthetic two-beam and multi-beam
 //! traces: accuracy, reported uncertainty, start phase, bad input.
 
+use super::coordinates::{refine_start, unrefine_start, REFINE_START};
 use super::factor::Factor;
-use super::grid::{refine_start, unrefine_start, REFINE_START};
 use super::output::phase_to_dl;
 use super::window::window_harmonic;
 use super::*;
