@@ -9,7 +9,7 @@
 //! writes them as a plan file (`discriminating-motions.ron` in the session folder) to record on
 //! the bench and add to the session's traces.
 
-use crate::cli::CliError;
+use super::common::CliError;
 use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
 use photorobot_core::diagnose::motions::{BenchRunner, MotionRunner};
 use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
@@ -174,7 +174,7 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
         None => None,
     };
     if a.json {
-        let text = crate::cli::json_text(&JsonOut {
+        let text = super::common::json_text(&JsonOut {
             result: &result,
             steps: &d.steps,
             skipped_traces: &skipped,
