@@ -6,6 +6,7 @@ pub mod decimate;
 pub mod dialogs;
 pub mod gui;
 pub mod session_io;
+pub mod settings;
 pub mod state;
 pub mod views;
 pub mod worker;

@@ -35,15 +35,15 @@ pub fn snapshot(s: &AppState) -> Snapshot {
             seed: Some(s.settings.seed),
         },
         robot: s.chain.description().clone(),
-        plans: s.steps.iter().map(|st| st.plan.clone()).collect(),
-        steps: s.steps.iter().map(|st| (st.traces.clone(), st.state == StepState::Done)).collect(),
+        plans: s.wizard.steps.iter().map(|st| st.plan.clone()).collect(),
+        steps: s.wizard.steps.iter().map(|st| (st.traces.clone(), st.state == StepState::Done)).collect(),
         imported: s.imported.clone(),
-        calibration: s.report.as_deref().cloned(),
-        diagnosis: match &s.diagnosis {
+        calibration: s.results.report.as_deref().cloned(),
+        diagnosis: match &s.diagnosis.result {
             Some(Ok(d)) => Some(diagnosis_record(s, d)),
-            _ => s.loaded_diagnosis.clone(),
+            _ => s.diagnosis.loaded_record.clone(),
         },
-        notes: s.notes.clone(),
+        notes: s.session.notes.clone(),
     }
 }
 
@@ -53,11 +53,11 @@ fn diagnosis_record(
     s: &AppState,
     d: &photorobot_core::diagnose::DiagnosisResult,
 ) -> photorobot_core::session::DiagnosisRecord {
-    let rows = match &s.diagnosis_validation {
+    let rows = match &s.diagnosis.validation {
         Some(crate::worker::EffectValidation::Ran { rows, .. }) => rows.as_slice(),
         _ => &[],
     };
-    photorobot_core::session::DiagnosisRecord::with_model(d, &s.diagnosis_effects, rows)
+    photorobot_core::session::DiagnosisRecord::with_model(d, &s.diagnosis.effects, rows)
 }
 
 impl Snapshot {
@@ -125,7 +125,7 @@ pub fn load(dir: &Path, recover: bool) -> Result<Loaded, String> {
 /// Put a loaded session into the state: the wizard's steps get the traces of the plans with the
 /// same name (done when the session says so), the rest are imported; the calibration is shown.
 pub fn apply(s: &mut AppState, loaded: Loaded, dir: &Path) {
-    for st in &mut s.steps {
+    for st in &mut s.wizard.steps {
         st.traces.clear();
         st.state = StepState::Pending;
     }
@@ -134,7 +134,7 @@ pub fn apply(s: &mut AppState, loaded: Loaded, dir: &Path) {
         .map(|p| loaded.session.traces.iter().filter(|r| r.step.is_some_and(|(q, _)| q == p)).all(|r| r.complete))
         .collect();
     for ((name, traces), complete) in loaded.plans.into_iter().zip(complete_plans) {
-        match s.steps.iter_mut().find(|st| st.plan.name == name) {
+        match s.wizard.steps.iter_mut().find(|st| st.plan.name == name) {
             Some(st) if !traces.is_empty() => {
                 st.traces = traces;
                 st.state = if complete { StepState::Done } else { StepState::Stopped("recovered: incomplete".into()) };
@@ -143,19 +143,19 @@ pub fn apply(s: &mut AppState, loaded: Loaded, dir: &Path) {
             None => s.imported.extend(traces),
         }
     }
-    s.report = loaded.session.calibration.map(Box::new);
-    if let Some(r) = &s.report {
+    s.results.report = loaded.session.calibration.map(Box::new);
+    if let Some(r) = &s.results.report {
         s.extrinsics = r.extrinsics;
     }
-    s.notes = loaded.session.notes;
+    s.session.notes = loaded.session.notes;
     s.analyses.clear();
-    s.validation = None;
+    s.results.validation = None;
     // The session's diagnosis record is kept for the next save and shown as a record by the
     // Diagnosis view (it is a summary, not a result: no steps, no residuals to draw).
     s.clear_diagnosis();
-    s.loaded_diagnosis = loaded.session.diagnosis;
-    s.session_dir = Some(dir.to_path_buf());
-    s.dirty = false;
+    s.diagnosis.loaded_record = loaded.session.diagnosis;
+    s.session.dir = Some(dir.to_path_buf());
+    s.session.dirty = false;
     remember(s, dir);
 }
 

@@ -9,6 +9,7 @@ pub mod fringes;
 pub mod hardware;
 pub mod identify;
 pub mod import;
+pub mod live_count;
 pub mod measure;
 pub mod model;
 pub mod plan;

@@ -51,7 +51,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, ins: &mut Inspector) {
                     Ok(t) => {
                         s.status = format!("imported {}", path.display());
                         s.imported.push(t);
-                        s.dirty = true;
+                        s.session.dirty = true;
                     }
                     Err(e) => s.status = format!("import refused: {e}"),
                 }
