@@ -230,7 +230,7 @@ impl Workbench {
         }
         if ui.button("Export report…").clicked() {
             if let Some(path) = self.state.dialogs.save_report() {
-                self.state.status = match crate::session_io::export_report(&self.state, &path) {
+                self.state.status = match self.state.snapshot().export_report(&path) {
                     Ok(()) => format!("report written to {}", path.display()),
                     Err(e) => format!("report not written: {e}"),
                 };
@@ -298,7 +298,7 @@ impl Workbench {
     fn open(&mut self, dir: &std::path::Path, recover: bool) {
         match crate::session_io::load(dir, recover) {
             Ok(loaded) => {
-                crate::session_io::apply(&mut self.state, loaded, dir);
+                self.state.apply_loaded(loaded, dir);
                 // A recovered session is newer than what is saved: it needs a save.
                 self.state.session.dirty = recover;
                 self.state.status = format!("{} {}", if recover { "recovered" } else { "opened" }, dir.display());

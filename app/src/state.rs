@@ -1,12 +1,16 @@
-//! The application state every view reads: settings (persisted), the worker handle, the bench's
-//! position, the live signal, the wizard's steps and their traces, the identification and
-//! validation results. Owns applying the worker's events; views only read it and send commands.
+//! The application state every view reads, grouped by the view that shows it: the worker handle,
+//! the bench's position, the live signal, the wizard's steps and their traces, the identification
+//! and validation results, the diagnosis, the robot view and the session file. Owns applying the
+//! worker's events and moving a session between the views and [`crate::session_io`]; views only
+//! read it and send commands.
 
 use crate::decimate::Decimator;
 use crate::dialogs::Dialogs;
+use crate::session_io::{remember, untitled_dir, Loaded, Snapshot};
 use crate::settings::Settings;
 use crate::worker::{Command, EffectValidation, Event, ValidationPair, Worker};
 use photorobot_core::alignment::SignalQuality;
+use photorobot_core::bench::BenchPreset;
 use photorobot_core::identify::calibration::{CalibrationReport, Mode};
 use photorobot_core::measure::Measurement;
 use photorobot_core::model::extrinsics::Extrinsics;
@@ -14,7 +18,9 @@ use photorobot_core::model::kinematics::Chain;
 use photorobot_core::plan::Plan;
 use photorobot_core::trace::Trace;
 use photorobot_core::live_count::LiveCounter;
+use photorobot_core::session::BenchInfo;
 use std::collections::HashMap;
+use std::path::Path;
 
 /// The live signal: the scrolling trace, the counter and the latest readouts.
 #[derive(Debug, Default)]
@@ -368,12 +374,12 @@ impl AppState {
     /// Save the session in `dir` on another thread (`autosave`: the autosave file, else
     /// `session.ron`); the result comes back as a status message.
     pub fn save_in_background(&mut self, dir: std::path::PathBuf, autosave: bool) {
-        let snap = crate::session_io::snapshot(self);
+        let snap = self.snapshot();
         let tx = self.session.saves.0.clone();
         self.session.saving += 1;
         if !autosave {
             self.session.dirty = false;
-            crate::session_io::remember(self, &dir);
+            remember(&mut self.settings, &dir);
         }
         std::thread::spawn(move || {
             let result = if autosave { snap.autosave(&dir) } else { snap.save(&dir) };
@@ -383,6 +389,75 @@ impl AppState {
                 Err(e) => format!("NOT {what}: {e}"),
             });
         });
+    }
+
+    /// A snapshot of what a session file keeps, for a save on another thread.
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            bench: BenchInfo {
+                name: self.worker.bench_name.clone(),
+                preset: Some(self.settings.preset.clone()),
+                description: BenchPreset::resolve(&self.settings.preset).ok(),
+                seed: Some(self.settings.seed),
+            },
+            robot: self.chain.description().clone(),
+            plans: self.wizard.steps.iter().map(|st| st.plan.clone()).collect(),
+            steps: self.wizard.steps.iter().map(|st| (st.traces.clone(), st.state == StepState::Done)).collect(),
+            imported: self.imported.clone(),
+            calibration: self.results.report.as_deref().cloned(),
+            diagnosis: match &self.diagnosis.result {
+                Some(Ok(d)) => Some(self.diagnosis_record(d)),
+                _ => self.diagnosis.loaded_record.clone(),
+            },
+            notes: self.session.notes.clone(),
+        }
+    }
+
+    /// The diagnosis as the session keeps it, as `photorobot diagnose` writes it: the result, the
+    /// extended model (effects and refitted extrinsics) and the validation without and with it.
+    fn diagnosis_record(&self, d: &photorobot_core::diagnose::DiagnosisResult) -> photorobot_core::session::DiagnosisRecord {
+        let rows = match &self.diagnosis.validation {
+            Some(EffectValidation::Ran { rows, .. }) => rows.as_slice(),
+            _ => &[],
+        };
+        photorobot_core::session::DiagnosisRecord::with_model(d, &self.diagnosis.effects, rows)
+    }
+
+    /// Put a loaded session into the state: the wizard's steps get the traces of the plans with the
+    /// same name (done when the session says so), the rest are imported; the calibration is shown.
+    pub fn apply_loaded(&mut self, loaded: Loaded, dir: &Path) {
+        for st in &mut self.wizard.steps {
+            st.traces.clear();
+            st.state = StepState::Pending;
+        }
+        self.imported = loaded.imported;
+        let complete_plans: Vec<bool> = (0..loaded.plans.len())
+            .map(|p| loaded.session.traces.iter().filter(|r| r.step.is_some_and(|(q, _)| q == p)).all(|r| r.complete))
+            .collect();
+        for ((name, traces), complete) in loaded.plans.into_iter().zip(complete_plans) {
+            match self.wizard.steps.iter_mut().find(|st| st.plan.name == name) {
+                Some(st) if !traces.is_empty() => {
+                    st.traces = traces;
+                    st.state = if complete { StepState::Done } else { StepState::Stopped("recovered: incomplete".into()) };
+                }
+                Some(_) => {}
+                None => self.imported.extend(traces),
+            }
+        }
+        self.results.report = loaded.session.calibration.map(Box::new);
+        if let Some(r) = &self.results.report {
+            self.extrinsics = r.extrinsics;
+        }
+        self.session.notes = loaded.session.notes;
+        self.analyses.clear();
+        self.results.validation = None;
+        // The session's diagnosis record is kept for the next save and shown as a record by the
+        // Diagnosis view (it is a summary, not a result: no steps, no residuals to draw).
+        self.clear_diagnosis();
+        self.diagnosis.loaded_record = loaded.session.diagnosis;
+        self.session.dir = Some(dir.to_path_buf());
+        self.session.dirty = false;
+        remember(&mut self.settings, dir);
     }
 
     /// Apply one event.
@@ -414,7 +489,7 @@ impl AppState {
                 self.wizard.running = None;
                 // Autosave after every measured step: a crash never costs a measurement.
                 self.session.dirty = true;
-                let dir = self.session.dir.get_or_insert_with(crate::session_io::untitled_dir).clone();
+                let dir = self.session.dir.get_or_insert_with(untitled_dir).clone();
                 self.save_in_background(dir, true);
             }
             Event::Identified(r) => match r {
