@@ -138,7 +138,8 @@ impl Workbench {
                 ui.label(format!("bench: {}", bench.split(" (").next().unwrap_or(bench))).on_hover_text(bench);
                 let name = self
                     .state
-                    .session.dir
+                    .session
+                    .dir
                     .as_ref()
                     .and_then(|d| d.file_name())
                     .map_or("untitled".to_string(), |n| n.to_string_lossy().into_owned());
@@ -248,7 +249,8 @@ impl Workbench {
     pub fn save(&mut self, as_new: bool) {
         let untitled = self
             .state
-            .session.dir
+            .session
+            .dir
             .as_ref()
             .is_none_or(|d| d.file_name().is_some_and(|n| n.to_string_lossy().starts_with("untitled-")));
         let dir = if as_new || untitled { self.state.dialogs.save_session() } else { self.state.session.dir.clone() };

@@ -145,4 +145,3 @@ pub fn mapping_of(robot: &RobotDescription) -> Vec<JointDrive> {
         })
         .collect()
 }
-

@@ -12,13 +12,13 @@ use crate::worker::{Command, EffectValidation, Event, ValidationPair, Worker};
 use photorobot_core::alignment::SignalQuality;
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::identify::calibration::{CalibrationReport, Mode};
+use photorobot_core::live_count::LiveCounter;
 use photorobot_core::measure::Measurement;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::kinematics::Chain;
 use photorobot_core::plan::Plan;
-use photorobot_core::trace::Trace;
-use photorobot_core::live_count::LiveCounter;
 use photorobot_core::session::BenchInfo;
+use photorobot_core::trace::Trace;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -328,7 +328,11 @@ impl AppState {
 
     /// The steps the chosen identifier needs, and whether they are all done.
     pub fn ready_to_identify(&self) -> bool {
-        self.wizard.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).all(|s| s.state == StepState::Done)
+        self.wizard
+            .steps
+            .iter()
+            .filter(|s| self.settings.joint_mode || !s.joint_only)
+            .all(|s| s.state == StepState::Done)
     }
 
     /// Identify from the recorded steps.
@@ -415,7 +419,10 @@ impl AppState {
 
     /// The diagnosis as the session keeps it, as `photorobot diagnose` writes it: the result, the
     /// extended model (effects and refitted extrinsics) and the validation without and with it.
-    fn diagnosis_record(&self, d: &photorobot_core::diagnose::DiagnosisResult) -> photorobot_core::session::DiagnosisRecord {
+    fn diagnosis_record(
+        &self,
+        d: &photorobot_core::diagnose::DiagnosisResult,
+    ) -> photorobot_core::session::DiagnosisRecord {
         let rows = match &self.diagnosis.validation {
             Some(EffectValidation::Ran { rows, .. }) => rows.as_slice(),
             _ => &[],
@@ -438,7 +445,8 @@ impl AppState {
             match self.wizard.steps.iter_mut().find(|st| st.plan.name == name) {
                 Some(st) if !traces.is_empty() => {
                     st.traces = traces;
-                    st.state = if complete { StepState::Done } else { StepState::Stopped("recovered: incomplete".into()) };
+                    st.state =
+                        if complete { StepState::Done } else { StepState::Stopped("recovered: incomplete".into()) };
                 }
                 Some(_) => {}
                 None => self.imported.extend(traces),

@@ -193,7 +193,9 @@ fn sessions_autosave_save_open_recover_and_export_through_the_file_menu() {
     open(&mut h, Tab::Wizard);
     h.get_by_label("Run step 2 (F5)").click();
     wait_until(&mut h, "strategy 2 and its autosave", Duration::from_secs(300), |w| {
-        w.state.wizard.steps[1].state == StepState::Done && w.state.session.saving == 0 && w.state.status.starts_with("autosaved")
+        w.state.wizard.steps[1].state == StepState::Done
+            && w.state.session.saving == 0
+            && w.state.status.starts_with("autosaved")
     });
     let recorded = h.state().state.wizard.steps[1].traces.clone();
     // Autosaved after the step: a crash now would lose nothing.

@@ -5,7 +5,7 @@
 //! (identify, connect) runs on background threads, status polls in the worker: never on the UI thread.
 
 use crate::dialogs::NativeDialogs;
-use crate::settings::{default_port, mapping_of, ConnectionSettings};
+use crate::settings::{default_port, mapping_of, ConnectionSettings, ControllerAddress};
 use crate::state::AppState;
 use crate::worker::{Command, Worker};
 use egui::{Color32, RichText};
@@ -388,9 +388,25 @@ fn message(ui: &mut egui::Ui, p: &ConnectionPanel) {
     }
 }
 
+/// The hardware bench: the controllers and their identification, the reply timeout and the local
+/// emulators, the axis mapping, Connect/Disconnect/Reconnect and the axes' status.
 fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &egui::Context, idle: bool) {
     let locked = p.connected.is_some() || p.connecting;
     ui.label(RichText::new("Controllers").strong());
+    controllers(ui, s, p, ctx, locked);
+    timeout_and_emulators(ui, s, p, locked);
+    ui.add_space(6.0);
+    mapping(ui, s, p, locked);
+    ui.add_space(6.0);
+    connect_buttons(ui, s, p, ctx, idle);
+    confirm_new_session(ui, s, p, ctx);
+    message(ui, p);
+    ui.add_space(6.0);
+    status(ui, s, p);
+}
+
+/// One row per controller: name, protocol, address and port (locked while connected), Identify.
+fn controllers(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &egui::Context, locked: bool) {
     egui::Grid::new("controllers").num_columns(6).spacing([12.0, 6.0]).striped(true).show(ui, |ui| {
         for h in ["controller", "protocol", "address", "port", "", "identification"] {
             ui.label(RichText::new(h).strong());
@@ -417,32 +433,41 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
                 let snapshot = c.clone();
                 p.identify(i, &snapshot, ctx);
             }
-            if busy {
-                ui.horizontal(|ui| {
-                    ui.spinner();
-                    ui.label(format!("asking {}…", c.controllers[i].address()));
-                });
-            } else {
-                match &p.identities[i] {
-                    Some(Ok(id)) => {
-                        let axes: Vec<String> =
-                            id.axes.iter().map(|x| format!("{} ({})", x.id, x.unit.symbol())).collect();
-                        ui.vertical(|ui| {
-                            ui.label(RichText::new(&id.reply).color(GOOD));
-                            ui.label(format!("axes: {}", axes.join(", ")));
-                        });
-                    }
-                    Some(Err(e)) => {
-                        ui.add(egui::Label::new(RichText::new(e).color(BAD)).wrap());
-                    }
-                    None => {
-                        ui.label("–");
-                    }
-                }
-            }
+            identification(ui, p, i, busy, &c.controllers[i]);
             ui.end_row();
         }
     });
+}
+
+/// The identification cell of controller `i`: a spinner while it is asked (`busy`, as at the
+/// start of the row), its reply, or the error.
+fn identification(ui: &mut egui::Ui, p: &ConnectionPanel, i: usize, busy: bool, address: &ControllerAddress) {
+    if busy {
+        ui.horizontal(|ui| {
+            ui.spinner();
+            ui.label(format!("asking {}…", address.address()));
+        });
+    } else {
+        match &p.identities[i] {
+            Some(Ok(id)) => {
+                let axes: Vec<String> = id.axes.iter().map(|x| format!("{} ({})", x.id, x.unit.symbol())).collect();
+                ui.vertical(|ui| {
+                    ui.label(RichText::new(&id.reply).color(GOOD));
+                    ui.label(format!("axes: {}", axes.join(", ")));
+                });
+            }
+            Some(Err(e)) => {
+                ui.add(egui::Label::new(RichText::new(e).color(BAD)).wrap());
+            }
+            None => {
+                ui.label("–");
+            }
+        }
+    }
+}
+
+/// The reply timeout, and starting or stopping the local emulators.
+fn timeout_and_emulators(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, locked: bool) {
     ui.horizontal(|ui| {
         ui.label("reply timeout");
         ui.add_enabled(
@@ -476,9 +501,10 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
             ui.label(RichText::new(format!("emulators: {}", list.join(", "))).weak());
         }
     });
-    ui.add_space(6.0);
-    mapping(ui, s, p, locked);
-    ui.add_space(6.0);
+}
+
+/// Connect (asking first when the session has unsaved measurements), or Disconnect and Reconnect.
+fn connect_buttons(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &egui::Context, idle: bool) {
     ui.horizontal(|ui| {
         if p.connected.is_none() {
             if ui.add_enabled(idle && !p.connecting, egui::Button::new(RichText::new("Connect").size(16.0))).clicked() {
@@ -505,6 +531,10 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
             ui.label("connecting…");
         }
     });
+}
+
+/// The question asked before a new bench replaces a session with unsaved measurements.
+fn confirm_new_session(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &egui::Context) {
     if p.confirm {
         ui.horizontal(|ui| {
             ui.label(
@@ -519,9 +549,6 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
             }
         });
     }
-    message(ui, p);
-    ui.add_space(6.0);
-    status(ui, s, p);
 }
 
 fn mapping(ui: &mut egui::Ui, s: &mut AppState, p: &ConnectionPanel, locked: bool) {

@@ -3,10 +3,10 @@
 //! fringe visibility. Pause freezes the view for pan and zoom while the buffer keeps filling.
 
 use crate::state::AppState;
-use photorobot_core::live_count::LiveCounter;
 use crate::views::{decimated_line, or_dash};
 use egui::RichText;
 use egui_plot::Plot;
+use photorobot_core::live_count::LiveCounter;
 use std::sync::atomic::Ordering;
 
 /// Draw the live view.
