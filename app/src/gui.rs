@@ -271,21 +271,7 @@ impl Workbench {
 
     fn perform(&mut self, action: Pending) {
         match action {
-            Pending::New => {
-                for st in &mut self.state.wizard.steps {
-                    st.traces.clear();
-                    st.state = StepState::Pending;
-                }
-                self.state.imported.clear();
-                self.state.results.report = None;
-                self.state.results.validation = None;
-                self.state.clear_diagnosis();
-                self.state.analyses.clear();
-                self.state.extrinsics = self.state.worker.nominal.extrinsics;
-                self.state.session.dir = None;
-                self.state.session.dirty = false;
-                self.state.status = "new session".into();
-            }
+            Pending::New => self.state.start_new_session(),
             Pending::Open(dir) => match crate::session_io::recoverable(&dir) {
                 Some(n) => self.recovery = Some((dir, n)),
                 None => self.open(&dir, false),

@@ -364,6 +364,24 @@ impl AppState {
         self.diagnosis.loaded_record = None;
     }
 
+    /// Forget the session's data for a new one on the same bench: the steps, imported traces,
+    /// results and diagnosis, back to the nominal extrinsics, no folder.
+    pub fn start_new_session(&mut self) {
+        for st in &mut self.wizard.steps {
+            st.traces.clear();
+            st.state = StepState::Pending;
+        }
+        self.imported.clear();
+        self.results.report = None;
+        self.results.validation = None;
+        self.clear_diagnosis();
+        self.analyses.clear();
+        self.extrinsics = self.worker.nominal.extrinsics;
+        self.session.dir = None;
+        self.session.dirty = false;
+        self.status = "new session".into();
+    }
+
     /// Apply every pending event of the worker and of the saves.
     pub fn poll_worker(&mut self) {
         for e in self.worker.drain() {
