@@ -161,9 +161,9 @@ impl Workbench {
                 if let Some(b) = &self.state.busy {
                     ui.spinner();
                     ui.label(b);
-                } else if let Some((_, label, f)) = &self.state.wizard.running {
+                } else if let Some(r) = &self.state.wizard.running {
                     ui.spinner();
-                    ui.label(format!("{label} {:.0} %", f * 100.0));
+                    ui.label(format!("{} {:.0} %", r.label, r.fraction * 100.0));
                 } else {
                     ui.label("idle");
                 }

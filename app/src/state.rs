@@ -151,8 +151,19 @@ pub fn measurement_steps() -> Vec<MeasurementStep> {
 pub struct Wizard {
     /// The measurement steps.
     pub steps: Vec<MeasurementStep>,
-    /// Which step is running and its progress (label, fraction).
-    pub running: Option<(usize, String, f64)>,
+    /// The step running, if one is.
+    pub running: Option<RunningStep>,
+}
+
+/// The wizard step being measured and how far it got.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunningStep {
+    /// Index of the step in [`Wizard::steps`].
+    pub step: usize,
+    /// Label of the segment recording (the plan's name at the start).
+    pub label: String,
+    /// Fraction of the plan done (0..1).
+    pub fraction: f64,
 }
 
 /// The identification and its validation, as the Results and Validation views show them.
@@ -316,7 +327,7 @@ impl AppState {
         step.state = StepState::Running;
         self.analyses.clear();
         self.live.counter = LiveCounter::default();
-        self.wizard.running = Some((i, step.plan.name.clone(), 0.0));
+        self.wizard.running = Some(RunningStep { step: i, label: step.plan.name.clone(), fraction: 0.0 });
         self.worker.send(Command::SetPace(self.settings.pace()));
         self.worker.send(Command::Run { job: i, plan: step.plan.clone() });
     }
@@ -497,8 +508,8 @@ impl AppState {
             }
             Event::Progress { label, fraction } => {
                 if let Some(r) = self.wizard.running.as_mut() {
-                    r.1 = label;
-                    r.2 = fraction;
+                    r.label = label;
+                    r.fraction = fraction;
                 }
             }
             Event::Position(q) => self.q_display = q,

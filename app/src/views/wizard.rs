@@ -94,7 +94,7 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
             ui.monospace(format!("{:>3} {:<40} {what}", k + 1, g.label()));
         }
     });
-    let running_this = s.wizard.running.as_ref().is_some_and(|r| r.0 == i);
+    let running_this = s.wizard.running.as_ref().is_some_and(|r| r.step == i);
     let pending = st.state == StepState::Pending;
     ui.horizontal(|ui| {
         let label = if pending { format!("Run step {} (F5)", i + 1) } else { format!("Redo step {}", i + 1) };
@@ -114,8 +114,9 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
             ),
         };
     });
-    if let Some((_, label, f)) = s.wizard.running.as_ref().filter(|r| r.0 == i) {
-        ui.add(egui::ProgressBar::new(*f as f32).show_percentage().text(format!("{label} — {:.0} %", f * 100.0)));
+    if let Some(r) = s.wizard.running.as_ref().filter(|r| r.step == i) {
+        let (label, f) = (&r.label, r.fraction);
+        ui.add(egui::ProgressBar::new(f as f32).show_percentage().text(format!("{label} — {:.0} %", f * 100.0)));
     }
     let st = &s.wizard.steps[i];
     if !st.traces.is_empty() {
