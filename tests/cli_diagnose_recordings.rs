@@ -5,7 +5,7 @@
 //! would tell the rest apart as a plan file; those are recorded on the same bench (`simulate
 //! --plan` that file), added to the session's traces, and the diagnosis runs again.
 
-use photorobot_app::cli_diagnose::PROPOSED_PLAN_FILE;
+use photorobot_app::cli::diagnose::PROPOSED_PLAN_FILE;
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::files::save_ron;
 use photorobot_core::identify::design::candidate_pool;

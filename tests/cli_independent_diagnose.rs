@@ -5,7 +5,7 @@
 //! on the same bench, later on the same clock, the traces join the session's, and the diagnosis
 //! runs again.
 
-use photorobot_app::cli_diagnose::PROPOSED_PLAN_FILE;
+use photorobot_app::cli::diagnose::PROPOSED_PLAN_FILE;
 use photorobot_core::plan::Plan;
 use photorobot_e2e::independent::{lab_records, records_of, Hidden, Recorder};
 use photorobot_e2e::recordings::{add_traces, assert_named, cli, diagnose_without_bench as diagnose};

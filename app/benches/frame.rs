@@ -6,7 +6,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use egui_kittest::Harness;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::{Tab, Workbench};
-use photorobot_app::state::Settings;
+use photorobot_app::settings::Settings;
 use photorobot_app::worker::Event;
 
 const SAMPLES: usize = 10_000_000;

@@ -5,7 +5,8 @@
 //! Shortcuts: F5 runs the next wizard step, Esc cancels what runs, Space pauses the live trace.
 
 use crate::dialogs::{Dialogs, NativeDialogs};
-use crate::state::{AppState, Settings, StepState};
+use crate::settings::Settings;
+use crate::state::{AppState, StepState};
 use crate::views::{self, inspector::Inspector};
 use crate::worker::Worker;
 use egui::RichText;
@@ -137,11 +138,12 @@ impl Workbench {
                 ui.label(format!("bench: {}", bench.split(" (").next().unwrap_or(bench))).on_hover_text(bench);
                 let name = self
                     .state
-                    .session_dir
+                    .session
+                    .dir
                     .as_ref()
                     .and_then(|d| d.file_name())
                     .map_or("untitled".to_string(), |n| n.to_string_lossy().into_owned());
-                ui.label(format!("session: {name}{}", if self.state.dirty { " (unsaved)" } else { "" }));
+                ui.label(format!("session: {name}{}", if self.state.session.dirty { " (unsaved)" } else { "" }));
                 ui.separator();
                 for t in Tab::ALL {
                     ui.selectable_value(&mut self.tab, t, RichText::new(t.title()).size(16.0));
@@ -159,9 +161,9 @@ impl Workbench {
                 if let Some(b) = &self.state.busy {
                     ui.spinner();
                     ui.label(b);
-                } else if let Some((_, label, f)) = &self.state.running {
+                } else if let Some(r) = &self.state.wizard.running {
                     ui.spinner();
-                    ui.label(format!("{label} {:.0} %", f * 100.0));
+                    ui.label(format!("{} {:.0} %", r.label, r.fraction * 100.0));
                 } else {
                     ui.label("idle");
                 }
@@ -194,7 +196,7 @@ impl Workbench {
         }
         // Live data keeps coming while the live signal streams or a plan runs.
         if self.state.busy.is_some()
-            || self.state.running.is_some()
+            || self.state.wizard.running.is_some()
             || self.state.worker.live.load(std::sync::atomic::Ordering::Relaxed)
         {
             ctx.request_repaint_after(std::time::Duration::from_millis(30));
@@ -229,7 +231,7 @@ impl Workbench {
         }
         if ui.button("Export report…").clicked() {
             if let Some(path) = self.state.dialogs.save_report() {
-                self.state.status = match crate::session_io::export_report(&self.state, &path) {
+                self.state.status = match self.state.snapshot().export_report(&path) {
                     Ok(()) => format!("report written to {}", path.display()),
                     Err(e) => format!("report not written: {e}"),
                 };
@@ -247,19 +249,20 @@ impl Workbench {
     pub fn save(&mut self, as_new: bool) {
         let untitled = self
             .state
-            .session_dir
+            .session
+            .dir
             .as_ref()
             .is_none_or(|d| d.file_name().is_some_and(|n| n.to_string_lossy().starts_with("untitled-")));
-        let dir = if as_new || untitled { self.state.dialogs.save_session() } else { self.state.session_dir.clone() };
+        let dir = if as_new || untitled { self.state.dialogs.save_session() } else { self.state.session.dir.clone() };
         if let Some(dir) = dir {
-            self.state.session_dir = Some(dir.clone());
+            self.state.session.dir = Some(dir.clone());
             self.state.save_in_background(dir, false);
         }
     }
 
     /// Do `action` now, or after the unsaved-changes prompt.
     pub fn request(&mut self, action: Pending) {
-        if self.state.dirty {
+        if self.state.session.dirty {
             self.pending = Some(action);
         } else {
             self.perform(action);
@@ -268,27 +271,13 @@ impl Workbench {
 
     fn perform(&mut self, action: Pending) {
         match action {
-            Pending::New => {
-                for st in &mut self.state.steps {
-                    st.traces.clear();
-                    st.state = StepState::Pending;
-                }
-                self.state.imported.clear();
-                self.state.report = None;
-                self.state.validation = None;
-                self.state.clear_diagnosis();
-                self.state.analyses.clear();
-                self.state.extrinsics = self.state.worker.nominal.extrinsics;
-                self.state.session_dir = None;
-                self.state.dirty = false;
-                self.state.status = "new session".into();
-            }
+            Pending::New => self.state.start_new_session(),
             Pending::Open(dir) => match crate::session_io::recoverable(&dir) {
                 Some(n) => self.recovery = Some((dir, n)),
                 None => self.open(&dir, false),
             },
             Pending::Quit => {
-                self.state.dirty = false;
+                self.state.session.dirty = false;
                 self.quit = true;
             }
         }
@@ -297,11 +286,11 @@ impl Workbench {
     fn open(&mut self, dir: &std::path::Path, recover: bool) {
         match crate::session_io::load(dir, recover) {
             Ok(loaded) => {
-                crate::session_io::apply(&mut self.state, loaded, dir);
+                self.state.apply_loaded(loaded, dir);
                 // A recovered session is newer than what is saved: it needs a save.
-                self.state.dirty = recover;
+                self.state.session.dirty = recover;
                 self.state.status = format!("{} {}", if recover { "recovered" } else { "opened" }, dir.display());
-                self.tab = if self.state.report.is_some() { Tab::Results } else { Tab::Wizard };
+                self.tab = if self.state.results.report.is_some() { Tab::Results } else { Tab::Wizard };
             }
             Err(e) => self.state.status = format!("cannot open: {e}"),
         }
@@ -328,13 +317,13 @@ impl Workbench {
                 Some(0) => {
                     self.save(false);
                     self.pending = None;
-                    if !self.state.dirty {
+                    if !self.state.session.dirty {
                         self.perform(action);
                     }
                 }
                 Some(1) => {
                     self.pending = None;
-                    self.state.dirty = false;
+                    self.state.session.dirty = false;
                     self.perform(action);
                 }
                 Some(_) => self.pending = None,
@@ -387,7 +376,7 @@ impl Workbench {
         if f5 {
             let joint = self.state.settings.joint_mode;
             if let Some(i) =
-                self.state.steps.iter().position(|s| s.state != StepState::Done && (joint || !s.joint_only))
+                self.state.wizard.steps.iter().position(|s| s.state != StepState::Done && (joint || !s.joint_only))
             {
                 self.state.run_step(i);
             }
@@ -461,13 +450,13 @@ pub struct App {
 impl eframe::App for App {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
-        if ctx.input(|i| i.viewport().close_requested()) && !self.workbench.quit && self.workbench.state.dirty {
+        if ctx.input(|i| i.viewport().close_requested()) && !self.workbench.quit && self.workbench.state.session.dirty {
             ctx.send_viewport_cmd(egui::ViewportCommand::CancelClose);
             self.workbench.pending = Some(Pending::Quit);
         }
         self.workbench.show(ui);
         // Close once every save has finished writing.
-        if self.workbench.quit && self.workbench.state.saving == 0 {
+        if self.workbench.quit && self.workbench.state.session.saving == 0 {
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
         }
     }

@@ -2,14 +2,11 @@
 //! Owns argument parsing, printing and the GUI; every command's work is a core function.
 
 pub mod cli;
-pub mod cli_calibrate;
-pub mod cli_design;
-pub mod cli_diagnose;
-pub mod cli_emulate;
 pub mod decimate;
 pub mod dialogs;
 pub mod gui;
 pub mod session_io;
+pub mod settings;
 pub mod state;
 pub mod views;
 pub mod worker;

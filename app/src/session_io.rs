@@ -1,9 +1,10 @@
-//! The workbench's session files: converting the wizard's state to a `photorobot_core::session`
-//! and back, saving off the UI thread, autosaving after every measured step, recovery of an
-//! autosave, recent folders and the HTML report export. Owns no format: that is the core's.
+//! The workbench's session files: a snapshot of the wizard's data written as a
+//! `photorobot_core::session` off the UI thread (saved, or autosaved after every measured step),
+//! a session read back sorted by plan, recovery of an autosave, recent folders and the HTML
+//! report export. Owns no format (that is the core's) and no UI state: [`crate::state`] takes the
+//! snapshot and puts a loaded session into the views.
 
-use crate::state::{AppState, StepState};
-use photorobot_core::bench::BenchPreset;
+use crate::settings::Settings;
 use photorobot_core::session::{find_recovery, BenchInfo, Session};
 use photorobot_core::trace::Trace;
 use std::path::{Path, PathBuf};
@@ -14,50 +15,22 @@ pub const RECENT: usize = 8;
 /// Everything a save needs, copied off the UI state so the writing runs on another thread.
 #[derive(Debug, Clone)]
 pub struct Snapshot {
-    bench: BenchInfo,
-    robot: photorobot_core::model::robot::RobotDescription,
-    plans: Vec<photorobot_core::plan::Plan>,
+    /// The bench the session was measured on.
+    pub bench: BenchInfo,
+    /// The robot description the software uses.
+    pub robot: photorobot_core::model::robot::RobotDescription,
+    /// The wizard's plans, in step order.
+    pub plans: Vec<photorobot_core::plan::Plan>,
     /// Per step: traces and whether the step ran to the end.
-    steps: Vec<(Vec<Trace>, bool)>,
-    imported: Vec<Trace>,
-    calibration: Option<photorobot_core::calibration::CalibrationReport>,
-    diagnosis: Option<photorobot_core::session::DiagnosisRecord>,
-    notes: String,
-}
-
-/// A snapshot of the state.
-pub fn snapshot(s: &AppState) -> Snapshot {
-    Snapshot {
-        bench: BenchInfo {
-            name: s.worker.bench_name.clone(),
-            preset: Some(s.settings.preset.clone()),
-            description: BenchPreset::resolve(&s.settings.preset).ok(),
-            seed: Some(s.settings.seed),
-        },
-        robot: s.chain.description().clone(),
-        plans: s.steps.iter().map(|st| st.plan.clone()).collect(),
-        steps: s.steps.iter().map(|st| (st.traces.clone(), st.state == StepState::Done)).collect(),
-        imported: s.imported.clone(),
-        calibration: s.report.as_deref().cloned(),
-        diagnosis: match &s.diagnosis {
-            Some(Ok(d)) => Some(diagnosis_record(s, d)),
-            _ => s.loaded_diagnosis.clone(),
-        },
-        notes: s.notes.clone(),
-    }
-}
-
-/// The diagnosis as the session keeps it, as `photorobot diagnose` writes it: the result, the
-/// extended model (effects and refitted extrinsics) and the validation without and with it.
-fn diagnosis_record(
-    s: &AppState,
-    d: &photorobot_core::diagnose::DiagnosisResult,
-) -> photorobot_core::session::DiagnosisRecord {
-    let rows = match &s.diagnosis_validation {
-        Some(crate::worker::EffectValidation::Ran { rows, .. }) => rows.as_slice(),
-        _ => &[],
-    };
-    photorobot_core::session::DiagnosisRecord::with_model(d, &s.diagnosis_effects, rows)
+    pub steps: Vec<(Vec<Trace>, bool)>,
+    /// Traces imported from files.
+    pub imported: Vec<Trace>,
+    /// The calibration, when identified.
+    pub calibration: Option<photorobot_core::calibration::CalibrationReport>,
+    /// The diagnosis record, when there is one.
+    pub diagnosis: Option<photorobot_core::session::DiagnosisRecord>,
+    /// The technician's notes.
+    pub notes: String,
 }
 
 impl Snapshot {
@@ -94,6 +67,17 @@ impl Snapshot {
     pub fn autosave(&self, dir: &Path) -> Result<(), String> {
         self.write(dir)?.autosave(dir).map_err(|e| e.to_string())
     }
+
+    /// Write the session's HTML report (traces are not needed for it).
+    pub fn export_report(self, path: &Path) -> Result<(), String> {
+        let mut session = Session::new(self.bench, self.robot);
+        session.plans = self.plans;
+        session.calibration = self.calibration;
+        session.diagnosis = self.diagnosis;
+        session.notes = self.notes;
+        let html = photorobot_core::report::render_html(&session);
+        photorobot_core::files::write_atomic(path, html.as_bytes()).map_err(|e| e.to_string())
+    }
 }
 
 /// A session read back for the workbench: traces sorted into the wizard's steps by plan name.
@@ -122,49 +106,12 @@ pub fn load(dir: &Path, recover: bool) -> Result<Loaded, String> {
     Ok(Loaded { session, plans, imported })
 }
 
-/// Put a loaded session into the state: the wizard's steps get the traces of the plans with the
-/// same name (done when the session says so), the rest are imported; the calibration is shown.
-pub fn apply(s: &mut AppState, loaded: Loaded, dir: &Path) {
-    for st in &mut s.steps {
-        st.traces.clear();
-        st.state = StepState::Pending;
-    }
-    s.imported = loaded.imported;
-    let complete_plans: Vec<bool> = (0..loaded.plans.len())
-        .map(|p| loaded.session.traces.iter().filter(|r| r.step.is_some_and(|(q, _)| q == p)).all(|r| r.complete))
-        .collect();
-    for ((name, traces), complete) in loaded.plans.into_iter().zip(complete_plans) {
-        match s.steps.iter_mut().find(|st| st.plan.name == name) {
-            Some(st) if !traces.is_empty() => {
-                st.traces = traces;
-                st.state = if complete { StepState::Done } else { StepState::Stopped("recovered: incomplete".into()) };
-            }
-            Some(_) => {}
-            None => s.imported.extend(traces),
-        }
-    }
-    s.report = loaded.session.calibration.map(Box::new);
-    if let Some(r) = &s.report {
-        s.extrinsics = r.extrinsics;
-    }
-    s.notes = loaded.session.notes;
-    s.analyses.clear();
-    s.validation = None;
-    // The session's diagnosis record is kept for the next save and shown as a record by the
-    // Diagnosis view (it is a summary, not a result: no steps, no residuals to draw).
-    s.clear_diagnosis();
-    s.loaded_diagnosis = loaded.session.diagnosis;
-    s.session_dir = Some(dir.to_path_buf());
-    s.dirty = false;
-    remember(s, dir);
-}
-
 /// Put `dir` first in the recent folders.
-pub fn remember(s: &mut AppState, dir: &Path) {
+pub fn remember(settings: &mut Settings, dir: &Path) {
     let d = dir.display().to_string();
-    s.settings.recent.retain(|r| r != &d);
-    s.settings.recent.insert(0, d);
-    s.settings.recent.truncate(RECENT);
+    settings.recent.retain(|r| r != &d);
+    settings.recent.insert(0, d);
+    settings.recent.truncate(RECENT);
 }
 
 /// Number of traces an autosave in `dir` would recover, if there is one.
@@ -177,16 +124,4 @@ pub fn untitled_dir() -> PathBuf {
     let base = std::env::var_os("HOME").map_or_else(std::env::temp_dir, |h| PathBuf::from(h).join(".local/share"));
     let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
     base.join("photorobot").join(format!("untitled-{stamp}"))
-}
-
-/// Write the HTML report of the state's session (traces are not needed for it).
-pub fn export_report(s: &AppState, path: &Path) -> Result<(), String> {
-    let snap = snapshot(s);
-    let mut session = Session::new(snap.bench, snap.robot);
-    session.plans = snap.plans;
-    session.calibration = snap.calibration;
-    session.diagnosis = snap.diagnosis;
-    session.notes = snap.notes;
-    let html = photorobot_core::report::render_html(&session);
-    photorobot_core::files::write_atomic(path, html.as_bytes()).map_err(|e| e.to_string())
 }

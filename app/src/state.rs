@@ -1,130 +1,26 @@
-//! The application state every view reads: settings (persisted), the worker handle, the bench's
-//! position, the live signal, the wizard's steps and their traces, the identification and
-//! validation results. Owns applying the worker's events; views only read it and send commands.
+//! The application state every view reads, grouped by the view that shows it: the worker handle,
+//! the bench's position, the live signal, the wizard's steps and their traces, the identification
+//! and validation results, the diagnosis, the robot view and the session file. Owns applying the
+//! worker's events and moving a session between the views and [`crate::session_io`]; views only
+//! read it and send commands.
 
 use crate::decimate::Decimator;
 use crate::dialogs::Dialogs;
-use crate::worker::{Command, EffectValidation, Event, Pace, ValidationPair, Worker};
+use crate::session_io::{remember, untitled_dir, Loaded, Snapshot};
+use crate::settings::Settings;
+use crate::worker::{Command, EffectValidation, Event, ValidationPair, Worker};
+use photorobot_core::bench::BenchPreset;
 use photorobot_core::calibration::{CalibrationReport, Mode};
 use photorobot_core::measure::alignment::SignalQuality;
+use photorobot_core::measure::live_count::LiveCounter;
 use photorobot_core::measure::Measurement;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::kinematics::Chain;
 use photorobot_core::plan::Plan;
+use photorobot_core::session::BenchInfo;
 use photorobot_core::trace::Trace;
-use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
-
-/// Settings kept between runs (eframe storage). Data is not kept here: sessions are files.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct Settings {
-    /// Dark theme (else light).
-    pub dark: bool,
-    /// Bench preset (embedded name or file).
-    pub preset: String,
-    /// Random seed of the virtual bench.
-    pub seed: u64,
-    /// Identify with the joint estimator (else the paper's steps).
-    pub joint_mode: bool,
-    /// Bench clock speed against the wall clock while running plans; 0 = as fast as possible.
-    pub speed: f64,
-    /// Width of the scrolling live window (s).
-    pub live_window_s: f64,
-    /// Recently opened or saved session folders, newest first.
-    pub recent: Vec<String>,
-    /// The connection panel: controller addresses, ports, axis mapping.
-    pub connection: crate::views::connection::ConnectionSettings,
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Self {
-            dark: true,
-            preset: "table2-ideal".into(),
-            seed: 7,
-            joint_mode: true,
-            speed: 0.0,
-            live_window_s: 5.0,
-            recent: vec![],
-            connection: Default::default(),
-        }
-    }
-}
-
-impl Settings {
-    /// The pacing these settings ask for.
-    pub fn pace(&self) -> Pace {
-        if self.speed > 0.0 {
-            Pace::Speed(self.speed)
-        } else {
-            Pace::Unpaced
-        }
-    }
-}
-
-/// Live fringe counting: each confirmed extremum of the irradiance is a λ/(4n) step of dL,
-/// signed by the direction in which the model says the gap moves.
-#[derive(Debug, Clone, Default)]
-pub struct LiveCounter {
-    looking_for_max: bool,
-    extreme: f64,
-    /// Signed number of λ/(4n) steps since the reset.
-    pub steps: i64,
-    /// Direction of the last counted step: +1 gap growing, −1 shrinking, 0 none yet.
-    pub direction: i8,
-    started: bool,
-    first: Option<f64>,
-}
-
-impl LiveCounter {
-    /// Feed samples; `hysteresis` is the drop from an extreme that confirms it, `sign` the
-    /// direction of the gap change over these samples.
-    pub fn feed(&mut self, samples: &[f64], hysteresis: f64, sign: f64) {
-        for &v in samples {
-            if !self.started {
-                // The first sample is no extremum: wait until the signal has moved by the
-                // hysteresis to know which extremum comes next.
-                let first = *self.first.get_or_insert(v);
-                if (v - first).abs() > hysteresis {
-                    self.started = true;
-                    self.looking_for_max = v > first;
-                    self.extreme = v;
-                }
-                continue;
-            }
-            if self.looking_for_max {
-                if v > self.extreme {
-                    self.extreme = v;
-                } else if v < self.extreme - hysteresis {
-                    self.count(sign);
-                    self.looking_for_max = false;
-                    self.extreme = v;
-                }
-            } else if v < self.extreme {
-                self.extreme = v;
-            } else if v > self.extreme + hysteresis {
-                self.count(sign);
-                self.looking_for_max = true;
-                self.extreme = v;
-            }
-        }
-    }
-
-    fn count(&mut self, sign: f64) {
-        let s = if sign > 0.0 {
-            1
-        } else if sign < 0.0 {
-            -1
-        } else {
-            0
-        };
-        self.steps += s as i64;
-        if s != 0 {
-            self.direction = s;
-        }
-    }
-}
+use std::path::Path;
 
 /// The live signal: the scrolling trace, the counter and the latest readouts.
 #[derive(Debug, Default)]
@@ -251,7 +147,102 @@ pub fn measurement_steps() -> Vec<MeasurementStep> {
     ]
 }
 
-/// Everything the views share.
+/// The wizard: its measurement steps and the one running.
+pub struct Wizard {
+    /// The measurement steps.
+    pub steps: Vec<MeasurementStep>,
+    /// The step running, if one is.
+    pub running: Option<RunningStep>,
+}
+
+/// The wizard step being measured and how far it got.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunningStep {
+    /// Index of the step in [`Wizard::steps`].
+    pub step: usize,
+    /// Label of the segment recording (the plan's name at the start).
+    pub label: String,
+    /// Fraction of the plan done (0..1).
+    pub fraction: f64,
+}
+
+/// The identification and its validation, as the Results and Validation views show them.
+#[derive(Default)]
+pub struct Results {
+    /// The identification result.
+    pub report: Option<Box<CalibrationReport>>,
+    /// Why identification failed.
+    pub identify_error: Option<String>,
+    /// Validation results.
+    pub validation: Option<Vec<ValidationPair>>,
+}
+
+/// The diagnosis, as the Diagnosis view shows it.
+#[derive(Default)]
+pub struct DiagnosisState {
+    /// The diagnosis steps so far (title, summary).
+    pub steps: Vec<(String, String)>,
+    /// The diagnosis result, or why it failed.
+    pub result: Option<Result<Box<photorobot_core::diagnose::DiagnosisResult>, String>>,
+    /// Whether the diagnosis started from identified extrinsics (else from the design ones).
+    pub from_calibration: bool,
+    /// The library effects the diagnosis added (its extended model; empty when none).
+    pub effects: Vec<photorobot_core::model::effects::Effect>,
+    /// The validation motions planned without and with those effects (`None` until it ran).
+    pub validation: Option<EffectValidation>,
+    /// The diagnosis record of an opened session, kept so that saving it again keeps it.
+    pub loaded_record: Option<photorobot_core::session::DiagnosisRecord>,
+}
+
+/// The orbit camera of the robot view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    /// Rotation about world Z (rad).
+    pub yaw: f32,
+    /// Elevation (rad).
+    pub pitch: f32,
+    /// Zoom factor (1 = the whole scene fits).
+    pub zoom: f32,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Self { yaw: -0.6, pitch: 0.45, zoom: 1.0 }
+    }
+}
+
+/// The robot view: its camera, the selected frame and the jog targets.
+#[derive(Default)]
+pub struct RobotView {
+    /// Selected frame-tree node.
+    pub selected_frame: Option<usize>,
+    /// The camera.
+    pub camera: Camera,
+    /// Joint targets of the jog controls (µm, °).
+    pub jog_target: [f64; 6],
+}
+
+/// The session's folder and its saving.
+pub struct SessionFile {
+    /// The session folder (`None` until saved, or autosaved as untitled).
+    pub dir: Option<std::path::PathBuf>,
+    /// Changes since the last save.
+    pub dirty: bool,
+    /// The technician's notes, saved with the session.
+    pub notes: String,
+    /// Saves running on other threads report here.
+    saves: (std::sync::mpsc::Sender<String>, std::sync::mpsc::Receiver<String>),
+    /// Number of saves still running.
+    pub saving: usize,
+}
+
+impl Default for SessionFile {
+    fn default() -> Self {
+        Self { dir: None, dirty: false, notes: String::new(), saves: std::sync::mpsc::channel(), saving: 0 }
+    }
+}
+
+/// Everything the views share, grouped by the view that shows it.
 pub struct AppState {
     /// Persisted settings.
     pub settings: Settings,
@@ -263,56 +254,28 @@ pub struct AppState {
     pub extrinsics: Extrinsics,
     /// The bench's joints (µm, °).
     pub q_display: [f64; 6],
-    /// Joint targets of the jog controls (µm, °).
-    pub jog_target: [f64; 6],
     /// What the worker is doing.
     pub busy: Option<String>,
     /// Latest message for the status bar.
     pub status: String,
     /// The live signal.
     pub live: LiveSignal,
-    /// The wizard's measurement steps.
-    pub steps: Vec<MeasurementStep>,
-    /// Which step is running and its progress (label, fraction).
-    pub running: Option<(usize, String, f64)>,
-    /// The identification result.
-    pub report: Option<Box<CalibrationReport>>,
-    /// Why identification failed.
-    pub identify_error: Option<String>,
-    /// Validation results.
-    pub validation: Option<Vec<ValidationPair>>,
-    /// The diagnosis steps so far (title, summary).
-    pub diagnosis_steps: Vec<(String, String)>,
-    /// The diagnosis result, or why it failed.
-    pub diagnosis: Option<Result<Box<photorobot_core::diagnose::DiagnosisResult>, String>>,
-    /// Whether the diagnosis started from identified extrinsics (else from the design ones).
-    pub diagnosis_from_calibration: bool,
-    /// The library effects the diagnosis added (its extended model; empty when none).
-    pub diagnosis_effects: Vec<photorobot_core::model::effects::Effect>,
-    /// The validation motions planned without and with those effects (`None` until it ran).
-    pub diagnosis_validation: Option<EffectValidation>,
-    /// The diagnosis record of an opened session, kept so that saving it again keeps it.
-    pub loaded_diagnosis: Option<photorobot_core::session::DiagnosisRecord>,
-    /// Selected frame-tree node.
-    pub selected_frame: Option<usize>,
-    /// The robot view's camera.
-    pub camera: crate::views::robot::Camera,
+    /// The wizard.
+    pub wizard: Wizard,
+    /// The identification and validation results.
+    pub results: Results,
+    /// The diagnosis.
+    pub diagnosis: DiagnosisState,
+    /// The robot view.
+    pub robot_view: RobotView,
     /// Traces imported from files.
     pub imported: Vec<Trace>,
     /// Trace analyses by index in [`AppState::all_traces`].
     pub analyses: HashMap<usize, Result<Box<Measurement>, String>>,
     /// File dialogs (a real portal in the app, scripted in tests).
     pub dialogs: Box<dyn Dialogs>,
-    /// The session folder (`None` until saved, or autosaved as untitled).
-    pub session_dir: Option<std::path::PathBuf>,
-    /// Changes since the last save.
-    pub dirty: bool,
-    /// The technician's notes, saved with the session.
-    pub notes: String,
-    /// Saves running on other threads report here.
-    saves: (std::sync::mpsc::Sender<String>, std::sync::mpsc::Receiver<String>),
-    /// Number of saves still running.
-    pub saving: usize,
+    /// The session folder and its saving.
+    pub session: SessionFile,
     /// The stage controllers' view of every joint axis (a bench on controllers), and when it came.
     pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::bench::AxisStatus>)>,
 }
@@ -328,57 +291,43 @@ impl AppState {
             chain,
             extrinsics,
             q_display: [0.0; 6],
-            jog_target: [0.0; 6],
             busy: None,
             status: String::new(),
             live: LiveSignal { wavelength_nm: 1550.0, ..Default::default() },
-            steps: measurement_steps(),
-            running: None,
-            report: None,
-            identify_error: None,
-            validation: None,
-            diagnosis_steps: vec![],
-            diagnosis: None,
-            diagnosis_from_calibration: false,
-            diagnosis_effects: vec![],
-            diagnosis_validation: None,
-            loaded_diagnosis: None,
-            selected_frame: None,
-            camera: Default::default(),
+            wizard: Wizard { steps: measurement_steps(), running: None },
+            results: Results::default(),
+            diagnosis: DiagnosisState::default(),
+            robot_view: RobotView::default(),
             imported: vec![],
             analyses: HashMap::new(),
             dialogs,
-            session_dir: None,
-            dirty: false,
-            notes: String::new(),
-            saves: std::sync::mpsc::channel(),
-            saving: 0,
+            session: SessionFile::default(),
             hardware_status: None,
         }
     }
 
     /// Every trace: the wizard's in step order, then the imported ones.
     pub fn all_traces(&self) -> Vec<&Trace> {
-        self.steps.iter().flat_map(|s| s.traces.iter()).chain(self.imported.iter()).collect()
+        self.wizard.steps.iter().flat_map(|s| s.traces.iter()).chain(self.imported.iter()).collect()
     }
 
     /// Trace `i` of [`AppState::all_traces`].
     pub fn trace(&self, i: usize) -> Option<&Trace> {
-        self.steps.iter().flat_map(|s| s.traces.iter()).chain(self.imported.iter()).nth(i)
+        self.wizard.steps.iter().flat_map(|s| s.traces.iter()).chain(self.imported.iter()).nth(i)
     }
 
     /// Start a wizard step (clears its earlier traces: a redo).
     pub fn run_step(&mut self, i: usize) {
-        if self.running.is_some() || self.busy.is_some() {
+        if self.wizard.running.is_some() || self.busy.is_some() {
             return;
         }
         self.worker.live.store(false, std::sync::atomic::Ordering::Relaxed);
-        let step = &mut self.steps[i];
+        let step = &mut self.wizard.steps[i];
         step.traces.clear();
         step.state = StepState::Running;
         self.analyses.clear();
         self.live.counter = LiveCounter::default();
-        self.running = Some((i, step.plan.name.clone(), 0.0));
+        self.wizard.running = Some(RunningStep { step: i, label: step.plan.name.clone(), fraction: 0.0 });
         self.worker.send(Command::SetPace(self.settings.pace()));
         self.worker.send(Command::Run { job: i, plan: step.plan.clone() });
     }
@@ -390,36 +339,58 @@ impl AppState {
 
     /// The steps the chosen identifier needs, and whether they are all done.
     pub fn ready_to_identify(&self) -> bool {
-        self.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).all(|s| s.state == StepState::Done)
+        self.wizard
+            .steps
+            .iter()
+            .filter(|s| self.settings.joint_mode || !s.joint_only)
+            .all(|s| s.state == StepState::Done)
     }
 
     /// Identify from the recorded steps.
     pub fn identify(&mut self) {
         let mode = if self.settings.joint_mode { Mode::Joint } else { Mode::Paper };
         let used: Vec<&MeasurementStep> =
-            self.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).collect();
+            self.wizard.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).collect();
         let traces = used.iter().flat_map(|s| s.traces.iter().cloned()).collect();
         let duration_s = used.iter().map(|s| s.duration_s).sum();
-        self.identify_error = None;
+        self.results.identify_error = None;
         self.worker.send(Command::Identify { traces, duration_s, mode });
     }
 
     /// Start the diagnosis on every recorded trace from the identified extrinsics.
     pub fn diagnose(&mut self) {
-        let traces: Vec<Trace> = self.steps.iter().flat_map(|s| s.traces.iter().cloned()).collect();
+        let traces: Vec<Trace> = self.wizard.steps.iter().flat_map(|s| s.traces.iter().cloned()).collect();
         self.clear_diagnosis();
-        self.diagnosis_from_calibration = self.extrinsics != self.worker.nominal.extrinsics;
+        self.diagnosis.from_calibration = self.extrinsics != self.worker.nominal.extrinsics;
         self.worker.send(Command::Diagnose { traces, extrinsics: self.extrinsics });
     }
 
     /// Forget the diagnosis (a new run, a new or opened session).
     pub fn clear_diagnosis(&mut self) {
-        self.diagnosis_steps.clear();
-        self.diagnosis = None;
-        self.diagnosis_effects.clear();
-        self.diagnosis_validation = None;
-        self.diagnosis_from_calibration = false;
-        self.loaded_diagnosis = None;
+        self.diagnosis.steps.clear();
+        self.diagnosis.result = None;
+        self.diagnosis.effects.clear();
+        self.diagnosis.validation = None;
+        self.diagnosis.from_calibration = false;
+        self.diagnosis.loaded_record = None;
+    }
+
+    /// Forget the session's data for a new one on the same bench: the steps, imported traces,
+    /// results and diagnosis, back to the nominal extrinsics, no folder.
+    pub fn start_new_session(&mut self) {
+        for st in &mut self.wizard.steps {
+            st.traces.clear();
+            st.state = StepState::Pending;
+        }
+        self.imported.clear();
+        self.results.report = None;
+        self.results.validation = None;
+        self.clear_diagnosis();
+        self.analyses.clear();
+        self.extrinsics = self.worker.nominal.extrinsics;
+        self.session.dir = None;
+        self.session.dirty = false;
+        self.status = "new session".into();
     }
 
     /// Apply every pending event of the worker and of the saves.
@@ -427,8 +398,8 @@ impl AppState {
         for e in self.worker.drain() {
             self.apply(e);
         }
-        while let Ok(msg) = self.saves.1.try_recv() {
-            self.saving -= 1;
+        while let Ok(msg) = self.session.saves.1.try_recv() {
+            self.session.saving -= 1;
             self.status = msg;
         }
     }
@@ -436,12 +407,12 @@ impl AppState {
     /// Save the session in `dir` on another thread (`autosave`: the autosave file, else
     /// `session.ron`); the result comes back as a status message.
     pub fn save_in_background(&mut self, dir: std::path::PathBuf, autosave: bool) {
-        let snap = crate::session_io::snapshot(self);
-        let tx = self.saves.0.clone();
-        self.saving += 1;
+        let snap = self.snapshot();
+        let tx = self.session.saves.0.clone();
+        self.session.saving += 1;
         if !autosave {
-            self.dirty = false;
-            crate::session_io::remember(self, &dir);
+            self.session.dirty = false;
+            remember(&mut self.settings, &dir);
         }
         std::thread::spawn(move || {
             let result = if autosave { snap.autosave(&dir) } else { snap.save(&dir) };
@@ -451,6 +422,79 @@ impl AppState {
                 Err(e) => format!("NOT {what}: {e}"),
             });
         });
+    }
+
+    /// A snapshot of what a session file keeps, for a save on another thread.
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            bench: BenchInfo {
+                name: self.worker.bench_name.clone(),
+                preset: Some(self.settings.preset.clone()),
+                description: BenchPreset::resolve(&self.settings.preset).ok(),
+                seed: Some(self.settings.seed),
+            },
+            robot: self.chain.description().clone(),
+            plans: self.wizard.steps.iter().map(|st| st.plan.clone()).collect(),
+            steps: self.wizard.steps.iter().map(|st| (st.traces.clone(), st.state == StepState::Done)).collect(),
+            imported: self.imported.clone(),
+            calibration: self.results.report.as_deref().cloned(),
+            diagnosis: match &self.diagnosis.result {
+                Some(Ok(d)) => Some(self.diagnosis_record(d)),
+                _ => self.diagnosis.loaded_record.clone(),
+            },
+            notes: self.session.notes.clone(),
+        }
+    }
+
+    /// The diagnosis as the session keeps it, as `photorobot diagnose` writes it: the result, the
+    /// extended model (effects and refitted extrinsics) and the validation without and with it.
+    fn diagnosis_record(
+        &self,
+        d: &photorobot_core::diagnose::DiagnosisResult,
+    ) -> photorobot_core::session::DiagnosisRecord {
+        let rows = match &self.diagnosis.validation {
+            Some(EffectValidation::Ran { rows, .. }) => rows.as_slice(),
+            _ => &[],
+        };
+        photorobot_core::session::DiagnosisRecord::with_model(d, &self.diagnosis.effects, rows)
+    }
+
+    /// Put a loaded session into the state: the wizard's steps get the traces of the plans with the
+    /// same name (done when the session says so), the rest are imported; the calibration is shown.
+    pub fn apply_loaded(&mut self, loaded: Loaded, dir: &Path) {
+        for st in &mut self.wizard.steps {
+            st.traces.clear();
+            st.state = StepState::Pending;
+        }
+        self.imported = loaded.imported;
+        let complete_plans: Vec<bool> = (0..loaded.plans.len())
+            .map(|p| loaded.session.traces.iter().filter(|r| r.step.is_some_and(|(q, _)| q == p)).all(|r| r.complete))
+            .collect();
+        for ((name, traces), complete) in loaded.plans.into_iter().zip(complete_plans) {
+            match self.wizard.steps.iter_mut().find(|st| st.plan.name == name) {
+                Some(st) if !traces.is_empty() => {
+                    st.traces = traces;
+                    st.state =
+                        if complete { StepState::Done } else { StepState::Stopped("recovered: incomplete".into()) };
+                }
+                Some(_) => {}
+                None => self.imported.extend(traces),
+            }
+        }
+        self.results.report = loaded.session.calibration.map(Box::new);
+        if let Some(r) = &self.results.report {
+            self.extrinsics = r.extrinsics;
+        }
+        self.session.notes = loaded.session.notes;
+        self.analyses.clear();
+        self.results.validation = None;
+        // The session's diagnosis record is kept for the next save and shown as a record by the
+        // Diagnosis view (it is a summary, not a result: no steps, no residuals to draw).
+        self.clear_diagnosis();
+        self.diagnosis.loaded_record = loaded.session.diagnosis;
+        self.session.dir = Some(dir.to_path_buf());
+        self.session.dirty = false;
+        remember(&mut self.settings, dir);
     }
 
     /// Apply one event.
@@ -463,14 +507,14 @@ impl AppState {
                 self.q_display = q_display;
             }
             Event::Progress { label, fraction } => {
-                if let Some(r) = self.running.as_mut() {
-                    r.1 = label;
-                    r.2 = fraction;
+                if let Some(r) = self.wizard.running.as_mut() {
+                    r.label = label;
+                    r.fraction = fraction;
                 }
             }
             Event::Position(q) => self.q_display = q,
             Event::PlanDone { job, traces, duration_s, outcome } => {
-                if let Some(step) = self.steps.get_mut(job) {
+                if let Some(step) = self.wizard.steps.get_mut(job) {
                     step.traces = traces;
                     step.duration_s = duration_s;
                     step.state = match outcome {
@@ -479,42 +523,42 @@ impl AppState {
                     };
                     self.status = format!("{}: {} traces recorded", step.title, step.traces.len());
                 }
-                self.running = None;
+                self.wizard.running = None;
                 // Autosave after every measured step: a crash never costs a measurement.
-                self.dirty = true;
-                let dir = self.session_dir.get_or_insert_with(crate::session_io::untitled_dir).clone();
+                self.session.dirty = true;
+                let dir = self.session.dir.get_or_insert_with(untitled_dir).clone();
                 self.save_in_background(dir, true);
             }
             Event::Identified(r) => match r {
                 Ok(report) => {
                     self.extrinsics = report.extrinsics;
                     self.status = format!("identified from {} observations", report.observations);
-                    self.report = Some(report);
-                    self.validation = None;
-                    self.dirty = true;
+                    self.results.report = Some(report);
+                    self.results.validation = None;
+                    self.session.dirty = true;
                 }
-                Err(e) => self.identify_error = Some(e),
+                Err(e) => self.results.identify_error = Some(e),
             },
             Event::Validated(pairs) => {
                 self.status = format!("validation done: {} motions, before and after", pairs.len());
-                self.validation = Some(pairs);
+                self.results.validation = Some(pairs);
             }
-            Event::DiagnosisStep(title, summary) => self.diagnosis_steps.push((title, summary)),
+            Event::DiagnosisStep(title, summary) => self.diagnosis.steps.push((title, summary)),
             Event::Diagnosed(r) => {
                 self.status = match &r {
                     Ok(d) => format!("diagnosis: {}", d.verdict.word()),
                     Err(e) => format!("diagnosis failed: {e}"),
                 };
-                self.diagnosis = Some(r);
-                self.dirty = true;
+                self.diagnosis.result = Some(r);
+                self.session.dirty = true;
             }
             Event::EffectsValidated { effects, validation } => {
                 if let EffectValidation::Ran { rows, .. } = &validation {
                     self.status = format!("validation with and without the added effects: {} motions", rows.len());
                 }
-                self.diagnosis_effects = effects;
-                self.diagnosis_validation = Some(validation);
-                self.dirty = true;
+                self.diagnosis.effects = effects;
+                self.diagnosis.validation = Some(validation);
+                self.session.dirty = true;
             }
             Event::Analysed { index, result } => {
                 self.analyses.insert(index, result);
@@ -527,29 +571,5 @@ impl AppState {
                 self.busy = b;
             }
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_live_counter_counts_each_extremum_once_with_the_model_direction() {
-        // 5 full fringes (10 extrema after the first) of a noisy cosine, gap growing.
-        let signal: Vec<f64> = (0..5000)
-            .map(|i| {
-                let x = i as f64 / 1000.0 * std::f64::consts::TAU;
-                1.0 + 0.4 * x.cos() + 0.01 * ((i * 7919 % 101) as f64 / 101.0 - 0.5)
-            })
-            .collect();
-        let mut c = LiveCounter::default();
-        c.feed(&signal, 0.1, 1.0);
-        // The start is a maximum already passed: extrema at 0.5, 1, …, 4.5 fringes = 9.
-        assert_eq!(c.steps, 9);
-        assert_eq!(c.direction, 1);
-        c.feed(&signal, 0.1, -1.0);
-        assert_eq!(c.steps, 9 - 10, "back down: ten more extrema, counted negative");
-        assert_eq!(c.direction, -1);
     }
 }

@@ -16,7 +16,8 @@ use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
 use photorobot_core::trace::Trace;
-use photorobot_core::validate::{run_validation, ValidationFigure, ValidationMotion};
+use photorobot_core::validate::before_after::run_before_and_after;
+use photorobot_core::validate::{ValidationFigure, ValidationMotion};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
@@ -353,16 +354,14 @@ impl Thread {
                 }
                 Command::Validate { identified } => {
                     self.send(Event::Busy(Some("validating".into())));
-                    let analysis = PhaseModel { extrinsics: identified, ..self.nominal.clone() };
-                    let nominal = self.nominal.extrinsics;
-                    let mut pairs = Vec::new();
-                    for m in ValidationMotion::ALL {
-                        let before = run_validation(self.bench.as_mut(), &analysis, &nominal, m, [0.0; 6])
-                            .map_err(|e| e.to_string());
-                        let after = run_validation(self.bench.as_mut(), &analysis, &identified, m, [0.0; 6])
-                            .map_err(|e| e.to_string());
-                        pairs.push(ValidationPair { motion: m, before, after });
-                    }
+                    let pairs = run_before_and_after(self.bench.as_mut(), &self.nominal, &identified)
+                        .into_iter()
+                        .map(|p| ValidationPair {
+                            motion: p.motion,
+                            before: p.before.map_err(|e| e.to_string()),
+                            after: p.after.map_err(|e| e.to_string()),
+                        })
+                        .collect();
                     self.send(Event::Position(self.bench.position_display()));
                     self.send(Event::Validated(pairs));
                     self.send(Event::Busy(None));

@@ -10,7 +10,7 @@ use common::*;
 use egui_kittest::kittest::Queryable;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::{App, Tab, Workbench};
-use photorobot_app::state::Settings;
+use photorobot_app::settings::Settings;
 use photorobot_core::hardware::emulator::{Fault, FaultSpec};
 use std::time::Duration;
 
@@ -76,7 +76,7 @@ fn connection_panel_drives_the_emulated_controllers_and_explains_failures() {
     // A jog through the drivers (Robot tab); the status table follows on the Connection tab.
     open(&mut h, Tab::Robot);
     let target = [10.0, -5.0, 3.0, 0.2, -0.3, 0.5];
-    h.state_mut().state.jog_target = target;
+    h.state_mut().state.robot_view.jog_target = target;
     h.get_by_label("Move to targets").click();
     wait_until(&mut h, "the jog on the controllers", Duration::from_secs(30), |w| {
         w.state.q_display.iter().zip(&target).all(|(q, t)| (q - t).abs() < 1e-6)

@@ -9,7 +9,8 @@ use egui_kittest::kittest::Queryable;
 use egui_kittest::Harness;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::{App, Tab, Workbench};
-use photorobot_app::state::{Settings, StepState};
+use photorobot_app::settings::Settings;
+use photorobot_app::state::StepState;
 use photorobot_app::worker::EffectValidation;
 use std::time::{Duration, Instant};
 
@@ -31,19 +32,19 @@ fn robot_view_shows_the_frames_and_selecting_a_node_highlights_it() {
     h.run_steps(2);
     h.get_by_label("selected: fiber");
     // Orbit: a drag on the scene turns the camera; reset brings it back.
-    let before = h.state().state.camera;
+    let before = h.state().state.robot_view.camera;
     let centre = h.get_by_label("Reset view").rect().center() + egui::vec2(300.0, 300.0);
     h.drag_at(centre);
     h.hover_at(centre + egui::vec2(60.0, 20.0));
     h.drop_at(centre + egui::vec2(60.0, 20.0));
     h.run_steps(2);
-    assert_ne!(h.state().state.camera, before, "dragging the scene orbits the camera");
+    assert_ne!(h.state().state.robot_view.camera, before, "dragging the scene orbits the camera");
     screenshot(&mut h, "robot");
     h.get_by_label("Reset view").click();
     h.run_steps(2);
-    assert_eq!(h.state().state.camera, before);
+    assert_eq!(h.state().state.robot_view.camera, before);
     // Jog: the bench moves and the readouts follow.
-    h.state_mut().state.jog_target = [10.0, -20.0, 30.0, 1.0, -2.0, 3.0];
+    h.state_mut().state.robot_view.jog_target = [10.0, -20.0, 30.0, 1.0, -2.0, 3.0];
     h.get_by_label("Move to targets").click();
     wait_until(&mut h, "the jog", Duration::from_secs(30), |w| (w.state.q_display[0] - 10.0).abs() < 1e-9);
     let chain = photorobot_core::model::kinematics::Chain::femto_6dof();
@@ -102,31 +103,31 @@ fn wizard_runs_every_step_identifies_and_validates() {
     let exported = dir.path().join("exported.csv");
     let dialogs = ScriptedDialogs { opens: vec![], saves: vec![Some(exported.clone())], folders: vec![] };
     let mut h = harness(workbench(Settings::default(), dialogs));
-    h.state_mut().state.session_dir = Some(dir.path().join("session"));
+    h.state_mut().state.session.dir = Some(dir.path().join("session"));
     open(&mut h, Tab::Wizard);
     h.get_by_label_contains("Strategy 1: translations");
     h.get_by_label("Identify"); // present, disabled until the steps ran
                                 // F5 runs the next step; a button runs the others.
     h.key_press(egui::Key::F5);
-    wait_until(&mut h, "strategy 1", Duration::from_secs(300), |w| w.state.steps[0].state == StepState::Done);
-    let step = &h.state().state.steps[0];
+    wait_until(&mut h, "strategy 1", Duration::from_secs(300), |w| w.state.wizard.steps[0].state == StepState::Done);
+    let step = &h.state().state.wizard.steps[0];
     let recorded = step.plan.segments.iter().filter(|g| g.is_recorded()).count();
     assert_eq!(step.traces.len(), recorded, "one trace per recorded segment");
     h.get_by_label_contains(&format!("done: {recorded} traces"));
     h.get_by_label("Run step 2 (F5)").click();
     h.run_steps(2);
     screenshot(&mut h, "wizard-running");
-    wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.steps[1].state == StepState::Done);
+    wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.wizard.steps[1].state == StepState::Done);
     h.get_by_label("Run step 3 (F5)").click();
     wait_until(&mut h, "the extra measurements", Duration::from_secs(300), |w| {
-        w.state.steps[2].state == StepState::Done
+        w.state.wizard.steps[2].state == StepState::Done
     });
     h.get_by_label("Redo step 1");
     h.get_by_label("Identify").click();
     wait_until(&mut h, "the identification", Duration::from_secs(600), |w| {
-        w.state.report.is_some() || w.state.identify_error.is_some()
+        w.state.results.report.is_some() || w.state.results.identify_error.is_some()
     });
-    assert!(h.state().state.identify_error.is_none(), "{:?}", h.state().state.identify_error);
+    assert!(h.state().state.results.identify_error.is_none(), "{:?}", h.state().state.results.identify_error);
     screenshot(&mut h, "wizard");
 
     open(&mut h, Tab::Results);
@@ -134,7 +135,7 @@ fn wizard_runs_every_step_identifies_and_validates() {
     for name in ["β_et", "θ_et", "β_wf", "θ_wf", "x_wf", "z_wf", "Z_et", "y_wf"] {
         assert!(h.query_all_by_label(name).next().is_some(), "row {name} missing");
     }
-    let report = h.state().state.report.clone().unwrap();
+    let report = h.state().state.results.report.clone().unwrap();
     let determined = report.parameters.iter().filter(|p| p.determined).count();
     assert_eq!(h.query_all_by_label("yes").count(), determined);
     assert!(determined >= 6, "{determined} parameters determined");
@@ -145,8 +146,8 @@ fn wizard_runs_every_step_identifies_and_validates() {
 
     open(&mut h, Tab::Validation);
     h.get_by_label("Run validation").click();
-    wait_until(&mut h, "the validation", Duration::from_secs(600), |w| w.state.validation.is_some());
-    let pairs = h.state().state.validation.clone().unwrap();
+    wait_until(&mut h, "the validation", Duration::from_secs(600), |w| w.state.results.validation.is_some());
+    let pairs = h.state().state.results.validation.clone().unwrap();
     let shown = |h: &Harness<'_, Workbench>, text: &str| h.query_all_by_label(text).next().is_some();
     for p in &pairs {
         assert!(shown(&h, p.motion.name()), "{}", p.motion.name());
@@ -173,7 +174,7 @@ fn wizard_runs_every_step_identifies_and_validates() {
     h.get_by_label("Export CSV…").click();
     h.run_steps(2);
     let back = photorobot_core::trace::Trace::read_csv(&exported).expect("the exported trace reads back");
-    assert_eq!(back.irradiance, h.state().state.steps[0].traces[1].irradiance);
+    assert_eq!(back.irradiance, h.state().state.wizard.steps[0].traces[1].irradiance);
 
     open(&mut h, Tab::Diagnosis);
     h.get_by_label("Largest residuals");
@@ -188,13 +189,15 @@ fn sessions_autosave_save_open_recover_and_export_through_the_file_menu() {
     let dialogs =
         ScriptedDialogs { opens: vec![], saves: vec![Some(report.clone())], folders: vec![Some(saved.clone())] };
     let mut h = harness(workbench(Settings::default(), dialogs));
-    h.state_mut().state.session_dir = Some(work.clone());
+    h.state_mut().state.session.dir = Some(work.clone());
     open(&mut h, Tab::Wizard);
     h.get_by_label("Run step 2 (F5)").click();
     wait_until(&mut h, "strategy 2 and its autosave", Duration::from_secs(300), |w| {
-        w.state.steps[1].state == StepState::Done && w.state.saving == 0 && w.state.status.starts_with("autosaved")
+        w.state.wizard.steps[1].state == StepState::Done
+            && w.state.session.saving == 0
+            && w.state.status.starts_with("autosaved")
     });
-    let recorded = h.state().state.steps[1].traces.clone();
+    let recorded = h.state().state.wizard.steps[1].traces.clone();
     // Autosaved after the step: a crash now would lose nothing.
     assert_eq!(photorobot_app::session_io::recoverable(&work), Some(recorded.len()));
     h.get_by_label_contains("(unsaved)");
@@ -202,7 +205,7 @@ fn sessions_autosave_save_open_recover_and_export_through_the_file_menu() {
     h.get_by_label("File").click();
     h.run_steps(2);
     h.get_by_label("Save as…").click();
-    wait_until(&mut h, "the save", Duration::from_secs(60), |w| w.state.saving == 0);
+    wait_until(&mut h, "the save", Duration::from_secs(60), |w| w.state.session.saving == 0);
     assert!(saved.join("session.ron").is_file(), "{}", h.state().state.status);
     assert!(h.query_by_label_contains("(unsaved)").is_none());
     assert_eq!(h.state().state.settings.recent[0], saved.display().to_string());
@@ -216,26 +219,26 @@ fn sessions_autosave_save_open_recover_and_export_through_the_file_menu() {
     // New (nothing unsaved: no prompt), then open the saved folder again: the same traces.
     h.state_mut().request(photorobot_app::gui::Pending::New);
     h.run_steps(2);
-    assert!(h.state().state.steps[1].traces.is_empty());
+    assert!(h.state().state.wizard.steps[1].traces.is_empty());
     h.state_mut().request(photorobot_app::gui::Pending::Open(saved.clone()));
     h.run_steps(2);
-    assert_eq!(h.state().state.steps[1].state, StepState::Done);
-    assert_eq!(h.state().state.steps[1].traces, recorded);
+    assert_eq!(h.state().state.wizard.steps[1].state, StepState::Done);
+    assert_eq!(h.state().state.wizard.steps[1].traces, recorded);
     // The work folder has only an autosave: opening it offers recovery.
     h.state_mut().request(photorobot_app::gui::Pending::Open(work.clone()));
     h.run_steps(2);
     h.get_by_label_contains("holds an autosave with");
     h.get_by_label("Recover the autosave").click();
     h.run_steps(2);
-    assert_eq!(h.state().state.steps[1].traces, recorded);
-    assert!(h.state().state.dirty, "a recovered session still needs a save");
+    assert_eq!(h.state().state.wizard.steps[1].traces, recorded);
+    assert!(h.state().state.session.dirty, "a recovered session still needs a save");
     // Unsaved changes: New asks first; Discard goes ahead.
     h.state_mut().request(photorobot_app::gui::Pending::New);
     h.run_steps(2);
     h.get_by_label_contains("not saved");
     h.get_by_label("Discard").click();
     h.run_steps(2);
-    assert!(h.state().state.steps[1].traces.is_empty() && !h.state().state.dirty);
+    assert!(h.state().state.wizard.steps[1].traces.is_empty() && !h.state().state.session.dirty);
 }
 
 /// A virtual bench whose goniometer pivots sit 150-200 µm off the model's: no extrinsics explain
@@ -264,17 +267,17 @@ fn results_view_refuses_a_fit_the_model_cannot_explain() {
     let settings = Settings { preset: off_pivot_preset(dir.path()), ..Settings::default() };
     let dialogs = ScriptedDialogs { opens: vec![], saves: vec![], folders: vec![] };
     let mut h = harness(workbench(settings, dialogs));
-    h.state_mut().state.session_dir = Some(dir.path().join("session"));
+    h.state_mut().state.session.dir = Some(dir.path().join("session"));
     open(&mut h, Tab::Wizard);
     for step in 0..3 {
         h.get_by_label(&format!("Run step {} (F5)", step + 1)).click();
-        wait_until(&mut h, "a step", Duration::from_secs(300), |w| w.state.steps[step].state == StepState::Done);
+        wait_until(&mut h, "a step", Duration::from_secs(300), |w| w.state.wizard.steps[step].state == StepState::Done);
     }
     h.get_by_label("Identify").click();
     wait_until(&mut h, "the identification", Duration::from_secs(600), |w| {
-        w.state.report.is_some() || w.state.identify_error.is_some()
+        w.state.results.report.is_some() || w.state.results.identify_error.is_some()
     });
-    let report = h.state().state.report.clone().expect("a report, even of a failed fit");
+    let report = h.state().state.results.report.clone().expect("a report, even of a failed fit");
     let fit = report.fit.clone().expect("the verdict");
     assert_eq!(fit.verdict, photorobot_core::identify::verdict::Verdict::DoesNotFit, "{}", fit.summary);
     open(&mut h, Tab::Results);
@@ -292,19 +295,19 @@ fn results_view_refuses_a_fit_the_model_cannot_explain() {
 fn diagnosis_view_runs_the_workflow_step_by_step() {
     let tmp = tempfile::tempdir().unwrap();
     let mut h = harness(workbench(Settings::default(), ScriptedDialogs::default()));
-    h.state_mut().state.session_dir = Some(tmp.path().join("session"));
+    h.state_mut().state.session.dir = Some(tmp.path().join("session"));
     open(&mut h, Tab::Diagnosis);
     h.get_by_label_contains("no recorded trace yet");
     open(&mut h, Tab::Wizard);
     h.get_by_label("Run step 2 (F5)").click();
-    wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.steps[1].state == StepState::Done);
+    wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.wizard.steps[1].state == StepState::Done);
     open(&mut h, Tab::Diagnosis);
     // Not identified: the view warns that the design extrinsics' errors can look like effects.
     h.get_by_label_contains("not identified yet: the diagnosis starts from the design extrinsics.");
     h.get_by_label("Run the diagnosis").click();
-    wait_until(&mut h, "the diagnosis", Duration::from_secs(600), |w| w.state.diagnosis.is_some());
-    let result = h.state().state.diagnosis.clone().unwrap().expect("the diagnosis runs");
-    assert!(h.state().state.diagnosis_steps.len() >= 3, "{:?}", h.state().state.diagnosis_steps);
+    wait_until(&mut h, "the diagnosis", Duration::from_secs(600), |w| w.state.diagnosis.result.is_some());
+    let result = h.state().state.diagnosis.result.clone().unwrap().expect("the diagnosis runs");
+    assert!(h.state().state.diagnosis.steps.len() >= 3, "{:?}", h.state().state.diagnosis.steps);
     h.get_by_label("1. replay: baseline fit of the extrinsics");
     h.get_by_label_contains("Verdict: ");
     h.get_by_label_contains(&format!(
@@ -313,10 +316,10 @@ fn diagnosis_view_runs_the_workflow_step_by_step() {
     ));
     // The validation with and without the effects follows; with none added, one line says so.
     wait_until(&mut h, "the validation with the effects", Duration::from_secs(600), |w| {
-        w.state.diagnosis_validation.is_some()
+        w.state.diagnosis.validation.is_some()
     });
     if result.effects.is_empty() && result.partial.is_empty() {
-        assert_eq!(h.state().state.diagnosis_validation, Some(EffectValidation::NoEffect));
+        assert_eq!(h.state().state.diagnosis.validation, Some(EffectValidation::NoEffect));
         h.get_by_label_contains("no effect was added: there is no extended model to validate");
     } else {
         h.get_by_label("without the effect (nm)");
@@ -349,27 +352,27 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     let tmp = tempfile::tempdir().unwrap();
     let settings = Settings { preset: "hidden-pivot".into(), ..Settings::default() };
     let mut h = harness(workbench(settings, ScriptedDialogs::default()));
-    h.state_mut().state.session_dir = Some(tmp.path().join("session"));
+    h.state_mut().state.session.dir = Some(tmp.path().join("session"));
     open(&mut h, Tab::Wizard);
     h.get_by_label("Run step 2 (F5)").click();
-    wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.steps[1].state == StepState::Done);
+    wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.wizard.steps[1].state == StepState::Done);
     h.get_by_label("Run step 3 (F5)").click();
     wait_until(&mut h, "the extra measurements", Duration::from_secs(300), |w| {
-        w.state.steps[2].state == StepState::Done
+        w.state.wizard.steps[2].state == StepState::Done
     });
     h.state_mut().state.extrinsics = photorobot_core::bench::BenchPreset::resolve("hidden-pivot").unwrap().truth;
     eprintln!("strategy 2 recorded after {:.1} s", t0.elapsed().as_secs_f64());
 
     open(&mut h, Tab::Diagnosis);
     h.get_by_label("Run the diagnosis").click();
-    wait_until(&mut h, "the diagnosis", Duration::from_secs(600), |w| w.state.diagnosis.is_some());
-    let result = h.state().state.diagnosis.clone().unwrap().expect("the diagnosis runs");
+    wait_until(&mut h, "the diagnosis", Duration::from_secs(600), |w| w.state.diagnosis.result.is_some());
+    let result = h.state().state.diagnosis.result.clone().unwrap().expect("the diagnosis runs");
     // The validation comes after the verdict, from the worker.
     wait_until(&mut h, "the validation with the effect", Duration::from_secs(600), |w| {
-        w.state.diagnosis_validation.is_some()
+        w.state.diagnosis.validation.is_some()
     });
     eprintln!("diagnosed and validated after {:.1} s", t0.elapsed().as_secs_f64());
-    for (title, summary) in &h.state().state.diagnosis_steps {
+    for (title, summary) in &h.state().state.diagnosis.steps {
         eprintln!("{title}\n{summary}");
     }
     for e in result.effects.iter().chain(&result.partial) {
@@ -383,8 +386,8 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
         "pivot offset q6 along X_w",
     ];
     assert!(class.contains(&first.name.as_str()), "{}", first.name);
-    let Some(EffectValidation::Ran { rows, .. }) = h.state().state.diagnosis_validation.clone() else {
-        panic!("{:?}", h.state().state.diagnosis_validation)
+    let Some(EffectValidation::Ran { rows, .. }) = h.state().state.diagnosis.validation.clone() else {
+        panic!("{:?}", h.state().state.diagnosis.validation)
     };
     assert_eq!(rows.len(), 4, "{rows:?}");
     h.get_by_label("Validation with and without the added effects");
@@ -431,17 +434,17 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     let session = save_as_and_load(&mut h, &saved);
     let record = session.diagnosis.expect("the diagnosis is in the session");
     assert_eq!(record.validation, rows);
-    assert_eq!(record.model_effects, h.state().state.diagnosis_effects);
+    assert_eq!(record.model_effects, h.state().state.diagnosis.effects);
     assert!(!record.model_effects.is_empty());
     assert_eq!(record.extrinsics, Some(result.extrinsics));
     // New forgets the diagnosis; opening the saved session and saving it elsewhere keeps its record.
     h.state_mut().request(photorobot_app::gui::Pending::New);
     h.run_steps(2);
-    assert!(h.state().state.diagnosis.is_none() && h.state().state.diagnosis_validation.is_none());
+    assert!(h.state().state.diagnosis.result.is_none() && h.state().state.diagnosis.validation.is_none());
     h.get_by_label_contains("no recorded trace yet");
     h.state_mut().request(photorobot_app::gui::Pending::Open(saved.clone()));
     h.run_steps(2);
-    assert!(h.state().state.diagnosis.is_none(), "a session's record is not a result to draw");
+    assert!(h.state().state.diagnosis.result.is_none(), "a session's record is not a result to draw");
     // The Diagnosis view shows the record: the verdict, the effect, the validation figures.
     open(&mut h, Tab::Diagnosis);
     h.get_by_label("Diagnosis saved with this session");
@@ -466,7 +469,7 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     h.state_mut().state.dialogs =
         Box::new(ScriptedDialogs { folders: vec![Some(again.clone())], ..Default::default() });
     h.state_mut().save(true);
-    wait_until(&mut h, "the second save", Duration::from_secs(60), |w| w.state.saving == 0);
+    wait_until(&mut h, "the second save", Duration::from_secs(60), |w| w.state.session.saving == 0);
     let kept = photorobot_core::session::Session::load(&again).expect("loads").diagnosis.expect("the record is kept");
     assert_eq!(kept.validation, rows);
     eprintln!("total {:.1} s", t0.elapsed().as_secs_f64());
@@ -478,14 +481,14 @@ fn cancelling_a_step_keeps_what_was_recorded_and_imports_go_through_the_dialog()
     // Real time: the step is still running when Esc arrives.
     let settings = Settings { speed: 1.0, ..Settings::default() };
     let mut h = harness(workbench(settings, ScriptedDialogs::default()));
-    h.state_mut().state.session_dir = Some(dir.path().join("session"));
+    h.state_mut().state.session.dir = Some(dir.path().join("session"));
     open(&mut h, Tab::Wizard);
     h.get_by_label("Run step 1 (F5)").click();
     wait_until(&mut h, "the first recorded samples", Duration::from_secs(60), |w| w.state.live.trace.len() > 500);
     h.get_by_label("Cancel (Esc)");
     h.key_press(egui::Key::Escape);
-    wait_until(&mut h, "the cancel", Duration::from_secs(60), |w| w.state.running.is_none());
-    let step = &h.state().state.steps[0];
+    wait_until(&mut h, "the cancel", Duration::from_secs(60), |w| w.state.wizard.running.is_none());
+    let step = &h.state().state.wizard.steps[0];
     assert!(matches!(step.state, StepState::Stopped(_)), "{:?}", step.state);
     assert!(!step.traces.is_empty() && !step.traces[0].is_empty(), "the partial trace is kept");
     h.get_by_label_contains("stopped: ");

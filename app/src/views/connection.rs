@@ -1,10 +1,11 @@
 //! Connection view: choose the bench (a virtual preset, or the stage controllers over TCP), the
 //! controllers' addresses and ports, Identify, the q1..q6 axis mapping, Connect/Disconnect, local
 //! emulators to try it without hardware, and the live status of every joint axis.
-//! Owns the panel's runtime state; its settings persist with [`crate::state::Settings`]. Network I/O
+//! Owns the panel's runtime state; its settings persist with [`crate::settings::Settings`]. Network I/O
 //! (identify, connect) runs on background threads, status polls in the worker: never on the UI thread.
 
 use crate::dialogs::NativeDialogs;
+use crate::settings::{default_port, mapping_of, ConnectionSettings, ControllerAddress};
 use crate::state::AppState;
 use crate::worker::{Command, Worker};
 use egui::{Color32, RichText};
@@ -16,106 +17,16 @@ use photorobot_core::hardware::{ControllerBench, HwError};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::{Drive, RobotDescription};
-use serde::{Deserialize, Serialize};
+
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-
-/// One controller's place on the network.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ControllerAddress {
-    /// Name, as in the robot description's `drive.controller` ("PI E-712").
-    pub name: String,
-    /// Driver.
-    pub kind: ControllerKind,
-    /// Host name or IP address.
-    pub host: String,
-    /// TCP port (E-712: 50000, MCS: 5000).
-    pub port: u16,
-}
-
-impl ControllerAddress {
-    /// host:port.
-    pub fn address(&self) -> String {
-        format!("{}:{}", self.host.trim(), self.port)
-    }
-}
-
-/// Which controller and channel drives a joint.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct JointDrive {
-    /// Joint name ("q1").
-    pub joint: String,
-    /// Controller name.
-    pub controller: String,
-    /// Axis (PI) or channel (MCS) identifier.
-    pub channel: String,
-}
-
-/// The connection settings kept between runs. The app always starts on the virtual bench:
-/// hardware is connected by hand.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct ConnectionSettings {
-    /// The panel shows the hardware bench (else the virtual one).
-    pub hardware: bool,
-    /// The controllers.
-    pub controllers: Vec<ControllerAddress>,
-    /// Reply timeout (s, real time).
-    pub timeout_s: f64,
-    /// q1..q6 to controller and channel.
-    pub mapping: Vec<JointDrive>,
-}
-
-impl Default for ConnectionSettings {
-    /// The controllers of `assets/benches/femto-hardware.ron` on 127.0.0.1 at their default ports,
-    /// the mapping of the femto-6dof robot description.
-    fn default() -> Self {
-        let config = HardwareConfig::femto();
-        let controllers = config
-            .controllers
-            .iter()
-            .map(|c| ControllerAddress {
-                name: c.name.clone(),
-                kind: c.kind,
-                host: "127.0.0.1".into(),
-                port: default_port(c.kind),
-            })
-            .collect();
-        Self {
-            hardware: false,
-            controllers,
-            timeout_s: config.controllers.first().map_or(2.0, |c| c.timeout_s),
-            mapping: mapping_of(&RobotDescription::femto_6dof()),
-        }
-    }
-}
-
-fn default_port(kind: ControllerKind) -> u16 {
-    match kind {
-        ControllerKind::PiGcs => photorobot_core::hardware::pi_gcs::DEFAULT_PORT,
-        ControllerKind::SmarActMcs => photorobot_core::hardware::smaract::DEFAULT_PORT,
-    }
-}
 
 fn kind_name(kind: ControllerKind) -> &'static str {
     match kind {
         ControllerKind::PiGcs => "PI GCS 2",
         ControllerKind::SmarActMcs => "SmarAct MCS ASCII",
     }
-}
-
-/// The `drive` fields of a robot description.
-pub fn mapping_of(robot: &RobotDescription) -> Vec<JointDrive> {
-    robot
-        .links
-        .iter()
-        .map(|l| JointDrive {
-            joint: l.name.clone(),
-            controller: l.drive.as_ref().map_or(String::new(), |d| d.controller.clone()),
-            channel: l.drive.as_ref().map_or(String::new(), |d| d.channel.clone()),
-        })
-        .collect()
 }
 
 /// What a background job reports.
@@ -419,7 +330,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel) {
     let n = s.settings.connection.controllers.len();
     p.identities.resize(n, None);
     p.identifying.resize(n, false);
-    let idle = s.busy.is_none() && s.running.is_none();
+    let idle = s.busy.is_none() && s.wizard.running.is_none();
     egui::ScrollArea::vertical().show(ui, |ui| {
         ui.heading("Connection");
         ui.horizontal(|ui| {
@@ -477,9 +388,25 @@ fn message(ui: &mut egui::Ui, p: &ConnectionPanel) {
     }
 }
 
+/// The hardware bench: the controllers and their identification, the reply timeout and the local
+/// emulators, the axis mapping, Connect/Disconnect/Reconnect and the axes' status.
 fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &egui::Context, idle: bool) {
     let locked = p.connected.is_some() || p.connecting;
     ui.label(RichText::new("Controllers").strong());
+    controllers(ui, s, p, ctx, locked);
+    timeout_and_emulators(ui, s, p, locked);
+    ui.add_space(6.0);
+    mapping(ui, s, p, locked);
+    ui.add_space(6.0);
+    connect_buttons(ui, s, p, ctx, idle);
+    confirm_new_session(ui, s, p, ctx);
+    message(ui, p);
+    ui.add_space(6.0);
+    status(ui, s, p);
+}
+
+/// One row per controller: name, protocol, address and port (locked while connected), Identify.
+fn controllers(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &egui::Context, locked: bool) {
     egui::Grid::new("controllers").num_columns(6).spacing([12.0, 6.0]).striped(true).show(ui, |ui| {
         for h in ["controller", "protocol", "address", "port", "", "identification"] {
             ui.label(RichText::new(h).strong());
@@ -506,32 +433,41 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
                 let snapshot = c.clone();
                 p.identify(i, &snapshot, ctx);
             }
-            if busy {
-                ui.horizontal(|ui| {
-                    ui.spinner();
-                    ui.label(format!("asking {}…", c.controllers[i].address()));
-                });
-            } else {
-                match &p.identities[i] {
-                    Some(Ok(id)) => {
-                        let axes: Vec<String> =
-                            id.axes.iter().map(|x| format!("{} ({})", x.id, x.unit.symbol())).collect();
-                        ui.vertical(|ui| {
-                            ui.label(RichText::new(&id.reply).color(GOOD));
-                            ui.label(format!("axes: {}", axes.join(", ")));
-                        });
-                    }
-                    Some(Err(e)) => {
-                        ui.add(egui::Label::new(RichText::new(e).color(BAD)).wrap());
-                    }
-                    None => {
-                        ui.label("–");
-                    }
-                }
-            }
+            identification(ui, p, i, busy, &c.controllers[i]);
             ui.end_row();
         }
     });
+}
+
+/// The identification cell of controller `i`: a spinner while it is asked (`busy`, as at the
+/// start of the row), its reply, or the error.
+fn identification(ui: &mut egui::Ui, p: &ConnectionPanel, i: usize, busy: bool, address: &ControllerAddress) {
+    if busy {
+        ui.horizontal(|ui| {
+            ui.spinner();
+            ui.label(format!("asking {}…", address.address()));
+        });
+    } else {
+        match &p.identities[i] {
+            Some(Ok(id)) => {
+                let axes: Vec<String> = id.axes.iter().map(|x| format!("{} ({})", x.id, x.unit.symbol())).collect();
+                ui.vertical(|ui| {
+                    ui.label(RichText::new(&id.reply).color(GOOD));
+                    ui.label(format!("axes: {}", axes.join(", ")));
+                });
+            }
+            Some(Err(e)) => {
+                ui.add(egui::Label::new(RichText::new(e).color(BAD)).wrap());
+            }
+            None => {
+                ui.label("–");
+            }
+        }
+    }
+}
+
+/// The reply timeout, and starting or stopping the local emulators.
+fn timeout_and_emulators(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, locked: bool) {
     ui.horizontal(|ui| {
         ui.label("reply timeout");
         ui.add_enabled(
@@ -565,13 +501,14 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
             ui.label(RichText::new(format!("emulators: {}", list.join(", "))).weak());
         }
     });
-    ui.add_space(6.0);
-    mapping(ui, s, p, locked);
-    ui.add_space(6.0);
+}
+
+/// Connect (asking first when the session has unsaved measurements), or Disconnect and Reconnect.
+fn connect_buttons(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &egui::Context, idle: bool) {
     ui.horizontal(|ui| {
         if p.connected.is_none() {
             if ui.add_enabled(idle && !p.connecting, egui::Button::new(RichText::new("Connect").size(16.0))).clicked() {
-                if s.dirty {
+                if s.session.dirty {
                     p.confirm = true;
                 } else {
                     p.connect(s, ctx);
@@ -594,6 +531,10 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
             ui.label("connecting…");
         }
     });
+}
+
+/// The question asked before a new bench replaces a session with unsaved measurements.
+fn confirm_new_session(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &egui::Context) {
     if p.confirm {
         ui.horizontal(|ui| {
             ui.label(
@@ -608,9 +549,6 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
             }
         });
     }
-    message(ui, p);
-    ui.add_space(6.0);
-    status(ui, s, p);
 }
 
 fn mapping(ui: &mut egui::Ui, s: &mut AppState, p: &ConnectionPanel, locked: bool) {
@@ -690,7 +628,7 @@ fn status(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel) {
         return;
     }
     // Poll through the worker (it owns the connections); one request at a time.
-    let idle = s.busy.is_none() && s.running.is_none();
+    let idle = s.busy.is_none() && s.wizard.running.is_none();
     let answered = match (&s.hardware_status, p.status_asked) {
         (Some((at, _)), Some(asked)) => *at >= asked,
         (_, None) => true,

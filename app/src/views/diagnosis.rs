@@ -23,7 +23,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
         "Where do the model and the data disagree? A residual above the noise floor means an effect the \
          model lacks (drift, a stage scale or pivot error, …).",
     );
-    match s.report.as_deref() {
+    match s.results.report.as_deref() {
         Some(r) => {
             ui.label(format!(
                 "residual {:.2} σ RMS over {} observations (1 = at the noise floor)",
@@ -40,12 +40,12 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
             ui.label("not identified in this session: the diagnosis starts from the extrinsics in use and refits them");
         }
     }
-    if s.steps.iter().all(|st| st.traces.is_empty()) {
+    if s.wizard.steps.iter().all(|st| st.traces.is_empty()) {
         ui.label("no recorded trace yet: run the wizard's steps first");
         saved_diagnosis(ui, s);
         return;
     }
-    let idle = s.busy.is_none() && s.running.is_none();
+    let idle = s.busy.is_none() && s.wizard.running.is_none();
     let mut start = false;
     ui.horizontal(|ui| {
         start = ui
@@ -73,7 +73,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
 }
 
 fn residuals(ui: &mut egui::Ui, s: &AppState) {
-    let Some(r) = s.report.as_deref() else { return };
+    let Some(r) = s.results.report.as_deref() else { return };
     let mut per_eq: Vec<(String, f64, usize)> = Vec::new();
     for (label, unit, res, sigma) in &r.residuals {
         let eq = equation_of(label, unit);
@@ -120,11 +120,11 @@ fn residuals(ui: &mut egui::Ui, s: &AppState) {
 }
 
 fn workflow(ui: &mut egui::Ui, s: &AppState) {
-    for (title, summary) in &s.diagnosis_steps {
+    for (title, summary) in &s.diagnosis.steps {
         ui.label(RichText::new(drawable(title)).strong());
         ui.label(drawable(summary));
     }
-    match &s.diagnosis {
+    match &s.diagnosis.result {
         None => {}
         Some(Err(e)) => {
             ui.colored_label(ui.visuals().error_fg_color, format!("diagnosis failed: {e}"));
@@ -186,7 +186,7 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
 
 /// The names of the effects the diagnosis added (named, then partial), joined.
 fn added_effects(s: &AppState) -> Option<String> {
-    let Some(Ok(d)) = &s.diagnosis else { return None };
+    let Some(Ok(d)) = &s.diagnosis.result else { return None };
     let names: Vec<&str> = d.effects.iter().chain(&d.partial).map(|e| e.name.as_str()).collect();
     (!names.is_empty()).then(|| drawable(&names.join(" + ")))
 }
@@ -199,15 +199,15 @@ fn short_motion(name: &str) -> &str {
 /// The validation motions planned without and with the effects the diagnosis added: a table and
 /// a bar chart of the peak-to-peak cavity variation.
 fn effect_validation(ui: &mut egui::Ui, s: &AppState) {
-    if !matches!(s.diagnosis, Some(Ok(_))) {
+    if !matches!(s.diagnosis.result, Some(Ok(_))) {
         return;
     }
     ui.add_space(8.0);
     ui.label(RichText::new("Validation with and without the added effects").size(16.0).strong());
     let without_name =
-        if s.diagnosis_from_calibration { "calibrated model" } else { "design extrinsics (not calibrated)" };
+        if s.diagnosis.from_calibration { "calibrated model" } else { "design extrinsics (not calibrated)" };
     let with_name = format!("with {}", added_effects(s).unwrap_or_else(|| "the effects".into()));
-    let rows = match &s.diagnosis_validation {
+    let rows = match &s.diagnosis.validation {
         None if s.busy.as_deref() == Some(BUSY_EFFECT_VALIDATION) => {
             ui.horizontal(|ui| {
                 ui.spinner();
@@ -268,7 +268,7 @@ fn validation_table(ui: &mut egui::Ui, id: &str, rows: &[EffectValidationRow]) {
 /// the validation without and with them. A record, not a result: the steps and the residual
 /// plots are not in it; running the diagnosis again replaces it.
 fn saved_diagnosis(ui: &mut egui::Ui, s: &AppState) {
-    let (None, Some(d)) = (&s.diagnosis, &s.loaded_diagnosis) else { return };
+    let (None, Some(d)) = (&s.diagnosis.result, &s.diagnosis.loaded_record) else { return };
     ui.add_space(8.0);
     ui.label(RichText::new("Diagnosis saved with this session").size(16.0).strong());
     ui.label(

@@ -15,13 +15,13 @@ fn node(ui: &mut egui::Ui, s: &mut AppState, tree: &FrameTree, i: usize) {
     let n = &tree.nodes[i];
     let t = n.local.translation.vector;
     let (r, p, y) = n.local.rotation.euler_angles();
-    let selected = s.selected_frame == Some(i);
+    let selected = s.robot_view.selected_frame == Some(i);
     let children: Vec<usize> = tree.children(i).collect();
     let id = ui.make_persistent_id(("frame", i));
     egui::collapsing_header::CollapsingState::load_with_default_open(ui.ctx(), id, true)
         .show_header(ui, |ui| {
             if ui.selectable_label(selected, &n.name).clicked() {
-                s.selected_frame = if selected { None } else { Some(i) };
+                s.robot_view.selected_frame = if selected { None } else { Some(i) };
             }
         })
         .body(|ui| {

@@ -8,7 +8,8 @@ use crate::views::decimated_line;
 use crate::worker::Command;
 use egui::{Color32, RichText};
 use egui_plot::{Legend, Line, MarkerShape, Plot, PlotPoints, Points, VLine};
-use photorobot_core::measure::Measurement;
+use photorobot_core::measure::live_count::turning_points;
+use photorobot_core::measure::{Measurement, MotionMeasurement};
 use photorobot_core::trace::Trace;
 
 /// Plot points (x, y).
@@ -23,39 +24,12 @@ pub struct Inspector {
     irradiance: Decimator,
 }
 
-/// Indices where the motion hint turns back (its slope changes sign).
-pub fn turning_points(hint: &[f64]) -> Vec<usize> {
-    let mut out = vec![];
-    let mut last_sign = 0.0;
-    for i in 1..hint.len() {
-        let d = hint[i] - hint[i - 1];
-        if d.abs() < 1e-9 {
-            continue;
-        }
-        let sign = d.signum();
-        if last_sign != 0.0 && sign != last_sign {
-            out.push(i - 1);
-        }
-        last_sign = sign;
-    }
-    out
-}
-
 /// Draw the inspector.
 pub fn ui(ui: &mut egui::Ui, s: &mut AppState, ins: &mut Inspector) {
     ui.horizontal(|ui| {
         ui.heading("Trace inspector");
         if ui.button("Import CSV traces…").clicked() {
-            for path in s.dialogs.open_traces() {
-                match Trace::read_csv(&path) {
-                    Ok(t) => {
-                        s.status = format!("imported {}", path.display());
-                        s.imported.push(t);
-                        s.dirty = true;
-                    }
-                    Err(e) => s.status = format!("import refused: {e}"),
-                }
-            }
+            import_traces(s);
         }
     });
     let labels: Vec<String> = s.all_traces().iter().map(|t| t.meta.label.clone()).collect();
@@ -64,6 +38,48 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, ins: &mut Inspector) {
         return;
     }
     ins.selected = ins.selected.min(labels.len() - 1);
+    if trace_selector(ui, ins, &labels) {
+        export_selected(s, ins.selected);
+    }
+    if ins.shown != Some(ins.selected) && !show_selected(s, ins) {
+        return;
+    }
+    let Some(t) = s.trace(ins.selected) else { return };
+    ui.label(format!(
+        "{} samples over {:.3} s; bench {}; {}",
+        t.len(),
+        t.t_s.last().unwrap_or(&0.0) - t.t_s.first().unwrap_or(&0.0),
+        t.meta.bench,
+        t.meta.notes
+    ));
+    let analysis = s.analyses.get(&ins.selected);
+    analysis_summary(ui, analysis);
+    let motion = match analysis {
+        Some(Ok(m)) => match m.as_ref() {
+            Measurement::Motion(m) => Some(m),
+            Measurement::Sweep(_) => None,
+        },
+        _ => None,
+    };
+    plots(ui, t, motion, &ins.irradiance);
+}
+
+/// Import the CSV traces the file dialog picks; the status says what happened.
+fn import_traces(s: &mut AppState) {
+    for path in s.dialogs.open_traces() {
+        match Trace::read_csv(&path) {
+            Ok(t) => {
+                s.status = format!("imported {}", path.display());
+                s.imported.push(t);
+                s.session.dirty = true;
+            }
+            Err(e) => s.status = format!("import refused: {e}"),
+        }
+    }
+}
+
+/// The trace chooser and the export button; true when export was clicked.
+fn trace_selector(ui: &mut egui::Ui, ins: &mut Inspector, labels: &[String]) -> bool {
     let mut export = false;
     ui.horizontal(|ui| {
         egui::ComboBox::from_label("trace")
@@ -76,39 +92,37 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, ins: &mut Inspector) {
             });
         export = ui.button("Export CSV…").clicked();
     });
-    if export {
-        let name = format!("trace-{:03}.csv", ins.selected + 1);
-        if let Some(path) = s.dialogs.save_trace(&name) {
-            let result = s.trace(ins.selected).map(|t| t.write_csv(&path));
-            s.status = match result {
-                Some(Ok(())) => format!("saved {}", path.display()),
-                Some(Err(e)) => format!("not saved: {e}"),
-                None => "not saved: no trace".into(),
-            };
-        }
+    export
+}
+
+/// Write trace `index` where the save dialog says; the status says what happened.
+fn export_selected(s: &mut AppState, index: usize) {
+    let name = format!("trace-{:03}.csv", index + 1);
+    if let Some(path) = s.dialogs.save_trace(&name) {
+        let result = s.trace(index).map(|t| t.write_csv(&path));
+        s.status = match result {
+            Some(Ok(())) => format!("saved {}", path.display()),
+            Some(Err(e)) => format!("not saved: {e}"),
+            None => "not saved: no trace".into(),
+        };
     }
-    if ins.shown != Some(ins.selected) {
-        let Some(t) = s.trace(ins.selected) else { return };
-        ins.irradiance.clear();
-        ins.irradiance.extend(&t.t_s, &t.irradiance);
-        ins.shown = Some(ins.selected);
-        if !s.analyses.contains_key(&ins.selected) {
-            s.worker.send(Command::Analyse {
-                index: ins.selected,
-                trace: Box::new(t.clone()),
-                extrinsics: s.extrinsics,
-            });
-        }
+}
+
+/// Load the selected trace into the plot and ask the worker to analyse it when no analysis is
+/// there yet; false when there is no such trace.
+fn show_selected(s: &mut AppState, ins: &mut Inspector) -> bool {
+    let Some(t) = s.trace(ins.selected) else { return false };
+    ins.irradiance.clear();
+    ins.irradiance.extend(&t.t_s, &t.irradiance);
+    ins.shown = Some(ins.selected);
+    if !s.analyses.contains_key(&ins.selected) {
+        s.worker.send(Command::Analyse { index: ins.selected, trace: Box::new(t.clone()), extrinsics: s.extrinsics });
     }
-    let Some(t) = s.trace(ins.selected) else { return };
-    ui.label(format!(
-        "{} samples over {:.3} s; bench {}; {}",
-        t.len(),
-        t.t_s.last().unwrap_or(&0.0) - t.t_s.first().unwrap_or(&0.0),
-        t.meta.bench,
-        t.meta.notes
-    ));
-    let analysis = s.analyses.get(&ins.selected);
+    true
+}
+
+/// One line: the analysis' result, a spinner while it runs, or why it failed.
+fn analysis_summary(ui: &mut egui::Ui, analysis: Option<&Result<Box<Measurement>, String>>) {
     match analysis {
         None => {
             ui.horizontal(|ui| {
@@ -142,13 +156,11 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, ins: &mut Inspector) {
             }
         }
     }
-    let motion = match analysis {
-        Some(Ok(m)) => match m.as_ref() {
-            Measurement::Motion(m) => Some(m),
-            Measurement::Sweep(_) => None,
-        },
-        _ => None,
-    };
+}
+
+/// The irradiance with the extrema and turning points; under it, for a motion, the tracked dL
+/// and the motion hint, the two plots' time axes linked.
+fn plots(ui: &mut egui::Ui, t: &Trace, motion: Option<&MotionMeasurement>, irradiance: &Decimator) {
     let extrema: Series = motion.map_or(vec![], |m| {
         m.count.extrema.iter().filter(|e| e.index < t.len()).map(|e| [t.t_s[e.index], t.irradiance[e.index]]).collect()
     });
@@ -167,7 +179,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, ins: &mut Inspector) {
         .x_axis_label("bench time (s)")
         .y_axis_label("irradiance (mW)")
         .show(ui, |p| {
-            decimated_line(p, "irradiance", &ins.irradiance, Color32::from_rgb(80, 170, 255));
+            decimated_line(p, "irradiance", irradiance, Color32::from_rgb(80, 170, 255));
             p.points(
                 Points::new("extrema", PlotPoints::from(extrema))
                     .shape(MarkerShape::Circle)

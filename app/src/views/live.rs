@@ -2,10 +2,11 @@
 //! the visible range), the fringe count with its direction, dL, the model's absolute gap and the
 //! fringe visibility. Pause freezes the view for pan and zoom while the buffer keeps filling.
 
-use crate::state::{AppState, LiveCounter};
+use crate::state::AppState;
 use crate::views::{decimated_line, or_dash};
 use egui::RichText;
 use egui_plot::Plot;
+use photorobot_core::measure::live_count::LiveCounter;
 use std::sync::atomic::Ordering;
 
 /// Draw the live view.

@@ -37,7 +37,7 @@ pub fn display_name(name: &str) -> String {
 
 /// Draw the results view.
 pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
-    let Some(r) = s.report.as_deref() else {
+    let Some(r) = s.results.report.as_deref() else {
         ui.heading("Results");
         ui.label("No identification yet: run the wizard's steps, then Identify.");
         return;

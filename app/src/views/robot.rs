@@ -3,29 +3,12 @@
 //! (drag), zoom (scroll), reset. Beside it the joint readouts and jog controls, clamped to the
 //! joint limits, and the frame tree.
 
-use crate::state::AppState;
+use crate::state::{AppState, Camera};
 use crate::views::frames;
 use crate::worker::Command;
 use egui::{Color32, Pos2, Stroke};
 use nalgebra::{Point3, Rotation3, Vector3};
 use photorobot_core::model::frames::{FrameKind, FrameTree};
-
-/// The orbit camera.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Camera {
-    /// Rotation about world Z (rad).
-    pub yaw: f32,
-    /// Elevation (rad).
-    pub pitch: f32,
-    /// Zoom factor (1 = the whole scene fits).
-    pub zoom: f32,
-}
-
-impl Default for Camera {
-    fn default() -> Self {
-        Self { yaw: -0.6, pitch: 0.45, zoom: 1.0 }
-    }
-}
 
 /// Draw the robot view with its side panels.
 pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
@@ -36,10 +19,10 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
     egui::CentralPanel::default().show(ui, |ui| {
         ui.horizontal(|ui| {
             if ui.button("Reset view").clicked() {
-                s.camera = Camera::default();
+                s.robot_view.camera = Camera::default();
             }
             ui.label("drag to orbit, scroll to zoom; Z up, beam along Y_w");
-            if let Some(i) = s.selected_frame {
+            if let Some(i) = s.robot_view.selected_frame {
                 ui.strong(format!("selected: {}", tree.nodes[i].name));
             }
         });
@@ -55,20 +38,20 @@ fn jog(ui: &mut egui::Ui, s: &mut AppState, tree: &FrameTree) {
             let unit = l.joint.display_unit();
             ui.label(format!("{} = {:.3} {unit}", l.name, s.q_display[j]));
             ui.add(
-                egui::Slider::new(&mut s.jog_target[j], l.limits.min..=l.limits.max)
+                egui::Slider::new(&mut s.robot_view.jog_target[j], l.limits.min..=l.limits.max)
                     .suffix(format!(" {unit}"))
                     .text("target"),
             );
             ui.end_row();
         }
     });
-    let idle = s.busy.is_none() && s.running.is_none();
+    let idle = s.busy.is_none() && s.wizard.running.is_none();
     ui.horizontal(|ui| {
         if ui.add_enabled(idle, egui::Button::new("Move to targets")).clicked() {
-            s.worker.send(Command::Jog(s.jog_target));
+            s.worker.send(Command::Jog(s.robot_view.jog_target));
         }
         if ui.add_enabled(idle, egui::Button::new("Home (all joints 0)")).clicked() {
-            s.jog_target = [0.0; 6];
+            s.robot_view.jog_target = [0.0; 6];
             s.worker.send(Command::Jog([0.0; 6]));
         }
     });
@@ -92,13 +75,13 @@ fn scene(ui: &mut egui::Ui, s: &mut AppState, tree: &FrameTree) {
     let (response, painter) = ui.allocate_painter(size, egui::Sense::drag());
     if response.dragged() {
         let d = response.drag_delta();
-        s.camera.yaw += d.x * 0.01;
-        s.camera.pitch = (s.camera.pitch + d.y * 0.01).clamp(-1.55, 1.55);
+        s.robot_view.camera.yaw += d.x * 0.01;
+        s.robot_view.camera.pitch = (s.robot_view.camera.pitch + d.y * 0.01).clamp(-1.55, 1.55);
     }
     if response.hovered() {
         let scroll = ui.input(|i| i.smooth_scroll_delta.y);
         if scroll != 0.0 {
-            s.camera.zoom = (s.camera.zoom * (1.0 + scroll * 0.002)).clamp(0.05, 50.0);
+            s.robot_view.camera.zoom = (s.robot_view.camera.zoom * (1.0 + scroll * 0.002)).clamp(0.05, 50.0);
         }
     }
     let rect = response.rect;
@@ -115,9 +98,9 @@ fn scene(ui: &mut egui::Ui, s: &mut AppState, tree: &FrameTree) {
     }
     let centre = nalgebra::center(&lo, &hi);
     let extent = (hi - lo).norm().max(100.0);
-    let rot = Rotation3::from_axis_angle(&Vector3::x_axis(), s.camera.pitch as f64)
-        * Rotation3::from_axis_angle(&Vector3::z_axis(), s.camera.yaw as f64);
-    let scale = rect.width().min(rect.height()) as f64 * 0.8 / extent * s.camera.zoom as f64;
+    let rot = Rotation3::from_axis_angle(&Vector3::x_axis(), s.robot_view.camera.pitch as f64)
+        * Rotation3::from_axis_angle(&Vector3::z_axis(), s.robot_view.camera.yaw as f64);
+    let scale = rect.width().min(rect.height()) as f64 * 0.8 / extent * s.robot_view.camera.zoom as f64;
     let project = |p: &Point3<f64>| -> Pos2 {
         let v = rot * (p - centre);
         Pos2::new(rect.center().x + (v.x * scale) as f32, rect.center().y - (v.z * scale) as f32)
@@ -159,7 +142,7 @@ fn scene(ui: &mut egui::Ui, s: &mut AppState, tree: &FrameTree) {
     let axis_len = 0.12 * extent;
     for (i, n) in tree.nodes.iter().enumerate() {
         let o: Point3<f64> = n.world.translation.vector.into();
-        let selected = s.selected_frame == Some(i);
+        let selected = s.robot_view.selected_frame == Some(i);
         let width = if selected { 4.0 } else { 1.5 };
         for (k, color) in [
             (0, Color32::from_rgb(230, 70, 70)),

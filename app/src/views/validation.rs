@@ -17,14 +17,14 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
          is planned twice, with the design (nominal) extrinsics and with the identified ones, run on the \
          bench and measured by phase tracking.",
     );
-    let idle = s.busy.is_none() && s.running.is_none();
-    let can = s.report.is_some();
+    let idle = s.busy.is_none() && s.wizard.running.is_none();
+    let can = s.results.report.is_some();
     if !can {
         ui.label("identify first (wizard)");
     }
     if ui.add_enabled(can && idle, egui::Button::new(RichText::new("Run validation").size(18.0))).clicked() {
         s.worker.send(Command::Validate { identified: s.extrinsics });
-        s.validation = None;
+        s.results.validation = None;
     }
     if s.busy.as_deref() == Some("validating") {
         ui.horizontal(|ui| {
@@ -32,7 +32,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
             ui.label("running 4 motions × (before, after)");
         });
     }
-    let Some(pairs) = &s.validation else { return };
+    let Some(pairs) = &s.results.validation else { return };
     ui.separator();
     let fmt = |f: &Result<ValidationFigure, String>| match f {
         Ok(f) => format!("{:.1} nm", f.peak_to_peak_nm),

@@ -26,14 +26,14 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
         if ui.button("Open the alignment gauge").clicked() {
             *go_to_align = true;
         }
-        for i in 0..s.steps.len() {
+        for i in 0..s.wizard.steps.len() {
             ui.separator();
             step(ui, s, i);
         }
         ui.separator();
-        ui.label(RichText::new(format!("{}. Identify", s.steps.len() + 1)).size(18.0).strong());
+        ui.label(RichText::new(format!("{}. Identify", s.wizard.steps.len() + 1)).size(18.0).strong());
         let ready = s.ready_to_identify();
-        let idle = s.busy.is_none() && s.running.is_none();
+        let idle = s.busy.is_none() && s.wizard.running.is_none();
         if !ready {
             ui.label("run every step above first (the extra measurements only for the joint identifier)");
         }
@@ -46,10 +46,10 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
                 ui.label("identifying: extracting dL and gaps from every trace, then the least-squares fit");
             });
         }
-        if let Some(e) = &s.identify_error {
+        if let Some(e) = &s.results.identify_error {
             ui.colored_label(ui.visuals().error_fg_color, format!("identification failed: {e}"));
         }
-        if let Some(r) = &s.report {
+        if let Some(r) = &s.results.report {
             ui.label(format!(
                 "identified from {} observations, residual {:.2} σ RMS: see Results",
                 r.observations, r.residual_rms_sigma
@@ -59,8 +59,8 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
 }
 
 fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
-    let idle = s.busy.is_none() && s.running.is_none();
-    let st = &s.steps[i];
+    let idle = s.busy.is_none() && s.wizard.running.is_none();
+    let st = &s.wizard.steps[i];
     let used = s.settings.joint_mode || !st.joint_only;
     ui.label(RichText::new(format!("{}. {}", i + 1, st.title)).size(18.0).strong());
     if !used {
@@ -94,7 +94,7 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
             ui.monospace(format!("{:>3} {:<40} {what}", k + 1, g.label()));
         }
     });
-    let running_this = s.running.as_ref().is_some_and(|r| r.0 == i);
+    let running_this = s.wizard.running.as_ref().is_some_and(|r| r.step == i);
     let pending = st.state == StepState::Pending;
     ui.horizontal(|ui| {
         let label = if pending { format!("Run step {} (F5)", i + 1) } else { format!("Redo step {}", i + 1) };
@@ -104,20 +104,21 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
         if running_this && ui.button("Cancel (Esc)").clicked() {
             s.cancel();
         }
-        match &s.steps[i].state {
+        match &s.wizard.steps[i].state {
             StepState::Pending => ui.label("not run"),
             StepState::Running => ui.label("running…"),
-            StepState::Done => ui.label(format!("done: {} traces", s.steps[i].traces.len())),
+            StepState::Done => ui.label(format!("done: {} traces", s.wizard.steps[i].traces.len())),
             StepState::Stopped(e) => ui.colored_label(
                 ui.visuals().warn_fg_color,
-                format!("stopped: {e}; {} traces kept", s.steps[i].traces.len()),
+                format!("stopped: {e}; {} traces kept", s.wizard.steps[i].traces.len()),
             ),
         };
     });
-    if let Some((_, label, f)) = s.running.as_ref().filter(|r| r.0 == i) {
-        ui.add(egui::ProgressBar::new(*f as f32).show_percentage().text(format!("{label} — {:.0} %", f * 100.0)));
+    if let Some(r) = s.wizard.running.as_ref().filter(|r| r.step == i) {
+        let (label, f) = (&r.label, r.fraction);
+        ui.add(egui::ProgressBar::new(f as f32).show_percentage().text(format!("{label} — {:.0} %", f * 100.0)));
     }
-    let st = &s.steps[i];
+    let st = &s.wizard.steps[i];
     if !st.traces.is_empty() {
         egui::CollapsingHeader::new(format!("recorded traces ({})", st.traces.len())).id_salt(("traces", i)).show(
             ui,

@@ -65,7 +65,7 @@ pub fn save_as_and_load(h: &mut Harness<'_, Workbench>, folder: &Path) -> photor
     h.state_mut().state.dialogs =
         Box::new(ScriptedDialogs { folders: vec![Some(folder.to_path_buf())], ..Default::default() });
     h.state_mut().save(true);
-    wait_until(h, "the save", Duration::from_secs(60), |w| w.state.saving == 0);
+    wait_until(h, "the save", Duration::from_secs(60), |w| w.state.session.saving == 0);
     photorobot_core::session::Session::load(folder).expect("the saved session loads")
 }
 

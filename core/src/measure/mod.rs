@@ -10,6 +10,7 @@
 pub mod alignment;
 pub mod extrema;
 pub mod hint;
+pub mod live_count;
 pub mod signal;
 pub mod sweep;
 pub mod track;

@@ -7,6 +7,7 @@
 //! phase-equivalent change is corrected by the model's tilt term (phase-equivalent gap − |L|) before the
 //! peak-to-peak is taken. With perfect extrinsics the figure is the noise.
 
+pub mod before_after;
 pub mod forecast;
 
 use crate::bench::{run_plan, Bench, RunControl};

@@ -9,12 +9,13 @@
 //! writes them as a plan file (`discriminating-motions.ron` in the session folder) to record on
 //! the bench and add to the session's traces.
 
-use crate::cli::CliError;
+use super::common::{json_text, CliError};
 use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
 use photorobot_core::diagnose::motions::{BenchRunner, MotionRunner};
 use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
 use photorobot_core::diagnose::{Diagnosis, DiagnosisResult, Step};
 use photorobot_core::files::FileError;
+use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::trace::Trace;
@@ -85,44 +86,11 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let traces = read_traces(&a.session)?;
     let extrinsics = Extrinsics::load(&a.session.join("extrinsics.ron"))?;
     let named = traces[0].meta.bench.trim().trim_start_matches("virtual bench ").to_string();
-    let preset_name = a.bench.clone().unwrap_or(named.clone());
-    let preset = match preset_name.as_str() {
-        "none" => None,
-        n => Some(BenchPreset::resolve(n).map_err(|e| match a.bench {
-            Some(_) => CliError::from(e),
-            None => invalid(
-                &a.session.join("traces"),
-                "# bench",
-                format!("the traces name bench `{named}`, which is not a known preset ({e}); give --bench PRESET or --bench none"),
-            ),
-        })?),
-    };
-    // The software's model: the preset's robot description (nominal), optics and air; without a
-    // preset, the embedded reference bench's.
-    let reference = match &preset {
-        Some(p) => p.clone(),
-        None => BenchPreset::resolve("table2-ideal")?,
-    };
-    let base = PhaseModel::new(
-        reference.robot_description()?,
-        extrinsics,
-        reference.optics,
-        &reference.ambient,
-        reference.laser.wavelength_nm,
-    )
-    .map_err(|problem| CliError::Argument { argument: "--bench", problem })?;
+    let preset = chosen_preset(a, &named)?;
+    let base = analysis_model(preset.as_ref(), extrinsics)?;
     let (mut d, skipped) =
         Diagnosis::from_traces(&base, &traces, extrinsics).map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
-    // The session's bench, resumed a minute after the session ended: its time (and drift) goes
-    // on from the recorded traces', so the observations need no time offset.
-    let mut bench = match &preset {
-        Some(p) => {
-            let mut b = VirtualBench::new(p, Some(a.seed.unwrap_or(p.seed + 1)))?;
-            b.set_clock_s(d.end_time_s() + 60.0);
-            Some(b)
-        }
-        None => None,
-    };
+    let mut bench = preset.as_ref().map(|p| resumed_bench(p, a.seed, &d)).transpose()?;
     let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, 0.0));
     if !a.json {
         writeln!(out, "diagnosis of {} ({} traces, bench {named})", a.session.display(), traces.len())?;
@@ -134,47 +102,16 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
             None => writeln!(out, "no bench: discriminating motions are proposed, not run")?,
         }
     }
-    loop {
-        let step = d
-            .step(runner.as_mut().map(|r| r as &mut dyn MotionRunner))
-            .map_err(|e| CliError::Failed { what: "diagnosis", problem: e.to_string() })?;
-        let Some(step) = step else { break };
-        if !a.json {
-            writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
-        }
-    }
+    run_steps(&mut d, runner.as_mut(), a.json, out)?;
     let result =
         d.result().cloned().ok_or_else(|| CliError::Failed { what: "diagnosis", problem: "no result".into() })?;
     drop(runner);
-    // The extended model in use: the validation motions planned with and without the effects
-    // added (named, or tried and kept as partial), on the same bench.
     let effects = d.state().map(|s| s.library_effects()).unwrap_or_default();
-    let validation = match bench.as_mut() {
-        Some(b) if !effects.is_empty() => {
-            if !a.json {
-                writeln!(
-                    out,
-                    "
-## validation with and without the added effects (on {})",
-                    b.name()
-                )?;
-            }
-            validate_with_effects(b, &base, &extrinsics, &result.extrinsics, &effects)
-                .map_err(|e| CliError::Failed { what: "validation with the named effects", problem: e.to_string() })?
-        }
-        _ => Vec::new(),
-    };
+    let validation = validate_added_effects(bench.as_mut(), &base, &extrinsics, &result, &effects, a.json, out)?;
     save_record(&a.session, &result, &effects, &validation)?;
-    let proposed = match d.proposed_plan() {
-        Some(plan) => {
-            let file = a.session.join(PROPOSED_PLAN_FILE);
-            photorobot_core::files::save_ron(&file, &plan)?;
-            Some(file)
-        }
-        None => None,
-    };
+    let proposed = save_proposed_plan(&d, &a.session)?;
     if a.json {
-        let text = crate::cli::json_text(&JsonOut {
+        let text = json_text(&JsonOut {
             result: &result,
             steps: &d.steps,
             skipped_traces: &skipped,
@@ -186,18 +123,124 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
         print_validation(&validation, out)?;
         print_result(&result, out)?;
         if let Some(file) = &proposed {
-            writeln!(
-                out,
-                "the discriminating motions, as a plan: {}\nrecord it on the bench that recorded these traces \
-                 (e.g. `photorobot simulate --bench PRESET --plan {} --out DIR` on a virtual one), put the traces \
-                 in {}, and diagnose again",
-                file.display(),
-                file.display(),
-                a.session.join("traces").display()
-            )?;
+            print_proposed_plan(file, &a.session, out)?;
         }
     }
     Ok(())
+}
+
+/// The preset of `--bench`, else the one the traces name; `None` for `none` (run nothing).
+fn chosen_preset(a: &DiagnoseArgs, named: &str) -> Result<Option<BenchPreset>, CliError> {
+    let preset_name = a.bench.clone().unwrap_or(named.to_string());
+    Ok(match preset_name.as_str() {
+        "none" => None,
+        n => Some(BenchPreset::resolve(n).map_err(|e| match a.bench {
+            Some(_) => CliError::from(e),
+            None => invalid(
+                &a.session.join("traces"),
+                "# bench",
+                format!("the traces name bench `{named}`, which is not a known preset ({e}); give --bench PRESET or --bench none"),
+            ),
+        })?),
+    })
+}
+
+/// The software's model: the preset's robot description (nominal), optics and air; without a
+/// preset, the embedded reference bench's.
+fn analysis_model(preset: Option<&BenchPreset>, extrinsics: Extrinsics) -> Result<PhaseModel, CliError> {
+    let reference = match preset {
+        Some(p) => p.clone(),
+        None => BenchPreset::resolve("table2-ideal")?,
+    };
+    PhaseModel::new(
+        reference.robot_description()?,
+        extrinsics,
+        reference.optics,
+        &reference.ambient,
+        reference.laser.wavelength_nm,
+    )
+    .map_err(|problem| CliError::Argument { argument: "--bench", problem })
+}
+
+/// The session's bench, resumed a minute after the session ended: its time (and drift) goes on
+/// from the recorded traces', so the observations need no time offset.
+fn resumed_bench(preset: &BenchPreset, seed: Option<u64>, d: &Diagnosis) -> Result<VirtualBench, CliError> {
+    let mut b = VirtualBench::new(preset, Some(seed.unwrap_or(preset.seed + 1)))?;
+    b.set_clock_s(d.end_time_s() + 60.0);
+    Ok(b)
+}
+
+/// Step the workflow to its end, printing each step unless the output is JSON.
+fn run_steps(
+    d: &mut Diagnosis,
+    mut runner: Option<&mut BenchRunner<'_>>,
+    json: bool,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    loop {
+        let step = d
+            .step(runner.as_mut().map(|r| &mut **r as &mut dyn MotionRunner))
+            .map_err(|e| CliError::Failed { what: "diagnosis", problem: e.to_string() })?;
+        let Some(step) = step else { break };
+        if !json {
+            writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
+        }
+    }
+    Ok(())
+}
+
+/// The extended model in use: the validation motions planned with and without the effects
+/// added (named, or tried and kept as partial), on the same bench; empty without a bench or
+/// without added effects.
+fn validate_added_effects(
+    bench: Option<&mut VirtualBench>,
+    base: &PhaseModel,
+    extrinsics: &Extrinsics,
+    result: &DiagnosisResult,
+    effects: &[Effect],
+    json: bool,
+    out: &mut dyn Write,
+) -> Result<Vec<EffectValidationRow>, CliError> {
+    match bench {
+        Some(b) if !effects.is_empty() => {
+            if !json {
+                writeln!(
+                    out,
+                    "
+## validation with and without the added effects (on {})",
+                    b.name()
+                )?;
+            }
+            validate_with_effects(b, base, extrinsics, &result.extrinsics, effects)
+                .map_err(|e| CliError::Failed { what: "validation with the named effects", problem: e.to_string() })
+        }
+        _ => Ok(Vec::new()),
+    }
+}
+
+/// Write the discriminating motions designed but not run as a plan file in the session folder.
+fn save_proposed_plan(d: &Diagnosis, session: &Path) -> Result<Option<PathBuf>, CliError> {
+    Ok(match d.proposed_plan() {
+        Some(plan) => {
+            let file = session.join(PROPOSED_PLAN_FILE);
+            photorobot_core::files::save_ron(&file, &plan)?;
+            Some(file)
+        }
+        None => None,
+    })
+}
+
+/// Where the proposed plan is and what to do with it.
+fn print_proposed_plan(file: &Path, session: &Path, out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "the discriminating motions, as a plan: {}\nrecord it on the bench that recorded these traces \
+         (e.g. `photorobot simulate --bench PRESET --plan {} --out DIR` on a virtual one), put the traces \
+         in {}, and diagnose again",
+        file.display(),
+        file.display(),
+        session.join("traces").display()
+    )
 }
 
 /// Save the diagnosis, with its extended model and validation, into the folder's `session.ron`
@@ -205,7 +248,7 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
 fn save_record(
     dir: &Path,
     result: &DiagnosisResult,
-    effects: &[photorobot_core::model::effects::Effect],
+    effects: &[Effect],
     validation: &[EffectValidationRow],
 ) -> Result<(), CliError> {
     use photorobot_core::session::{session_path, DiagnosisRecord, Session};

@@ -9,7 +9,7 @@
 //! loadable by `photorobot frames --extrinsics`) and the whole report (`report.json`). Every file
 //! is written atomically. `--resume` continues a measurement a crash interrupted.
 
-use crate::cli::CliError;
+use super::common::{json_text, load_plan, CliError};
 use photorobot_core::bench::{BenchPreset, RunControl, VirtualBench};
 use photorobot_core::calibration::{
     plan_durations, plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
@@ -23,7 +23,7 @@ use photorobot_core::session::{find_recovery, recording::record, BenchInfo, Sess
 use photorobot_core::trace::import::{read_folder, ColumnMapping};
 use photorobot_core::trace::Trace;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 /// Which identifier.
@@ -73,115 +73,159 @@ pub struct CalibrateArgs {
 /// Run the calibration and write the session.
 pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let preset = BenchPreset::resolve(&a.bench)?;
-    // The software's model: the bench's robot description and optics, the design extrinsics.
-    let nominal = PhaseModel::new(
-        preset.robot_description()?,
-        Extrinsics::nominal_design(),
-        preset.optics,
-        &preset.ambient,
-        preset.laser.wavelength_nm,
-    )
-    .map_err(|problem| CliError::Argument { argument: "--bench", problem })?;
+    let nominal = nominal_model(&preset)?;
     let mode = match a.mode {
         ModeArg::Paper => Mode::Paper,
         ModeArg::Joint => Mode::Joint,
     };
-    // Never overwrite recorded data: a folder that holds a saved session is left alone.
-    if photorobot_core::session::session_path(&a.out).exists() && !a.resume {
-        return Err(CliError::Argument {
-            argument: "--out",
-            problem: format!("{} already holds a session (session.ron); choose another folder", a.out.display()),
-        });
-    }
-    let failed = |problem: String| CliError::Failed { what: "calibration", problem };
+    refuse_saved_session(a)?;
     let (mut session, report) = match &a.traces {
-        Some(dir) => {
-            let mapping = a.mapping.as_deref().map(ColumnMapping::load).transpose()?;
-            let traces = read_folder(dir, mapping.as_ref())?;
-            if std::fs::canonicalize(dir).ok() == std::fs::canonicalize(a.out.join("traces")).ok() {
-                return Err(CliError::Argument {
-                    argument: "--out",
-                    problem: format!(
-                        "{} would overwrite the traces it reads from; choose another folder",
-                        a.out.display()
-                    ),
-                });
-            }
-            let bench = BenchInfo {
-                name: format!("recorded traces from {}", dir.display()),
-                preset: Some(a.bench.clone()),
-                description: Some(preset.clone()),
-                seed: None,
-            };
-            let mut session = Session::new(bench, preset.robot_description()?);
-            session.notes = match &a.mapping {
-                Some(m) => format!("traces imported from {} with the column mapping {}", dir.display(), m.display()),
-                None => format!("traces imported from {}", dir.display()),
-            };
-            for t in &traces {
-                session.add_trace(&a.out, t, None, true)?;
-            }
-            let duration_s = traces.iter().map(span_s).sum();
-            let name = session.bench.name.clone();
-            let mut report = report_from_traces(traces, duration_s, name, &nominal, mode).map_err(failed)?;
-            report.validation = predicted_validation_rows(&preset, &nominal, &report.extrinsics).map_err(failed)?;
-            report.validation_predicted = true;
-            (session, report)
-        }
-        None => {
-            let mut bench = VirtualBench::new(&preset, a.seed)?;
-            let mut session = if a.resume {
-                Session::recover(&a.out)?
-            } else {
-                if find_recovery(&a.out)?.is_some() {
-                    return Err(CliError::Argument {
-                        argument: "--out",
-                        problem: format!(
-                            "{} holds an unfinished measurement ({AUTOSAVE_FILE}); add --resume to continue it, or choose another folder",
-                            a.out.display()
-                        ),
-                    });
-                }
-                let info = BenchInfo {
-                    name: photorobot_core::bench::Bench::name(&bench),
-                    preset: Some(a.bench.clone()),
-                    description: Some(preset.clone()),
-                    seed: Some(a.seed.unwrap_or(preset.seed)),
-                };
-                let mut s = Session::new(info, preset.robot_description()?);
-                s.plans = if a.plans.is_empty() {
-                    plans(mode)
-                } else {
-                    a.plans.iter().map(|p| crate::cli::load_plan(p)).collect::<Result<_, _>>()?
-                };
-                s
-            };
-            // Each plan's bench time from the timing model, every plan from the start (q = 0).
-            let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
-                .map_err(|problem| CliError::Argument { argument: "--plan", problem })?;
-            let cancel = AtomicBool::new(false);
-            let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-            let recorded = record(&mut bench, &mut session, &a.out, &mut control)?;
-            recorded.outcome?;
-            let traces = session.load_traces(&a.out)?;
-            let name = session.bench.name.clone();
-            let mut report = report_from_traces(traces, recorded.duration_s, name, &nominal, mode).map_err(failed)?;
-            report.plan_durations = durations;
-            report.validation = validation_rows(&mut bench, &nominal, &report.extrinsics);
-            (session, report)
-        }
+        Some(dir) => calibrate_from_traces(a, dir, &preset, &nominal, mode)?,
+        None => calibrate_on_virtual_bench(a, &preset, &nominal, mode)?,
     };
-    session.calibration = Some(CalibrationReport { traces: Vec::new(), ..report.clone() });
-    session.save(&a.out)?;
-    save_ron(&a.out.join("extrinsics.ron"), &report.extrinsics)?;
-    let json = crate::cli::json_text(&report)?;
-    write_atomic(&a.out.join("report.json"), json.as_bytes())?;
+    let json = write_session(a, &mut session, &report)?;
     if a.json {
         writeln!(out, "{json}")?;
     } else {
         print_report(&report, out)?;
         writeln!(out, "\nsession written to {}", a.out.display())?;
     }
+    calibration_verdict(a, &report)
+}
+
+/// The software's model: the bench's robot description and optics, the design extrinsics.
+fn nominal_model(preset: &BenchPreset) -> Result<PhaseModel, CliError> {
+    PhaseModel::new(
+        preset.robot_description()?,
+        Extrinsics::nominal_design(),
+        preset.optics,
+        &preset.ambient,
+        preset.laser.wavelength_nm,
+    )
+    .map_err(|problem| CliError::Argument { argument: "--bench", problem })
+}
+
+/// Never overwrite recorded data: a folder that holds a saved session is left alone.
+fn refuse_saved_session(a: &CalibrateArgs) -> Result<(), CliError> {
+    if photorobot_core::session::session_path(&a.out).exists() && !a.resume {
+        return Err(CliError::Argument {
+            argument: "--out",
+            problem: format!("{} already holds a session (session.ron); choose another folder", a.out.display()),
+        });
+    }
+    Ok(())
+}
+
+/// A calibration that could not be computed.
+fn calibration_failed(problem: String) -> CliError {
+    CliError::Failed { what: "calibration", problem }
+}
+
+/// `--traces`: identify from a folder of traces recorded elsewhere; the validation is predicted
+/// on a virtual bench, since no bench runs.
+fn calibrate_from_traces(
+    a: &CalibrateArgs,
+    dir: &Path,
+    preset: &BenchPreset,
+    nominal: &PhaseModel,
+    mode: Mode,
+) -> Result<(Session, CalibrationReport), CliError> {
+    let mapping = a.mapping.as_deref().map(ColumnMapping::load).transpose()?;
+    let traces = read_folder(dir, mapping.as_ref())?;
+    if std::fs::canonicalize(dir).ok() == std::fs::canonicalize(a.out.join("traces")).ok() {
+        return Err(CliError::Argument {
+            argument: "--out",
+            problem: format!("{} would overwrite the traces it reads from; choose another folder", a.out.display()),
+        });
+    }
+    let bench = BenchInfo {
+        name: format!("recorded traces from {}", dir.display()),
+        preset: Some(a.bench.clone()),
+        description: Some(preset.clone()),
+        seed: None,
+    };
+    let mut session = Session::new(bench, preset.robot_description()?);
+    session.notes = match &a.mapping {
+        Some(m) => format!("traces imported from {} with the column mapping {}", dir.display(), m.display()),
+        None => format!("traces imported from {}", dir.display()),
+    };
+    for t in &traces {
+        session.add_trace(&a.out, t, None, true)?;
+    }
+    let duration_s = traces.iter().map(span_s).sum();
+    let name = session.bench.name.clone();
+    let mut report = report_from_traces(traces, duration_s, name, nominal, mode).map_err(calibration_failed)?;
+    report.validation = predicted_validation_rows(preset, nominal, &report.extrinsics).map_err(calibration_failed)?;
+    report.validation_predicted = true;
+    Ok((session, report))
+}
+
+/// Measure the plans on a virtual bench of the preset (each trace saved as it is recorded),
+/// identify, and run the validation motions on the same bench.
+fn calibrate_on_virtual_bench(
+    a: &CalibrateArgs,
+    preset: &BenchPreset,
+    nominal: &PhaseModel,
+    mode: Mode,
+) -> Result<(Session, CalibrationReport), CliError> {
+    let mut bench = VirtualBench::new(preset, a.seed)?;
+    let mut session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &bench, mode)? };
+    // Each plan's bench time from the timing model, every plan from the start (q = 0).
+    let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
+        .map_err(|problem| CliError::Argument { argument: "--plan", problem })?;
+    let cancel = AtomicBool::new(false);
+    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+    let recorded = record(&mut bench, &mut session, &a.out, &mut control)?;
+    recorded.outcome?;
+    let traces = session.load_traces(&a.out)?;
+    let name = session.bench.name.clone();
+    let mut report =
+        report_from_traces(traces, recorded.duration_s, name, nominal, mode).map_err(calibration_failed)?;
+    report.plan_durations = durations;
+    report.validation = validation_rows(&mut bench, nominal, &report.extrinsics);
+    Ok((session, report))
+}
+
+/// A new session on the bench with the plans to measure (the mode's or `--plan`'s); refused when
+/// `--out` holds an unfinished measurement that `--resume` should continue.
+fn new_session(a: &CalibrateArgs, preset: &BenchPreset, bench: &VirtualBench, mode: Mode) -> Result<Session, CliError> {
+    if find_recovery(&a.out)?.is_some() {
+        return Err(CliError::Argument {
+            argument: "--out",
+            problem: format!(
+                "{} holds an unfinished measurement ({AUTOSAVE_FILE}); add --resume to continue it, or choose another folder",
+                a.out.display()
+            ),
+        });
+    }
+    let info = BenchInfo {
+        name: photorobot_core::bench::Bench::name(bench),
+        preset: Some(a.bench.clone()),
+        description: Some(preset.clone()),
+        seed: Some(a.seed.unwrap_or(preset.seed)),
+    };
+    let mut s = Session::new(info, preset.robot_description()?);
+    s.plans = if a.plans.is_empty() {
+        plans(mode)
+    } else {
+        a.plans.iter().map(|p| load_plan(p)).collect::<Result<_, _>>()?
+    };
+    Ok(s)
+}
+
+/// Write the session with its calibration, the identified extrinsics and the report; the
+/// report's JSON text is returned for printing.
+fn write_session(a: &CalibrateArgs, session: &mut Session, report: &CalibrationReport) -> Result<String, CliError> {
+    session.calibration = Some(CalibrationReport { traces: Vec::new(), ..report.clone() });
+    session.save(&a.out)?;
+    save_ron(&a.out.join("extrinsics.ron"), &report.extrinsics)?;
+    let json = json_text(report)?;
+    write_atomic(&a.out.join("report.json"), json.as_bytes())?;
+    Ok(json)
+}
+
+/// A fit that fails or a solver that did not converge is not a calibration, though written.
+fn calibration_verdict(a: &CalibrateArgs, report: &CalibrationReport) -> Result<(), CliError> {
     match &report.fit {
         Some(fit) if fit.verdict != Verdict::Fits => {
             Err(CliError::NotACalibration { session: a.out.clone(), problem: fit.summary.clone() })

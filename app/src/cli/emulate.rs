@@ -1,7 +1,7 @@
 //! `photorobot emulate pi|smaract [--port N]`: serve a stage-controller protocol emulator on loopback.
 //! Owns only argument parsing and printing; the emulators are `photorobot_core::hardware::emulator`.
 
-use crate::cli::CliError;
+use super::common::CliError;
 use photorobot_core::hardware::emulator::{run_emulator, EmulatorKind};
 use std::io::Write;
 use std::sync::atomic::AtomicBool;

@@ -4,7 +4,7 @@
 //! against the default joint plans), and write the plan. Owns only argument parsing and printing;
 //! the work is `photorobot_core::identify::design`.
 
-use crate::cli::CliError;
+use super::common::CliError;
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::calibration::{plans, Mode};
 use photorobot_core::files::write_atomic;
@@ -122,7 +122,7 @@ pub fn run_design(a: &DesignArgs, out: &mut dyn Write) -> Result<(), CliError> {
             "plan": d.plan,
             "out": a.out,
         });
-        writeln!(out, "{}", crate::cli::json_text(&doc)?)?;
+        writeln!(out, "{}", super::common::json_text(&doc)?)?;
     } else {
         print_design(&d, &preset.name, out)?;
         if let Some(p) = &a.out {

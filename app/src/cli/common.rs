@@ -1,0 +1,128 @@
+//! What every command shares: the error type and its exit codes, the JSON document form and the
+//! loaders of the files several commands take (extrinsics, plans).
+
+use photorobot_core::bench::{BenchError, RunError};
+use photorobot_core::files::FileError;
+use photorobot_core::measure::MeasureError;
+use photorobot_core::model::extrinsics::Extrinsics;
+use photorobot_core::model::kinematics::LimitViolation;
+use photorobot_core::plan::Plan;
+use photorobot_core::trace::TraceError;
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// Why a command failed. Every message names the file, field or argument and what was expected.
+#[derive(Debug, Error)]
+pub enum CliError {
+    /// Bad command line (clap prints it, with usage).
+    #[error("{0}")]
+    Usage(#[from] clap::Error),
+    /// A data file could not be used.
+    #[error(transparent)]
+    File(#[from] FileError),
+    /// An argument has the wrong form.
+    #[error("argument {argument}: {problem}")]
+    Argument {
+        /// The argument, e.g. `--q`.
+        argument: &'static str,
+        /// What is wrong and what was expected.
+        problem: String,
+    },
+    /// A joint value is outside its limits.
+    #[error("argument --q: {0}")]
+    Limits(#[from] LimitViolation),
+    /// A bench could not be built or failed.
+    #[error(transparent)]
+    Bench(#[from] BenchError),
+    /// A plan failed.
+    #[error(transparent)]
+    Run(#[from] RunError),
+    /// A trace file could not be read or written.
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    /// A session could not be read or written.
+    #[error(transparent)]
+    Session(#[from] photorobot_core::session::SessionError),
+    /// A trace could not be analysed.
+    #[error(transparent)]
+    Measure(#[from] MeasureError),
+    /// Output could not be written.
+    #[error("cannot write output: {0}")]
+    Output(#[from] std::io::Error),
+    /// The work itself failed (a calibration, design or diagnosis that could not be computed).
+    #[error("{what} failed: {problem}")]
+    Failed {
+        /// What failed, e.g. "calibration".
+        what: &'static str,
+        /// Why.
+        problem: String,
+    },
+    /// The run finished and its session was written, but it is not a calibration (the model does
+    /// not fit the data, branches tie, or the solver did not converge).
+    #[error("not a calibration: {problem} (session written to {})", session.display())]
+    NotACalibration {
+        /// Where the session was written.
+        session: std::path::PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+/// The version of every command's JSON output, in its `schema` field: raised when a field is
+/// renamed, removed or changes meaning (new fields do not raise it).
+pub const JSON_SCHEMA: u32 = 1;
+
+/// A command's JSON document as printed, with `schema` ([`JSON_SCHEMA`]) added.
+pub fn json_text<T: serde::Serialize>(doc: &T) -> std::io::Result<String> {
+    let mut doc = serde_json::to_value(doc).map_err(std::io::Error::other)?;
+    if let Some(map) = doc.as_object_mut() {
+        map.insert("schema".into(), JSON_SCHEMA.into());
+    }
+    serde_json::to_string_pretty(&doc).map_err(std::io::Error::other)
+}
+
+impl CliError {
+    /// The process exit code: 1 for a run that failed or finished without a result (not a
+    /// calibration, a bench or plan that failed, a trace that could not be analysed, output that
+    /// could not be written), 2 for a command line that is wrong, 3 for a file that cannot be
+    /// used (a plan, preset, trace or session that is missing or malformed, a bench preset that
+    /// cannot be built).
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            CliError::Bench(BenchError::Config(_)) => 3,
+            CliError::NotACalibration { .. }
+            | CliError::Failed { .. }
+            | CliError::Bench(_)
+            | CliError::Run(_)
+            | CliError::Measure(_)
+            | CliError::Output(_) => 1,
+            CliError::Usage(_) | CliError::Argument { .. } | CliError::Limits(_) => 2,
+            CliError::File(_) | CliError::Trace(_) | CliError::Session(_) => 3,
+        }
+    }
+}
+
+/// The extrinsics file given, or the paper's Table II when none is.
+pub fn load_extrinsics(path: &Option<PathBuf>) -> Result<Extrinsics, CliError> {
+    Ok(match path {
+        Some(p) => Extrinsics::load(p)?,
+        None => Extrinsics::table2(),
+    })
+}
+
+/// A plan file, or an embedded plan by name: strategy1, strategy2, joint-extras, optimised.
+pub fn load_plan(name_or_path: &str) -> Result<Plan, CliError> {
+    Ok(match name_or_path {
+        "strategy1" => Plan::from_ron_str(
+            photorobot_core::plan::STRATEGY1_RON,
+            std::path::Path::new("assets/plans/strategy1.ron"),
+        )?,
+        "strategy2" => Plan::from_ron_str(
+            photorobot_core::plan::STRATEGY2_RON,
+            std::path::Path::new("assets/plans/strategy2.ron"),
+        )?,
+        "joint-extras" => Plan::joint_extras(),
+        "optimised" => Plan::optimised(),
+        path => Plan::load(std::path::Path::new(path))?,
+    })
+}
