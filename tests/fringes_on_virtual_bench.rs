@@ -51,7 +51,7 @@ fn check_motions(plan: &Plan) -> Errors {
     let analysis_model = model(&preset, believed(&preset.truth));
     let traces = run(&preset, plan, 5);
     let (mut sum_sq, mut n, mut worst, mut worst_count, mut motions) = (0.0, 0usize, 0.0f64, 0.0f64, 0);
-    for t in traces.iter().filter(|t| !measure::is_sweep(t)) {
+    for t in traces.iter().filter(|t| !photorobot_core::trace::is_sweep(t)) {
         let Measurement::Motion(m) = measure::analyse(t, &analysis_model).unwrap() else { panic!("motion expected") };
         // Truth: the phase-equivalent gap change from the hidden model at the recorded joints.
         let truth = truth_model.hint_nm(t, m.wavelength_nm).unwrap();

@@ -158,7 +158,7 @@ fn main() {
             })
             .cloned()
             .collect();
-        let sweeps: Vec<Trace> = traces.iter().filter(|t| photorobot_core::measure::is_sweep(t)).cloned().collect();
+        let sweeps: Vec<Trace> = traces.iter().filter(|t| photorobot_core::trace::is_sweep(t)).cloned().collect();
         let g =
             photorobot_core::identify::measurements::observations_from_traces(&sweeps, &nominal, &Default::default());
         for o in &g.observations {

@@ -21,7 +21,7 @@ fn main() {
     };
     let preset = BenchPreset::resolve(args.get(1).map_or("table2-ideal", String::as_str)).expect("a bench preset");
     let traces = photorobot_core::trace::import::read_folder(std::path::Path::new(dir), None).expect("a traces folder");
-    let sweeps: Vec<_> = traces.into_iter().filter(photorobot_core::measure::is_sweep).collect();
+    let sweeps: Vec<_> = traces.into_iter().filter(photorobot_core::trace::is_sweep).collect();
     let analyse = |e: Extrinsics| {
         let model = PhaseModel::of_preset(&preset, e).expect("the model");
         observations_from_traces(&sweeps, &model, &extract_options()).observations

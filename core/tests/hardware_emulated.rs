@@ -144,8 +144,8 @@ fn compare(plan: &Plan, scale: f64, moves: usize) {
     for (h, v) in got.traces.iter().zip(&virt.traces) {
         assert_eq!(h.meta.label, v.meta.label);
         assert!(h.meta.bench.contains("PI E-712 at 127.0.0.1:"), "{}", h.meta.bench);
-        if measure::is_sweep(h) {
-            assert!(measure::is_sweep(v));
+        if photorobot_core::trace::is_sweep(h) {
+            assert!(photorobot_core::trace::is_sweep(v));
             sweeps.push((h, v));
             continue;
         }

@@ -184,7 +184,7 @@ pub(crate) fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
 /// with it listed in [`Identification::tied`].
 pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Identification, String> {
     use rayon::prelude::*;
-    let (sweeps, motions): (Vec<Trace>, Vec<Trace>) = traces.iter().cloned().partition(crate::measure::is_sweep);
+    let (sweeps, motions): (Vec<Trace>, Vec<Trace>) = traces.iter().cloned().partition(crate::trace::is_sweep);
     let swept = observations_from_traces(&sweeps, nominal, &extract_options());
     if motions.is_empty() && swept.observations.is_empty() {
         return Err("no trace could be analysed: nothing to identify from".into());

@@ -46,7 +46,7 @@ pub struct Travel {
 pub fn travels(motions: &[Trace], n_air: f64) -> Vec<Travel> {
     motions
         .iter()
-        .filter(|t| t.len() >= 2 && !crate::measure::is_sweep(t))
+        .filter(|t| t.len() >= 2 && !crate::trace::is_sweep(t))
         .map(|t| {
             let wavelength_nm = t.wavelength_nm[0];
             let extrema = detect_extrema(&t.irradiance, &HysteresisConfig::default()).map_or(0, |e| e.len());

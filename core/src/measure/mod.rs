@@ -106,17 +106,6 @@ pub enum Measurement {
     Sweep(SweepMeasurement),
 }
 
-/// True when the trace is a wavelength sweep: the wavelength varies while the joints stay.
-pub fn is_sweep(trace: &Trace) -> bool {
-    let span = |c: &[f64]| {
-        let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        hi - lo
-    };
-    let wl = span(&trace.wavelength_nm);
-    let joints_still = (0..6).all(|j| span(trace.joint_column(j)) < 0.05);
-    wl > 0.1 && joints_still
-}
-
 /// Loose phase walk over the first fringe of a motion ([`TrackConfig::start_walk_rad`]) with
 /// [`AnalyseOptions::free_start`]. Measured with `cargo test -p photorobot-e2e --test
 /// fringes_on_virtual_bench tracked_gap`: with 2 µm of play on a lateral stage (a 20.8 nm
@@ -169,7 +158,7 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
     if trace.is_empty() {
         return Err(MeasureError::Trace { label, problem: "no samples".into() });
     }
-    if is_sweep(trace) {
+    if crate::trace::is_sweep(trace) {
         let cfg = SweepConfig { n_air: model.n_air, gouy_waist_nm: Some(model.optics.mode_field_radius_um * 1e3) };
         let fit = sweep::fit_gap(&trace.wavelength_nm, &trace.irradiance, &cfg)
             .map_err(|source| MeasureError::Sweep { label: label.clone(), source })?;

@@ -29,7 +29,7 @@
 //! Columns the mapping does not read are kept as extra columns.
 
 use super::table::{open_limited, read_table, ReadOptions, Table};
-use super::{ExtraColumn, Trace, TraceError, TraceKind, REQUIRED_COLUMNS};
+use super::{is_sweep, ExtraColumn, Trace, TraceError, TraceKind, REQUIRED_COLUMNS};
 use crate::files::{self, FieldError, FileError};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -289,7 +289,7 @@ pub fn import_reader<R: Read>(
         .map(|(n, values)| ExtraColumn { name: n.clone(), values })
         .collect();
     let mut trace = Trace::from_columns(meta, converted, extra);
-    trace.meta.kind = if crate::measure::is_sweep(&trace) { TraceKind::WavelengthSweep } else { TraceKind::Motion };
+    trace.meta.kind = if is_sweep(&trace) { TraceKind::WavelengthSweep } else { TraceKind::Motion };
     // Scaling keeps time increasing only up to rounding: say so rather than pass on a bad trace.
     trace.validate().map_err(|e| TraceError::Imported { file: origin.to_path_buf(), problem: e.to_string() })?;
     Ok(trace)

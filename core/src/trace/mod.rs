@@ -382,5 +382,16 @@ impl Trace {
     }
 }
 
+/// True when the trace is a wavelength sweep: the wavelength varies while the joints stay.
+pub fn is_sweep(trace: &Trace) -> bool {
+    let span = |c: &[f64]| {
+        let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        hi - lo
+    };
+    let wl = span(&trace.wavelength_nm);
+    let joints_still = (0..6).all(|j| span(trace.joint_column(j)) < 0.05);
+    wl > 0.1 && joints_still
+}
+
 #[cfg(test)]
 mod tests;
