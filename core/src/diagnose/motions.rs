@@ -632,7 +632,7 @@ mod tests {
     /// which barely moves over that first fringe while the tilt does, it was 17-20 nm off at
     /// the quarters and 23 nm at worst (hint scale 1.0013; the same without noise), and the
     /// diagnosis of that pivot named a spurious q1 scale error of 1290 ppm. Interpolated along
-    /// a coordinate that also advances with time (`fringes::envelope_coordinate`): 7-9.5 nm
+    /// a coordinate that also advances with time (the tracker's envelope coordinate, `measure::track`): 7-9.5 nm
     /// at the quarters, 12.5 nm at worst, hint scale 1.0001.
     #[test]
     fn a_rotation_that_starts_on_a_gap_turning_point_tracks_within_12_nm_at_its_quarters() {

@@ -45,7 +45,7 @@ pub fn assemble(chosen: &[&Candidate], robot: &RobotDescription, limits: &Motion
     let plan = Plan {
         name: "optimised".into(),
         description: format!(
-            "Experiment design (core/src/identify/design.rs): {} motions chosen from a candidate pool to reach the required σ of the joint estimate in the least bench time.",
+            "Experiment design (core/src/identify/design/): {} motions chosen from a candidate pool to reach the required σ of the joint estimate in the least bench time.",
             chosen.len()
         ),
         segments,
