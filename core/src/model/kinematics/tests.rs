@@ -3,6 +3,7 @@
 
 use super::*;
 use approx::assert_relative_eq;
+use nalgebra::Matrix3;
 use proptest::prelude::*;
 
 fn deg(qd: [f64; 6]) -> Vec<f64> {
