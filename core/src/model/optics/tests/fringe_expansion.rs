@@ -1,0 +1,136 @@
+//! The fringe expansion against the field, and the fringe shape against the harmonics of the power.
+
+use super::*;
+
+/// The fringe expansion sums to the field, and its derivatives match finite differences
+/// (the wavenumber derivative against a model rebuilt at a shifted wavelength).
+#[test]
+fn fringe_expansion_equals_the_field_and_its_derivatives_are_exact() {
+    let cases = [
+        OpticalParams::default(),
+        OpticalParams { gouy_phase: false, cleave_angle_deg: 0.7, beams: 6, ..OpticalParams::default() },
+        OpticalParams { gouy_scale_error: -0.4, beams: 5, ..OpticalParams::default() },
+        OpticalParams { back_face: Some(BackFace::default()), cleave_angle_deg: 0.3, ..OpticalParams::default() },
+        OpticalParams { beams: 1000, lamella_reflectance: 0.306, ..OpticalParams::default() },
+    ];
+    assert_eq!((1..6).map(tilt_phase_order).collect::<Vec<_>>(), [0, 2, 8, 20, 40]);
+    let mut e = FringeExpansion::default();
+    let mut ep = FringeExpansion::default();
+    let mut em = FringeExpansion::default();
+    for params in cases {
+        let fp = bench(&params);
+        for gap in [0.0, 3.0, 54.0, 333.3, -898.83] {
+            for tilt in [0.0, 0.004, -0.0195, 0.07] {
+                let t2 = tilt * tilt;
+                fp.expansion(gap, t2, &mut e);
+                let (phi, psi) = fp.expansion_phases_rad(gap, t2);
+                let field = e.field(Complex::new(phi.cos(), -phi.sin()), Complex::new(psi.cos(), psi.sin()));
+                let exact = fp.field(gap, tilt);
+                // Both round Φ ≈ 7.3e3 rad at 899 µm to its ulp (9e-13 rad).
+                assert!((field - exact).norm() < 1e-13, "{params:?} gap {gap} tilt {tilt}: {field} vs {exact}");
+                let check = |name: &str, d: &[Complex<f64>], p: &FringeExpansion, m: &FringeExpansion, h: f64| {
+                    for (j, dj) in d.iter().enumerate() {
+                        let fd = (p.coefficients[j] - m.coefficients[j]) / (2.0 * h);
+                        let scale = e.coefficients[1].norm().max(1e-300);
+                        assert!(
+                            (fd - dj).norm() * h < 1e-9 * scale + 1e-20,
+                            "{name} m = {j}, gap {gap}, tilt {tilt}: {dj} vs {fd}"
+                        );
+                    }
+                };
+                let h = 1e-3;
+                fp.expansion(gap.abs() + h, t2, &mut ep);
+                fp.expansion(gap.abs() - h, t2, &mut em);
+                if gap.abs() > h {
+                    check("d/dgap", &e.d_gap, &ep, &em, h);
+                }
+                let h = 1e-7;
+                fp.expansion(gap, t2 + h, &mut ep);
+                fp.expansion(gap, t2 - h, &mut em);
+                check("d/dtilt²", &e.d_tilt_sq, &ep, &em, h);
+                for j in 0..e.d2_tilt_sq.len() {
+                    let fd = (ep.d_tilt_sq[j] - em.d_tilt_sq[j]) / (2.0 * h);
+                    let tol = 1e-4 * (e.d2_tilt_sq[j].norm() + e.coefficients[1].norm() * 1e3);
+                    assert!((fd - e.d2_tilt_sq[j]).norm() < tol, "d²/dtilt²² m = {j}: {} vs {fd}", e.d2_tilt_sq[j]);
+                }
+                let dl = 1e-3; // nm
+                let (fpp, fpm) = (
+                    FabryPerot::new(&params, WL + dl, N_AIR).unwrap(),
+                    FabryPerot::new(&params, WL - dl, N_AIR).unwrap(),
+                );
+                fpp.expansion(gap, t2, &mut ep);
+                fpm.expansion(gap, t2, &mut em);
+                let dk = 0.5 * (fpp.wavenumber_per_um() - fpm.wavenumber_per_um());
+                check("d/dk", &e.d_wavenumber, &ep, &em, dk);
+            }
+        }
+    }
+}
+
+/// Oracle for [`FabryPerot::fringe_shape`]: the power of the expansion at fixed B_m and w,
+/// sampled over one period of u, projected on its harmonics by brute force.
+#[test]
+fn fringe_shape_matches_the_harmonics_of_the_power() {
+    let linbo3 = OpticalParams { lamella_reflectance: 0.142, beams: 4, ..OpticalParams::default() };
+    for params in [linbo3, glass()] {
+        let fp = bench(&params);
+        let mut ex = FringeExpansion::default();
+        for (gap, tilt) in [(900.0, 0.0), (900.0, 0.05), (100.0, 0.03), (70.0, 0.0), (450.0, 0.08)] {
+            let shape = fp.fringe_shape(gap, tilt, &mut ex);
+            let (phi, psi) = fp.expansion_phases_rad(gap, tilt * tilt);
+            let w = Complex::new(psi.cos(), psi.sin());
+            let n = 64;
+            let mut c = [Complex::new(0.0, 0.0); 4];
+            for j in 0..n {
+                let big_phi = 2.0 * PI * j as f64 / n as f64;
+                let p = ex.field(Complex::new(big_phi.cos(), -big_phi.sin()), w).norm_sqr();
+                for (k, ck) in c.iter_mut().enumerate() {
+                    // coefficient of e^{-ikΦ}: 2·G_k for k ≥ 1
+                    *ck += p * Complex::new(0.0, k as f64 * big_phi).exp() / n as f64;
+                }
+            }
+            // fundamental phase φ = Φ - arg G1, relative to the first beam's phase
+            let pulling = wrap(phi - c[1].arg() - fp.fringe_phase_rad(gap, tilt));
+            assert!((pulling - shape.pulling_rad).abs() < 1e-9, "pulling {pulling} vs {}", shape.pulling_rad);
+            assert!((2.0 * c[1].norm() - shape.fundamental).abs() < 1e-12);
+            assert!((c[0].re - shape.offset).abs() < 1e-12);
+            for (k, h) in [(2, shape.second), (3, shape.third)] {
+                let expect = Complex::from_polar(c[k].norm() / c[1].norm(), k as f64 * c[1].arg() - c[k].arg());
+                assert!((expect - h).norm() < 1e-9 * (1.0 + h.norm()), "h{k} {h} vs {expect} at {gap} µm, {tilt} rad");
+            }
+        }
+    }
+}
+
+/// The shape rebuilds the real power over one fringe: P0 + P1·f(φ) with φ the first beam's
+/// phase plus the pulling (what the tracker sees), within the 4th-harmonic and the slow
+/// change of B_m over one fringe.
+#[test]
+fn fringe_shape_rebuilds_the_power_over_one_fringe() {
+    let params = OpticalParams { lamella_reflectance: 0.142, beams: 4, ..OpticalParams::default() };
+    let fp = bench(&params);
+    let mut ex = FringeExpansion::default();
+    for (gap, tilt) in [(900.0, 0.02), (900.0, 0.07), (300.0, 0.04)] {
+        let s = fp.fringe_shape(gap, tilt, &mut ex);
+        let period = fp.fringe_period_um();
+        let n = 200;
+        let (mut worst, mut p0) = (0f64, 0.0);
+        let model: Vec<(f64, f64)> = (0..n)
+            .map(|j| {
+                let g = gap + period * j as f64 / n as f64;
+                let phi = fp.fringe_phase_rad(g, tilt) + s.pulling_rad;
+                let f = phi.cos()
+                    + (s.second * Complex::new(0.0, 2.0 * phi).exp()).re
+                    + (s.third * Complex::new(0.0, 3.0 * phi).exp()).re;
+                (fp.power(g, tilt) / fp.input_power_mw(), f)
+            })
+            .collect();
+        for &(p, f) in &model {
+            p0 += (p - s.fundamental * f) / n as f64;
+        }
+        for &(p, f) in &model {
+            worst = worst.max((p - p0 - s.fundamental * f).abs());
+        }
+        assert!(worst < 2e-3 * s.fundamental, "misfit {worst:e} of {:e} at {gap} µm, {tilt} rad", s.fundamental);
+    }
+}
