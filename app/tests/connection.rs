@@ -8,6 +8,7 @@ mod common;
 
 use common::*;
 use egui_kittest::kittest::Queryable;
+use egui_kittest::Harness;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::{App, Tab, Workbench};
 use photorobot_app::settings::Settings;
@@ -26,21 +27,41 @@ fn refused(w: &Workbench, i: usize, text: &str) -> bool {
         .is_some_and(|r| r.as_ref().is_some_and(|r| r.as_ref().is_err_and(|e| e.contains(text))))
 }
 
+/// One session through the Connection panel; the stages share the harness and the emulators, so
+/// they run in order within one test rather than as separate tests.
 #[test]
 fn connection_panel_drives_the_emulated_controllers_and_explains_failures() {
     let wb = Workbench::new(Settings::default(), Box::new(ScriptedDialogs::default()), Box::new(|| {}))
         .expect("the embedded virtual bench starts");
     let mut h = harness(wb);
-    open(&mut h, Tab::Connection);
+    choose_hardware_and_check_the_mapping(&mut h);
+    start_emulators_and_identify_both(&mut h);
+    connect_and_read_the_status(&mut h);
+    jog_through_the_drivers(&mut h);
+    screenshot(&mut h, "connection");
+    drop_the_link_and_reconnect(&mut h);
+    disconnect_to_the_virtual_bench(&mut h);
+    identify_a_wrong_device(&mut h);
+    let closed = identify_and_connect_to_a_closed_port(&mut h);
+    check_the_settings_persist(h, closed);
+}
+
+type Kittest = Harness<'static, Workbench>;
+
+/// Hardware mode: the mapping comes from the robot description: q1 on the E-712's axis 3, q6 on
+/// MCS channel 2.
+fn choose_hardware_and_check_the_mapping(h: &mut Kittest) {
+    open(h, Tab::Connection);
     h.get_by_label("running on:");
     h.get_by_label("Hardware: stage controllers over TCP").click();
     h.run_steps(3);
-    // The mapping comes from the robot description: q1 on the E-712's axis 3, q6 on MCS channel 2.
     let mapping = h.state().state.settings.connection.mapping.clone();
     assert_eq!((mapping[0].controller.as_str(), mapping[0].channel.as_str()), ("PI E-712", "3"));
     assert_eq!((mapping[5].controller.as_str(), mapping[5].channel.as_str()), ("SmarAct MCS", "2"));
+}
 
-    // Local emulators, then Identify both controllers: the replies are shown.
+/// Local emulators, then Identify both controllers: the replies are shown.
+fn start_emulators_and_identify_both(h: &mut Kittest) {
     h.get_by_label("Start local emulators").click();
     h.run_steps(3);
     h.get_by_label_contains("local emulators running");
@@ -52,37 +73,41 @@ fn connection_panel_drives_the_emulated_controllers_and_explains_failures() {
     for node in h.get_all_by_label("Identify") {
         node.click();
     }
-    wait_until(&mut h, "both identifications", Duration::from_secs(20), |w| identified(w, 0) && identified(w, 1));
+    wait_until(h, "both identifications", Duration::from_secs(20), |w| identified(w, 0) && identified(w, 1));
     let ids = h.state().connection.identities.clone();
     assert!(ids.iter().all(|r| r.as_ref().unwrap().is_ok()), "{ids:?}");
     h.get_by_label_contains("E-712 (emulated)");
     h.get_by_label("SmarAct MCS, 3 channels: 0 rotary (°), 1 rotary (°), 2 rotary (°)");
     h.get_by_label("axes: 1 (µm), 2 (µm), 3 (µm)");
+}
 
-    // Connect: the worker now runs on the controllers; the status table reads them.
-    // The connection completes whichever tab is open.
+/// Connect: the worker now runs on the controllers; the status table reads them.
+/// The connection completes whichever tab is open.
+fn connect_and_read_the_status(h: &mut Kittest) {
     h.get_by_label("Connect").click();
     h.run_steps(1);
-    open(&mut h, Tab::Robot);
-    wait_until(&mut h, "the connection", Duration::from_secs(30), |w| w.connection.connected.is_some());
-    open(&mut h, Tab::Connection);
+    open(h, Tab::Robot);
+    wait_until(h, "the connection", Duration::from_secs(30), |w| w.connection.connected.is_some());
+    open(h, Tab::Connection);
     assert!(h.state().connection.connected.as_ref().unwrap().emulated);
     assert!(h.state().state.worker.bench_name.starts_with("femto-hardware (PI E-712 at 127.0.0.1:"));
-    wait_until(&mut h, "the axis status", Duration::from_secs(20), |w| w.state.hardware_status.is_some());
+    wait_until(h, "the axis status", Duration::from_secs(20), |w| w.state.hardware_status.is_some());
     h.get_by_label("q1 = 0.0000 µm");
     assert_eq!(h.query_all_by_label("150.0000 µm").count(), 3, "the PI axes at their 150 µm joint zero");
     assert_eq!(h.query_all_by_label("on target").count(), 6);
+}
 
-    // A jog through the drivers (Robot tab); the status table follows on the Connection tab.
-    open(&mut h, Tab::Robot);
+/// A jog through the drivers (Robot tab); the status table follows on the Connection tab.
+fn jog_through_the_drivers(h: &mut Kittest) {
+    open(h, Tab::Robot);
     let target = [10.0, -5.0, 3.0, 0.2, -0.3, 0.5];
     h.state_mut().state.robot_view.jog_target = target;
     h.get_by_label("Move to targets").click();
-    wait_until(&mut h, "the jog on the controllers", Duration::from_secs(30), |w| {
+    wait_until(h, "the jog on the controllers", Duration::from_secs(30), |w| {
         w.state.q_display.iter().zip(&target).all(|(q, t)| (q - t).abs() < 1e-6)
     });
-    open(&mut h, Tab::Connection);
-    wait_until(&mut h, "the status after the jog", Duration::from_secs(20), |w| {
+    open(h, Tab::Connection);
+    wait_until(h, "the status after the jog", Duration::from_secs(20), |w| {
         w.state.hardware_status.as_ref().is_some_and(|(_, axes)| {
             axes.iter().zip(&target).all(|(a, t)| a.q_display.is_some_and(|q| (q - t).abs() < 1e-6))
         })
@@ -92,55 +117,66 @@ fn connection_panel_drives_the_emulated_controllers_and_explains_failures() {
     h.get_by_label("q6 = 0.5000 °");
     assert_eq!(h.query_all_by_label("on target").count(), 6);
     assert!(h.query_all_by_label("none").count() >= 6, "no axis has an error");
-    screenshot(&mut h, "connection");
+}
 
-    // A fault on the link: the status table names it on the PI axes; Reconnect clears it.
+/// A fault on the link: the status table names it on the PI axes; Reconnect clears it.
+fn drop_the_link_and_reconnect(h: &mut Kittest) {
     h.state().connection.emulators.as_ref().unwrap().pi.inject(FaultSpec::on_command("POS?", 0, Fault::DropConnection));
-    wait_until(&mut h, "the fault in the status", Duration::from_secs(20), |w| {
+    wait_until(h, "the fault in the status", Duration::from_secs(20), |w| {
         w.state.hardware_status.as_ref().is_some_and(|(_, axes)| axes[0].error.is_some())
     });
     let lost = "PI E-712: connection lost during `POS? 3`: closed by the peer";
     assert_eq!(h.query_all_by_label(lost).count(), 3, "the fault shows on the three PI axes");
     h.get_by_label("Reconnect").click();
-    wait_until(&mut h, "the reconnection", Duration::from_secs(20), |w| {
+    wait_until(h, "the reconnection", Duration::from_secs(20), |w| {
         w.state.busy.is_none()
             && w.state.status == "reconnected"
             && w.state.hardware_status.as_ref().is_some_and(|(_, axes)| axes.iter().all(|a| a.error.is_none()))
     });
     assert_eq!(h.query_all_by_label("none").count(), 6);
     h.get_by_label("q1 = 10.0000 µm");
+}
 
-    // Disconnect: back on the virtual bench.
+/// Disconnect: back on the virtual bench.
+fn disconnect_to_the_virtual_bench(h: &mut Kittest) {
     h.get_by_label("Disconnect").click();
-    wait_until(&mut h, "the disconnection", Duration::from_secs(20), |w| w.connection.connected.is_none());
+    wait_until(h, "the disconnection", Duration::from_secs(20), |w| w.connection.connected.is_none());
     assert!(h.state().state.worker.bench_name.contains("virtual bench"), "{}", h.state().state.worker.bench_name);
+}
 
-    // A wrong device: the PI driver at the MCS emulator's port.
+/// A wrong device: the PI driver at the MCS emulator's port.
+fn identify_a_wrong_device(h: &mut Kittest) {
     let mcs_port = h.state().state.settings.connection.controllers[1].port;
     h.state_mut().state.settings.connection.controllers[0].port = mcs_port;
     h.run_steps(1);
     h.get_all_by_label("Identify").next().unwrap().click();
     let wrong = "is this a PI GCS controller?";
-    wait_until(&mut h, "the wrong-device identification", Duration::from_secs(20), |w| refused(w, 0, wrong));
+    wait_until(h, "the wrong-device identification", Duration::from_secs(20), |w| refused(w, 0, wrong));
     h.get_by_label_contains(wrong);
+}
 
-    // A closed port: refused, naming address and port, for Identify and for Connect.
+/// A closed port: refused, naming address and port, for Identify and for Connect. Returns the
+/// port, which stays in the settings.
+fn identify_and_connect_to_a_closed_port(h: &mut Kittest) -> u16 {
     let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     h.state_mut().state.settings.connection.controllers[0].port = closed;
     h.run_steps(1);
     h.get_all_by_label("Identify").next().unwrap().click();
     let refusal = format!("PI E-712: cannot connect to 127.0.0.1:{closed}: ");
-    wait_until(&mut h, "the refused identification", Duration::from_secs(20), |w| refused(w, 0, &refusal));
+    wait_until(h, "the refused identification", Duration::from_secs(20), |w| refused(w, 0, &refusal));
     h.get_by_label_contains(&refusal);
     h.get_by_label("Connect").click();
-    wait_until(&mut h, "the refused connection", Duration::from_secs(20), |w| {
+    wait_until(h, "the refused connection", Duration::from_secs(20), |w| {
         !w.connection.connecting && w.connection.message.as_ref().is_some_and(|m| m.is_err())
     });
     h.get_by_label_contains(&format!("not connected: {refusal}"));
     assert!(h.state().connection.connected.is_none());
     assert!(h.state().state.worker.bench_name.contains("virtual bench"));
+    closed
+}
 
-    // The connection settings persist with the other settings.
+/// The connection settings persist with the other settings, the `closed` port included.
+fn check_the_settings_persist(h: Kittest, closed: u16) {
     let mut app = App { workbench: h.into_state() };
     let mut storage = MemoryStorage::default();
     eframe::App::save(&mut app, &mut storage);

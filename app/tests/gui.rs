@@ -350,9 +350,32 @@ fn diagnosis_view_runs_the_workflow_step_by_step() {
 fn diagnosis_view_validates_with_and_without_the_named_effect() {
     let t0 = Instant::now();
     let tmp = tempfile::tempdir().unwrap();
+    let mut h = record_strategy_2_on_the_hidden_pivot_bench(tmp.path(), t0);
+    let result = diagnose_and_validate(&mut h, t0);
+    let first = first_effect_in_the_pivot_class(&result);
+    let rows = validation_rows(&h);
+    check_the_validation_table(&mut h, &rows, first);
+    h.get_by_label_contains("bars: the calibrated model (left)").scroll_to_me();
+    h.run_steps(6);
+    screenshot(&mut h, "diagnosis-validation");
+    let saved = tmp.path().join("saved");
+    let record = check_the_saved_record(&mut h, &saved, &rows, &result);
+    check_the_reopened_record(&mut h, &saved, &record, &rows, first);
+    check_a_second_save_keeps_the_record(&mut h, &tmp.path().join("again"), &rows);
+    eprintln!("total {:.1} s", t0.elapsed().as_secs_f64());
+}
+
+/// Whether some widget carries exactly `text` as its label.
+fn label_shown(h: &Harness<'_, Workbench>, text: &str) -> bool {
+    h.query_all_by_label(text).next().is_some()
+}
+
+/// The workbench on the hidden-pivot bench after the wizard's steps 2 and 3, with the
+/// extrinsics set to the bench's truth; the session lives under `tmp`.
+fn record_strategy_2_on_the_hidden_pivot_bench(tmp: &std::path::Path, t0: Instant) -> Harness<'static, Workbench> {
     let settings = Settings { preset: "hidden-pivot".into(), ..Settings::default() };
     let mut h = harness(workbench(settings, ScriptedDialogs::default()));
-    h.state_mut().state.session.dir = Some(tmp.path().join("session"));
+    h.state_mut().state.session.dir = Some(tmp.join("session"));
     open(&mut h, Tab::Wizard);
     h.get_by_label("Run step 2 (F5)").click();
     wait_until(&mut h, "strategy 2", Duration::from_secs(300), |w| w.state.wizard.steps[1].state == StepState::Done);
@@ -362,13 +385,21 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     });
     h.state_mut().state.extrinsics = photorobot_core::bench::BenchPreset::resolve("hidden-pivot").unwrap().truth;
     eprintln!("strategy 2 recorded after {:.1} s", t0.elapsed().as_secs_f64());
+    h
+}
 
-    open(&mut h, Tab::Diagnosis);
+/// Runs the diagnosis from its view and waits for the worker's validation that follows it;
+/// returns the diagnosis result (its steps and effects are logged).
+fn diagnose_and_validate(
+    h: &mut Harness<'_, Workbench>,
+    t0: Instant,
+) -> Box<photorobot_core::diagnose::DiagnosisResult> {
+    open(h, Tab::Diagnosis);
     h.get_by_label("Run the diagnosis").click();
-    wait_until(&mut h, "the diagnosis", Duration::from_secs(600), |w| w.state.diagnosis.result.is_some());
+    wait_until(h, "the diagnosis", Duration::from_secs(600), |w| w.state.diagnosis.result.is_some());
     let result = h.state().state.diagnosis.result.clone().unwrap().expect("the diagnosis runs");
     // The validation comes after the verdict, from the worker.
-    wait_until(&mut h, "the validation with the effect", Duration::from_secs(600), |w| {
+    wait_until(h, "the validation with the effect", Duration::from_secs(600), |w| {
         w.state.diagnosis.validation.is_some()
     });
     eprintln!("diagnosed and validated after {:.1} s", t0.elapsed().as_secs_f64());
@@ -378,6 +409,14 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     for e in result.effects.iter().chain(&result.partial) {
         eprintln!("{:?}: {} = {:.3} {}", result.verdict, e.name, e.estimate, e.unit);
     }
+    result
+}
+
+/// The first effect the diagnosis added, asserted to be one of the pivot offsets that explain
+/// the hidden joint-4 pivot.
+fn first_effect_in_the_pivot_class(
+    result: &photorobot_core::diagnose::DiagnosisResult,
+) -> &photorobot_core::diagnose::NamedEffect {
     let first = result.effects.iter().chain(&result.partial).next().expect("an effect added");
     let class = [
         "pivot offset q4 along Z_w",
@@ -386,19 +425,33 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
         "pivot offset q6 along X_w",
     ];
     assert!(class.contains(&first.name.as_str()), "{}", first.name);
+    first
+}
+
+/// The rows of the validation the worker ran (it must have run).
+fn validation_rows(h: &Harness<'_, Workbench>) -> Vec<photorobot_core::diagnose::validation::EffectValidationRow> {
     let Some(EffectValidation::Ran { rows, .. }) = h.state().state.diagnosis.validation.clone() else {
         panic!("{:?}", h.state().state.diagnosis.validation)
     };
+    rows
+}
+
+/// The view's validation table: four motions, each with its figures or the reason one is
+/// missing; the rotation about X_f improves more than tenfold, the others are not worse.
+fn check_the_validation_table(
+    h: &mut Harness<'_, Workbench>,
+    rows: &[photorobot_core::diagnose::validation::EffectValidationRow],
+    first: &photorobot_core::diagnose::NamedEffect,
+) {
     assert_eq!(rows.len(), 4, "{rows:?}");
     h.get_by_label("Validation with and without the added effects");
     h.get_by_label_contains(&format!("with the calibrated model and with {}", first.name));
     for h_ in ["without the effect (nm)", "with the effect (nm)", "improvement (×)"] {
         h.get_by_label(h_);
     }
-    let shown = |h: &Harness<'_, Workbench>, text: &str| h.query_all_by_label(text).next().is_some();
     let mut rotations = 0;
-    for r in &rows {
-        assert!(shown(&h, &r.motion), "{}", r.motion);
+    for r in rows {
+        assert!(label_shown(h, &r.motion), "{}", r.motion);
         let (Some(without), Some(with)) = (r.without_effect_nm, r.with_effect_nm) else {
             // A motion the IGM or the bench refused: a dash in the table and why, below it.
             eprintln!(
@@ -406,14 +459,14 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
                 r.motion, r.without_effect_nm, r.with_effect_nm, r.note
             );
             let note = r.note.as_deref().expect("a missing figure says why");
-            assert!(shown(&h, note), "{note}");
+            assert!(label_shown(h, note), "{note}");
             assert!(!r.motion.starts_with("rotation 6°"), "{r:?}");
             continue;
         };
         eprintln!("{}: {without:.1} nm without the effect, {with:.1} nm with it", r.motion);
-        assert!(shown(&h, &format!("{without:.1}")), "{r:?}");
-        assert!(shown(&h, &format!("{with:.1}")), "{r:?}");
-        assert!(shown(&h, &format!("{:.1}×", without / with)), "{r:?}");
+        assert!(label_shown(h, &format!("{without:.1}")), "{r:?}");
+        assert!(label_shown(h, &format!("{with:.1}")), "{r:?}");
+        assert!(label_shown(h, &format!("{:.1}×", without / with)), "{r:?}");
         // The hidden pivot of joint 4 (the goniometer turning about X_w) moves P_r along the beam
         // by about 20 µm × 3° in the rotation about X_f: the model with the effect plans it so
         // that the cavity barely moves. The other motions barely use joint 4: not worse with the
@@ -426,27 +479,42 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
         }
     }
     assert_eq!(rotations, 1);
-    h.get_by_label_contains("bars: the calibrated model (left)").scroll_to_me();
-    h.run_steps(6);
-    screenshot(&mut h, "diagnosis-validation");
-    // Saved with the session, as `photorobot diagnose` saves it.
-    let saved = tmp.path().join("saved");
-    let session = save_as_and_load(&mut h, &saved);
+}
+
+/// Saves the session to `saved` (as `photorobot diagnose` saves it) and checks the diagnosis
+/// record it holds: the validation rows, the model's effects and the extrinsics.
+fn check_the_saved_record(
+    h: &mut Harness<'_, Workbench>,
+    saved: &std::path::Path,
+    rows: &[photorobot_core::diagnose::validation::EffectValidationRow],
+    result: &photorobot_core::diagnose::DiagnosisResult,
+) -> photorobot_core::session::DiagnosisRecord {
+    let session = save_as_and_load(h, saved);
     let record = session.diagnosis.expect("the diagnosis is in the session");
     assert_eq!(record.validation, rows);
     assert_eq!(record.model_effects, h.state().state.diagnosis.effects);
     assert!(!record.model_effects.is_empty());
     assert_eq!(record.extrinsics, Some(result.extrinsics));
-    // New forgets the diagnosis; opening the saved session and saving it elsewhere keeps its record.
+    record
+}
+
+/// New forgets the diagnosis; opening the saved session brings back its record (not a result
+/// to draw), which the Diagnosis view shows: the verdict, the effect, the validation figures.
+fn check_the_reopened_record(
+    h: &mut Harness<'_, Workbench>,
+    saved: &std::path::Path,
+    record: &photorobot_core::session::DiagnosisRecord,
+    rows: &[photorobot_core::diagnose::validation::EffectValidationRow],
+    first: &photorobot_core::diagnose::NamedEffect,
+) {
     h.state_mut().request(photorobot_app::gui::Pending::New);
     h.run_steps(2);
     assert!(h.state().state.diagnosis.result.is_none() && h.state().state.diagnosis.validation.is_none());
     h.get_by_label_contains("no recorded trace yet");
-    h.state_mut().request(photorobot_app::gui::Pending::Open(saved.clone()));
+    h.state_mut().request(photorobot_app::gui::Pending::Open(saved.to_path_buf()));
     h.run_steps(2);
     assert!(h.state().state.diagnosis.result.is_none(), "a session's record is not a result to draw");
-    // The Diagnosis view shows the record: the verdict, the effect, the validation figures.
-    open(&mut h, Tab::Diagnosis);
+    open(h, Tab::Diagnosis);
     h.get_by_label("Diagnosis saved with this session");
     h.get_by_label_contains(&format!("Verdict: {}", record.verdict));
     h.get_by_label(&first.name);
@@ -456,23 +524,29 @@ fn diagnosis_view_validates_with_and_without_the_named_effect() {
     }
     h.get_by_label_contains("extrinsics refitted with them: beta_et = ");
     h.get_by_label("Validation with and without the added effects (saved)");
-    for r in &rows {
+    for r in rows {
         if let (Some(without), Some(with)) = (r.without_effect_nm, r.with_effect_nm) {
-            assert!(shown(&h, &format!("{without:.1}")), "{r:?}");
-            assert!(shown(&h, &format!("{with:.1}")), "{r:?}");
+            assert!(label_shown(h, &format!("{without:.1}")), "{r:?}");
+            assert!(label_shown(h, &format!("{with:.1}")), "{r:?}");
         }
     }
     h.get_by_label("Diagnosis saved with this session").scroll_to_me();
     h.run_steps(6);
-    screenshot(&mut h, "diagnosis-saved");
-    let again = tmp.path().join("again");
+    screenshot(h, "diagnosis-saved");
+}
+
+/// Saving the reopened session elsewhere (`again`) keeps its diagnosis record.
+fn check_a_second_save_keeps_the_record(
+    h: &mut Harness<'_, Workbench>,
+    again: &std::path::Path,
+    rows: &[photorobot_core::diagnose::validation::EffectValidationRow],
+) {
     h.state_mut().state.dialogs =
-        Box::new(ScriptedDialogs { folders: vec![Some(again.clone())], ..Default::default() });
+        Box::new(ScriptedDialogs { folders: vec![Some(again.to_path_buf())], ..Default::default() });
     h.state_mut().save(true);
-    wait_until(&mut h, "the second save", Duration::from_secs(60), |w| w.state.session.saving == 0);
-    let kept = photorobot_core::session::Session::load(&again).expect("loads").diagnosis.expect("the record is kept");
+    wait_until(h, "the second save", Duration::from_secs(60), |w| w.state.session.saving == 0);
+    let kept = photorobot_core::session::Session::load(again).expect("loads").diagnosis.expect("the record is kept");
     assert_eq!(kept.validation, rows);
-    eprintln!("total {:.1} s", t0.elapsed().as_secs_f64());
 }
 
 #[test]
