@@ -265,7 +265,12 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
             p.duration_s / 60.0
         )?;
     }
-    writeln!(out, "solver: {} ({})", if r.converged { "converged" } else { "NOT CONVERGED" }, r.termination)?;
+    // The termination words already say "converged (...)" or "stopped: ...".
+    if r.converged {
+        writeln!(out, "solver: {}", r.termination)?;
+    } else {
+        writeln!(out, "solver: NOT CONVERGED, {}", r.termination)?;
+    }
     if let Some(fit) = &r.fit {
         print_fit(fit, out)?;
     }
