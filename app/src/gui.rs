@@ -80,6 +80,8 @@ pub struct Workbench {
     applied_dark: Option<bool>,
     /// An action waiting for the unsaved-changes answer.
     pub pending: Option<Pending>,
+    /// An action waiting for the save the user chose in the unsaved-changes prompt.
+    pub after_save: Option<Pending>,
     /// A session folder whose autosave may be recovered (and how many traces it holds).
     pub recovery: Option<(std::path::PathBuf, usize)>,
     /// The window may close (nothing unsaved, or the user said so).
@@ -110,6 +112,7 @@ impl Workbench {
             editing: None,
             applied_dark: None,
             pending: None,
+            after_save: None,
             recovery: None,
             quit: false,
         })
@@ -118,6 +121,7 @@ impl Workbench {
     /// Draw one frame.
     pub fn show(&mut self, ui: &mut egui::Ui) {
         self.state.poll_worker();
+        self.resume_after_save();
         let ctx = ui.ctx().clone();
         // Identify and Connect finish on other threads whichever tab is open.
         self.connection.poll(&mut self.state, &ctx);
@@ -246,7 +250,7 @@ impl Workbench {
     }
 
     /// Save in the session folder (asking for one the first time, or with `as_new`).
-    pub fn save(&mut self, as_new: bool) {
+    pub fn save(&mut self, as_new: bool) -> bool {
         let untitled = self
             .state
             .session
@@ -254,9 +258,27 @@ impl Workbench {
             .as_ref()
             .is_none_or(|d| d.file_name().is_some_and(|n| n.to_string_lossy().starts_with("untitled-")));
         let dir = if as_new || untitled { self.state.dialogs.save_session() } else { self.state.session.dir.clone() };
-        if let Some(dir) = dir {
-            self.state.session.dir = Some(dir.clone());
-            self.state.save_in_background(dir, false);
+        match dir {
+            Some(dir) => {
+                self.state.save_in_background(dir, false);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Once the save chosen in the unsaved-changes prompt has finished: go ahead if it
+    /// succeeded, ask again (with its error) if it did not.
+    fn resume_after_save(&mut self) {
+        if self.state.session.saving > 0 {
+            return;
+        }
+        if let Some(action) = self.after_save.take() {
+            if self.state.session.dirty {
+                self.pending = Some(action);
+            } else {
+                self.perform(action);
+            }
         }
     }
 
@@ -288,7 +310,9 @@ impl Workbench {
             Ok(loaded) => {
                 self.state.apply_loaded(loaded, dir);
                 // A recovered session is newer than what is saved: it needs a save.
-                self.state.session.dirty = recover;
+                if recover {
+                    self.state.session.mark_dirty();
+                }
                 self.state.status = format!("{} {}", if recover { "recovered" } else { "opened" }, dir.display());
                 self.tab = if self.state.results.report.is_some() { Tab::Results } else { Tab::Wizard };
             }
@@ -301,6 +325,9 @@ impl Workbench {
             let mut answer = None;
             egui::Window::new("Unsaved changes").collapsible(false).resizable(false).show(ctx, |ui| {
                 ui.label("The session has measurements or results that are not saved.");
+                if let Some(e) = &self.state.session.save_error {
+                    ui.colored_label(egui::Color32::from_rgb(220, 80, 60), format!("The last save failed: {e}"));
+                }
                 ui.horizontal(|ui| {
                     if ui.button("Save").clicked() {
                         answer = Some(0);
@@ -315,10 +342,10 @@ impl Workbench {
             });
             match answer {
                 Some(0) => {
-                    self.save(false);
                     self.pending = None;
-                    if !self.state.session.dirty {
-                        self.perform(action);
+                    // The action waits for the save: done once it succeeds, asked again if it fails.
+                    if self.save(false) {
+                        self.after_save = Some(action);
                     }
                 }
                 Some(1) => {

@@ -226,19 +226,51 @@ pub struct RobotView {
 pub struct SessionFile {
     /// The session folder (`None` until saved, or autosaved as untitled).
     pub dir: Option<std::path::PathBuf>,
-    /// Changes since the last save.
+    /// Changes since the last save that succeeded.
     pub dirty: bool,
+    /// Counts changes, so that a save clears `dirty` only when nothing changed while it wrote.
+    pub revision: u64,
     /// The technician's notes, saved with the session.
     pub notes: String,
     /// Saves running on other threads report here.
-    saves: (std::sync::mpsc::Sender<String>, std::sync::mpsc::Receiver<String>),
+    saves: (std::sync::mpsc::Sender<SaveOutcome>, std::sync::mpsc::Receiver<SaveOutcome>),
     /// Number of saves still running.
     pub saving: usize,
+    /// Why the last save of `session.ron` failed, until a save succeeds.
+    pub save_error: Option<String>,
+}
+
+/// What a save on another thread reports back.
+struct SaveOutcome {
+    /// The autosave file, or `session.ron`.
+    autosave: bool,
+    /// The session's revision when its snapshot was taken.
+    revision: u64,
+    /// The folder written.
+    dir: std::path::PathBuf,
+    /// Success, or the error's message.
+    result: Result<(), String>,
+}
+
+impl SessionFile {
+    /// Record a change that a save must keep.
+    pub fn mark_dirty(&mut self) {
+        self.dirty = true;
+        self.revision += 1;
+    }
 }
 
 impl Default for SessionFile {
     fn default() -> Self {
-        Self { dir: None, dirty: false, notes: String::new(), saves: std::sync::mpsc::channel(), saving: 0 }
+        Self {
+            dir: None,
+            dirty: false,
+            revision: 0,
+            notes: String::new(),
+            saves: std::sync::mpsc::channel(),
+            saving: 0,
+            save_error: None,
+        }
     }
 }
 
@@ -398,9 +430,35 @@ impl AppState {
         for e in self.worker.drain() {
             self.apply(e);
         }
-        while let Ok(msg) = self.session.saves.1.try_recv() {
+        while let Ok(outcome) = self.session.saves.1.try_recv() {
             self.session.saving -= 1;
-            self.status = msg;
+            self.apply_save_outcome(outcome);
+        }
+    }
+
+    /// A save finished: a saved `session.ron` clears `dirty` (unless something changed while
+    /// it wrote); a failed one keeps the session unsaved and its error on show.
+    fn apply_save_outcome(&mut self, outcome: SaveOutcome) {
+        let what = if outcome.autosave { "autosaved" } else { "saved" };
+        match outcome.result {
+            Ok(()) => {
+                self.status = format!("{what} {}", outcome.dir.display());
+                if !outcome.autosave {
+                    // The session lives where it was saved from now on.
+                    remember(&mut self.settings, &outcome.dir);
+                    self.session.dir = Some(outcome.dir);
+                    self.session.save_error = None;
+                    if outcome.revision == self.session.revision {
+                        self.session.dirty = false;
+                    }
+                }
+            }
+            Err(e) => {
+                self.status = format!("NOT {what}: {e}");
+                if !outcome.autosave {
+                    self.session.save_error = Some(e);
+                }
+            }
         }
     }
 
@@ -409,18 +467,11 @@ impl AppState {
     pub fn save_in_background(&mut self, dir: std::path::PathBuf, autosave: bool) {
         let snap = self.snapshot();
         let tx = self.session.saves.0.clone();
+        let revision = self.session.revision;
         self.session.saving += 1;
-        if !autosave {
-            self.session.dirty = false;
-            remember(&mut self.settings, &dir);
-        }
         std::thread::spawn(move || {
             let result = if autosave { snap.autosave(&dir) } else { snap.save(&dir) };
-            let what = if autosave { "autosaved" } else { "saved" };
-            let _ = tx.send(match result {
-                Ok(()) => format!("{what} {}", dir.display()),
-                Err(e) => format!("NOT {what}: {e}"),
-            });
+            let _ = tx.send(SaveOutcome { autosave, revision, dir, result });
         });
     }
 
@@ -525,7 +576,7 @@ impl AppState {
                 }
                 self.wizard.running = None;
                 // Autosave after every measured step: a crash never costs a measurement.
-                self.session.dirty = true;
+                self.session.mark_dirty();
                 let dir = self.session.dir.get_or_insert_with(untitled_dir).clone();
                 self.save_in_background(dir, true);
             }
@@ -535,7 +586,7 @@ impl AppState {
                     self.status = format!("identified from {} observations", report.observations);
                     self.results.report = Some(report);
                     self.results.validation = None;
-                    self.session.dirty = true;
+                    self.session.mark_dirty();
                 }
                 Err(e) => self.results.identify_error = Some(e),
             },
@@ -550,7 +601,7 @@ impl AppState {
                     Err(e) => format!("diagnosis failed: {e}"),
                 };
                 self.diagnosis.result = Some(r);
-                self.session.dirty = true;
+                self.session.mark_dirty();
             }
             Event::EffectsValidated { effects, validation } => {
                 if let EffectValidation::Ran { rows, .. } = &validation {
@@ -558,7 +609,7 @@ impl AppState {
                 }
                 self.diagnosis.effects = effects;
                 self.diagnosis.validation = Some(validation);
-                self.session.dirty = true;
+                self.session.mark_dirty();
             }
             Event::Analysed { index, result } => {
                 self.analyses.insert(index, result);

@@ -627,3 +627,55 @@ fn settings_persist_between_runs_and_the_theme_toggles() {
     assert_eq!(back, app.workbench.state.settings);
     assert!(!back.dark && back.seed == 42);
 }
+
+#[test]
+fn a_save_that_fails_keeps_the_session_unsaved_and_the_window_asks_again() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = tmp.path().join("trace.csv");
+    std::fs::write(
+        &csv,
+        "t_s,q1_um,q2_um,q3_um,q4_deg,q5_deg,q6_deg,wavelength_nm,irradiance\n\
+         0,0,0,0,0,0,0,1550,0.5\n0.001,0.1,0,0,0,0,0,1550,0.6\n",
+    )
+    .unwrap();
+    // A folder under a regular file cannot be created, even by root.
+    let blocker = tmp.path().join("a-file");
+    std::fs::write(&blocker, "not a folder").unwrap();
+    let (unwritable, good) = (blocker.join("session"), tmp.path().join("saved"));
+    let dialogs = ScriptedDialogs {
+        opens: vec![vec![csv.clone()]],
+        saves: vec![],
+        folders: vec![Some(unwritable.clone()), Some(good.clone())],
+    };
+    let mut h = harness(workbench(Settings::default(), dialogs));
+    open(&mut h, Tab::Traces);
+    h.get_by_label("Import CSV traces…").click();
+    wait_until(&mut h, "the import", Duration::from_secs(10), |w| w.state.imported.len() == 1);
+    assert!(h.state().state.session.dirty);
+    // Closing asks; Save picks a folder that cannot be written.
+    h.state_mut().request(photorobot_app::gui::Pending::Quit);
+    h.run_steps(2);
+    h.get_by_label("Save").click();
+    wait_until(&mut h, "the failed save", Duration::from_secs(60), |w| {
+        w.state.session.saving == 0 && w.pending.is_some()
+    });
+    let state = &h.state().state;
+    assert!(state.session.dirty, "a failed save leaves the session unsaved");
+    assert!(!h.state().quit, "a failed save does not close the window");
+    assert!(state.status.starts_with("NOT saved"), "{}", state.status);
+    assert!(
+        state.session.save_error.as_deref().is_some_and(|e| e.contains("a-file")),
+        "{:?}",
+        state.session.save_error
+    );
+    assert!(!unwritable.join("session.ron").exists());
+    // The prompt is back, with the error; Save again goes to a folder that can be written.
+    h.get_by_label_contains("The last save failed");
+    screenshot(&mut h, "save-failed");
+    h.get_by_label("Save").click();
+    wait_until(&mut h, "the second save and the close", Duration::from_secs(60), |w| w.quit);
+    let state = &h.state().state;
+    assert!(!state.session.dirty && state.session.save_error.is_none());
+    assert!(good.join("session.ron").is_file());
+    assert_eq!(state.session.dir.as_deref(), Some(good.as_path()));
+}

@@ -71,7 +71,7 @@ fn import_traces(s: &mut AppState) {
             Ok(t) => {
                 s.status = format!("imported {}", path.display());
                 s.imported.push(t);
-                s.session.dirty = true;
+                s.session.mark_dirty();
             }
             Err(e) => s.status = format!("import refused: {e}"),
         }
