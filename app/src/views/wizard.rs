@@ -163,7 +163,8 @@ fn confirm_redo(ui: &mut egui::Ui, s: &mut AppState) {
             StepState::Done => "it ran to the end".into(),
             _ => "it ran before".into(),
         };
-        ui.label(format!("Redo step {} discards its {count} traces: {how}.", i + 1));
+        let traces = if count == 1 { "trace" } else { "traces" };
+        ui.label(format!("Redo step {} discards its {count} {traces}: {how}.", i + 1));
         ui.horizontal(|ui| {
             if ui.button("Redo").clicked() {
                 answer = Some(true);
