@@ -77,11 +77,8 @@ impl Bench for GuardedBench {
         if stop.load(Ordering::Relaxed) || control.cancelled() {
             return Err(BenchError::Cancelled { partial: None });
         }
-        let mut shared = RunControl {
-            cancel: &stop,
-            on_samples: &mut *control.on_samples,
-            on_progress: &mut *control.on_progress,
-        };
+        let mut shared =
+            RunControl { cancel: &stop, on_samples: &mut *control.on_samples, on_progress: &mut *control.on_progress };
         let result = self.inner.run_segment(segment, meta, &mut shared);
         let mut kept = lock(&self.kept);
         if kept.on {

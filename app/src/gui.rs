@@ -442,9 +442,10 @@ impl Workbench {
     fn stop_button(&mut self, ui: &mut egui::Ui) {
         let Some(moving) = self.state.moving() else { return };
         let label = if self.tab.motion() == Some(moving) { "Stop (Esc)" } else { "Stop" };
-        let button = egui::Button::new(RichText::new(label).strong().color(egui::Color32::WHITE))
+        let button = egui::Button::new(RichText::new(label).size(16.0).strong().color(egui::Color32::WHITE))
             .fill(egui::Color32::from_rgb(200, 40, 40));
-        if ui.add(button).on_hover_text("stop every motion of the bench; the traces recorded so far are kept").clicked() {
+        let hover = "stop every motion of the bench; the traces recorded so far are kept";
+        if ui.add(button).on_hover_text(hover).clicked() {
             self.state.stop_all();
         }
     }
@@ -453,11 +454,14 @@ impl Workbench {
     fn worker_failure(&mut self, ctx: &egui::Context) {
         let Some(message) = self.state.worker_failure.clone() else { return };
         let mut close = false;
-        egui::Window::new("The bench worker failed").collapsible(false).resizable(false).show(ctx, |ui| {
+        // Below the top bar, centred, as the settings.
+        let at = ctx.content_rect().center_top() + egui::vec2(0.0, 48.0);
+        let window = egui::Window::new("The bench worker failed").collapsible(false).resizable(false);
+        window.pivot(egui::Align2::CENTER_TOP).default_pos(at).show(ctx, |ui| {
             ui.colored_label(egui::Color32::from_rgb(220, 80, 60), format!("panic: {message}"));
             ui.label(
-                "What ran was stopped; every trace recorded before the failure is kept and the step is \
-                 marked stopped. The bench is ready for the next command.",
+                "What ran was stopped. Every trace recorded before the failure is kept (a wizard step \
+                 is marked stopped). The bench is ready for the next command.",
             );
             ui.horizontal(|ui| {
                 if ui.button("Save the session").clicked() {

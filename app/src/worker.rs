@@ -200,7 +200,8 @@ pub enum Event {
 pub struct Worker {
     commands: Sender<Command>,
     events: Receiver<Event>,
-    /// Set to cancel the running plan.
+    /// Set to stop the running motion: the one flag every segment on this worker's bench obeys
+    /// (plans, validation and diagnosis motions, jogs, the live dither).
     pub cancel: Arc<AtomicBool>,
     /// While set and idle, the worker dithers the lamella along the beam and streams the signal.
     pub live: Arc<AtomicBool>,
