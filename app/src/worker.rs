@@ -420,6 +420,8 @@ impl Thread {
                     };
                     if let (_, _, Err(e)) = self.run(&plan, Pace::Unpaced, false) {
                         self.send(Event::Busy(Some(format!("jog refused: {e}"))));
+                    } else {
+                        self.send(Event::Busy(Some("jog done".into())));
                     }
                     self.send(Event::Busy(None));
                 }
