@@ -2,9 +2,12 @@
 //! view, the status bar and the keyboard shortcuts. Owns only presentation state; the bench runs
 //! in the worker thread, the science is `photorobot_core`, the views are in [`crate::views`].
 //!
-//! Shortcuts: F5 runs the next wizard step, Esc cancels what runs, Space pauses the live trace.
+//! Shortcuts act on the open tab (the view with focus): F5 runs the next wizard step in the
+//! Wizard, Esc stops the motion the open view started, Space pauses the live trace in Live. The
+//! red Stop in the status bar stops whatever moves, from any tab.
 
 use crate::dialogs::{Dialogs, NativeDialogs};
+use crate::motion::Motion;
 use crate::settings::Settings;
 use crate::state::{AppState, StepState};
 use crate::views::{self, inspector::Inspector};
@@ -60,6 +63,18 @@ impl Tab {
             Tab::Validation => "Validation",
             Tab::Diagnosis => "Diagnosis",
             Tab::Connection => "Connection",
+        }
+    }
+
+    /// The motion this view starts, which Esc stops while it is open.
+    pub fn motion(self) -> Option<Motion> {
+        match self {
+            Tab::Live | Tab::Align => Some(Motion::Live),
+            Tab::Robot => Some(Motion::Jog),
+            Tab::Wizard => Some(Motion::Step),
+            Tab::Validation => Some(Motion::Validation),
+            Tab::Diagnosis => Some(Motion::Diagnosis),
+            Tab::Traces | Tab::Results | Tab::Connection => None,
         }
     }
 }
@@ -162,6 +177,7 @@ impl Workbench {
         });
         egui::Panel::bottom("status bar").show(ui, |ui| {
             ui.horizontal(|ui| {
+                self.stop_button(ui);
                 if let Some(b) = &self.state.busy {
                     ui.spinner();
                     ui.label(b);
@@ -183,6 +199,7 @@ impl Workbench {
         });
         self.settings_window(&ctx);
         self.prompts(&ctx);
+        self.worker_failure(&ctx);
         let mut go_to_align = false;
         egui::CentralPanel::default().show(ui, |ui| match self.tab {
             Tab::Live => views::live::ui(ui, &mut self.state),
@@ -400,19 +417,64 @@ impl Workbench {
         let (f5, esc, space) = ctx.input(|i| {
             (i.key_pressed(egui::Key::F5), i.key_pressed(egui::Key::Escape), i.key_pressed(egui::Key::Space))
         });
-        if f5 {
+        // F5 and Esc act on the open tab only; a modal question takes the keys while it is up.
+        let asking = self.state.wizard.confirm_redo.is_some() || self.state.worker_failure.is_some();
+        if f5 && self.tab == Tab::Wizard && !asking {
             let joint = self.state.settings.joint_mode;
             if let Some(i) =
                 self.state.wizard.steps.iter().position(|s| s.state != StepState::Done && (joint || !s.joint_only))
             {
-                self.state.run_step(i);
+                self.state.request_step(i);
             }
         }
-        if esc {
-            self.state.cancel();
+        if esc && !asking {
+            if let Some(motion) = self.tab.motion() {
+                self.state.stop(motion);
+            }
         }
         if space && !typing && self.tab == Tab::Live {
             self.state.live.paused = !self.state.live.paused;
+        }
+    }
+
+    /// The red Stop, shown while anything moves: it stops whatever runs, from any tab (Esc only
+    /// when the open view started the motion, and then the label says so).
+    fn stop_button(&mut self, ui: &mut egui::Ui) {
+        let Some(moving) = self.state.moving() else { return };
+        let label = if self.tab.motion() == Some(moving) { "Stop (Esc)" } else { "Stop" };
+        let button = egui::Button::new(RichText::new(label).size(16.0).strong().color(egui::Color32::WHITE))
+            .fill(egui::Color32::from_rgb(200, 40, 40));
+        let hover = "stop every motion of the bench; the traces recorded so far are kept";
+        if ui.add(button).on_hover_text(hover).clicked() {
+            self.state.stop_all();
+        }
+    }
+
+    /// The worker caught a panic: say so, with the message, and offer to save what was kept.
+    fn worker_failure(&mut self, ctx: &egui::Context) {
+        let Some(message) = self.state.worker_failure.clone() else { return };
+        let mut close = false;
+        // Below the top bar, centred, as the settings.
+        let at = ctx.content_rect().center_top() + egui::vec2(0.0, 48.0);
+        let window = egui::Window::new("The bench worker failed").collapsible(false).resizable(false);
+        window.pivot(egui::Align2::CENTER_TOP).default_pos(at).show(ctx, |ui| {
+            ui.colored_label(egui::Color32::from_rgb(220, 80, 60), format!("panic: {message}"));
+            ui.label(
+                "What ran was stopped. Every trace recorded before the failure is kept (a wizard step \
+                 is marked stopped). The bench is ready for the next command.",
+            );
+            ui.horizontal(|ui| {
+                if ui.button("Save the session").clicked() {
+                    self.save(false);
+                    close = true;
+                }
+                if ui.button("Close").clicked() {
+                    close = true;
+                }
+            });
+        });
+        if close {
+            self.state.worker_failure = None;
         }
     }
 

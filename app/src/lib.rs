@@ -1,10 +1,12 @@
 //! The photorobot application: a thin command-line interface and the eframe workbench over `photorobot_core`.
 //! Owns argument parsing, printing and the GUI; every command's work is a core function.
 
+pub mod bench_guard;
 pub mod cli;
 pub mod decimate;
 pub mod dialogs;
 pub mod gui;
+pub mod motion;
 pub mod session_io;
 pub mod settings;
 pub mod state;

@@ -153,6 +153,8 @@ pub struct Wizard {
     pub steps: Vec<MeasurementStep>,
     /// The step running, if one is.
     pub running: Option<RunningStep>,
+    /// The step whose redo waits for the technician's answer (it holds traces).
+    pub confirm_redo: Option<usize>,
 }
 
 /// The wizard step being measured and how far it got.
@@ -310,6 +312,8 @@ pub struct AppState {
     pub session: SessionFile,
     /// The stage controllers' view of every joint axis (a bench on controllers), and when it came.
     pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::bench::AxisStatus>)>,
+    /// The message of a panic the worker caught, until the technician closes it.
+    pub worker_failure: Option<String>,
 }
 
 impl AppState {
@@ -326,7 +330,7 @@ impl AppState {
             busy: None,
             status: String::new(),
             live: LiveSignal { wavelength_nm: 1550.0, ..Default::default() },
-            wizard: Wizard { steps: measurement_steps(), running: None },
+            wizard: Wizard { steps: measurement_steps(), running: None, confirm_redo: None },
             results: Results::default(),
             diagnosis: DiagnosisState::default(),
             robot_view: RobotView::default(),
@@ -335,6 +339,7 @@ impl AppState {
             dialogs,
             session: SessionFile::default(),
             hardware_status: None,
+            worker_failure: None,
         }
     }
 
@@ -364,9 +369,9 @@ impl AppState {
         self.worker.send(Command::Run { job: i, plan: step.plan.clone() });
     }
 
-    /// Cancel what runs (the traces recorded so far are kept).
+    /// Cancel what runs (the traces recorded so far are kept); nothing while nothing moves.
     pub fn cancel(&mut self) {
-        self.worker.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.stop_all();
     }
 
     /// The steps the chosen identifier needs, and whether they are all done.
@@ -615,6 +620,10 @@ impl AppState {
                 self.analyses.insert(index, result);
             }
             Event::HardwareStatus(axes) => self.hardware_status = Some((std::time::Instant::now(), axes)),
+            Event::WorkerPanicked(message) => {
+                self.status = format!("the bench worker failed: {message}");
+                self.worker_failure = Some(message);
+            }
             Event::Busy(b) => {
                 if let Some(msg) = &b {
                     self.status.clone_from(msg);

@@ -24,6 +24,8 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use crate::bench_guard::{lock, panic_message, GuardedBench, KeptTraces};
+
 /// How fast the bench clock runs against the wall clock.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Pace {
@@ -116,6 +118,12 @@ pub enum EffectValidation {
 
 /// The worker's [`Event::Busy`] text while it runs the validation motions after a diagnosis.
 pub const BUSY_EFFECT_VALIDATION: &str = "validating with and without the added effects";
+/// The worker's [`Event::Busy`] text while it runs the validation motions before and after.
+pub const BUSY_VALIDATING: &str = "validating";
+/// The worker's [`Event::Busy`] text while it runs the diagnosis.
+pub const BUSY_DIAGNOSING: &str = "diagnosing";
+/// The worker's [`Event::Busy`] text while it jogs the robot.
+pub const BUSY_JOGGING: &str = "jogging";
 
 /// What the worker reports.
 #[derive(Debug)]
@@ -183,13 +191,17 @@ pub enum Event {
     Busy(Option<String>),
     /// The stage controllers' view of every joint axis (a bench on controllers only).
     HardwareStatus(Vec<photorobot_core::bench::AxisStatus>),
+    /// A command panicked in the worker (the message): the worker caught it and serves the next
+    /// command; a plan it interrupted was reported first with the traces recorded before.
+    WorkerPanicked(String),
 }
 
 /// The UI's handle on the worker thread.
 pub struct Worker {
     commands: Sender<Command>,
     events: Receiver<Event>,
-    /// Set to cancel the running plan.
+    /// Set to stop the running motion: the one flag every segment on this worker's bench obeys
+    /// (plans, validation and diagnosis motions, jogs, the live dither).
     pub cancel: Arc<AtomicBool>,
     /// While set and idle, the worker dithers the lamella along the beam and streams the signal.
     pub live: Arc<AtomicBool>,
@@ -199,6 +211,9 @@ pub struct Worker {
     /// The software's model before calibration.
     pub nominal: PhaseModel,
 }
+
+/// Why a run ended early when the technician stopped it.
+pub const STOPPED: &str = "stopped by the user";
 
 /// Step of the live view's dither staircase along the beam (µm).
 pub const DITHER_STEP_UM: f64 = 0.1;
@@ -233,6 +248,8 @@ impl Worker {
         let cancel = Arc::new(AtomicBool::new(false));
         let live = Arc::new(AtomicBool::new(false));
         let bench_name = bench.name();
+        let kept = KeptTraces::default();
+        let bench = Box::new(GuardedBench::new(bench, cancel.clone(), kept.clone()));
         let mut state = Thread {
             bench,
             nominal: nominal.clone(),
@@ -242,20 +259,32 @@ impl Worker {
             cancel: cancel.clone(),
             live: live.clone(),
             dither_up: true,
+            kept,
+            current: None,
         };
         let handle = std::thread::Builder::new()
             .name("bench worker".into())
-            .spawn(move || state.serve(rx))
+            .spawn(move || state.supervise(rx))
             .expect("the OS starts a thread");
         Self { commands, events, cancel, live, handle: Some(handle), bench_name, nominal }
     }
 
     /// Send a command (ignored once the thread is gone).
     pub fn send(&self, c: Command) {
-        if matches!(c, Command::Run { .. }) {
+        // A new motion starts with the stop flag down (a stop pressed before it was asked for
+        // is not its stop).
+        if matches!(c, Command::Run { .. } | Command::Jog(_) | Command::Validate { .. } | Command::Diagnose { .. }) {
             self.cancel.store(false, Ordering::Relaxed);
         }
         let _ = self.commands.send(c);
+    }
+
+    /// Start or stop the live dither; starting it puts the stop flag down.
+    pub fn set_live(&self, on: bool) {
+        if on {
+            self.cancel.store(false, Ordering::Relaxed);
+        }
+        self.live.store(on, Ordering::Relaxed);
     }
 
     /// Every event received since the last call.
@@ -289,6 +318,10 @@ struct Thread {
     cancel: Arc<AtomicBool>,
     live: Arc<AtomicBool>,
     dither_up: bool,
+    /// The traces of the running plan, kept by the guarded bench for a panic's report.
+    kept: KeptTraces,
+    /// The wizard job running and the bench time it started at (s).
+    current: Option<(usize, f64)>,
 }
 
 impl Thread {
@@ -297,7 +330,49 @@ impl Thread {
         (self.notify)();
     }
 
-    fn serve(&mut self, rx: Receiver<Command>) {
+    /// Serve commands until shutdown; a panic in a command is reported and the serving goes on.
+    fn supervise(&mut self, rx: Receiver<Command>) {
+        loop {
+            match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.serve(&rx))) {
+                Ok(()) => return,
+                Err(payload) => self.recover(panic_message(&*payload)),
+            }
+        }
+    }
+
+    /// After a panic: the interrupted plan's traces recorded so far go back as a stopped run,
+    /// the live dither stops, and the UI is told why and that the worker is idle.
+    fn recover(&mut self, message: String) {
+        self.live.store(false, Ordering::Relaxed);
+        let traces = std::mem::take(&mut lock(&self.kept).traces);
+        lock(&self.kept).on = false;
+        if let Some((job, start_s)) = self.current.take() {
+            let end_s = traces.last().and_then(|t| t.t_s.last().copied()).unwrap_or(start_s);
+            let outcome = Err(format!("the worker panicked: {message}"));
+            self.send(Event::PlanDone { job, traces, duration_s: (end_s - start_s).max(0.0), outcome });
+        }
+        self.send(Event::WorkerPanicked(message));
+        self.send(Event::Busy(None));
+    }
+
+    /// Note the command starting: a wizard plan's traces are kept aside while it runs.
+    fn begin(&mut self, command: &Command) {
+        let mut kept = lock(&self.kept);
+        kept.traces.clear();
+        kept.on = matches!(command, Command::Run { .. });
+        self.current = match command {
+            Command::Run { job, .. } => Some((*job, self.bench.clock_s())),
+            _ => None,
+        };
+    }
+
+    /// The command finished: nothing is kept aside any more.
+    fn end(&mut self) {
+        *lock(&self.kept) = Default::default();
+        self.current = None;
+    }
+
+    fn serve(&mut self, rx: &Receiver<Command>) {
         self.send(Event::Position(self.bench.position_display()));
         loop {
             let command = match rx.recv_timeout(Duration::from_millis(20)) {
@@ -310,6 +385,7 @@ impl Thread {
                 }
                 Err(RecvTimeoutError::Disconnected) => return,
             };
+            self.begin(&command);
             match command {
                 Command::Shutdown => return,
                 Command::SetPace(p) => self.pace = p,
@@ -336,6 +412,7 @@ impl Thread {
                     self.send(Event::Busy(None));
                 }
                 Command::Jog(to) => {
+                    self.send(Event::Busy(Some(BUSY_JOGGING.into())));
                     let plan = Plan {
                         name: "jog".into(),
                         description: String::new(),
@@ -343,8 +420,10 @@ impl Thread {
                     };
                     if let (_, _, Err(e)) = self.run(&plan, Pace::Unpaced, false) {
                         self.send(Event::Busy(Some(format!("jog refused: {e}"))));
-                        self.send(Event::Busy(None));
+                    } else {
+                        self.send(Event::Busy(Some("jog done".into())));
                     }
+                    self.send(Event::Busy(None));
                 }
                 Command::Identify { traces, duration_s, mode } => {
                     self.send(Event::Busy(Some("identifying".into())));
@@ -378,6 +457,8 @@ impl Thread {
                             // the calibrated model and with the extended one, on this bench.
                             let validation = if effects.is_empty() {
                                 EffectValidation::NoEffect
+                            } else if self.cancel.load(Ordering::Relaxed) {
+                                EffectValidation::Failed(STOPPED.into())
                             } else {
                                 self.send(Event::Busy(Some(BUSY_EFFECT_VALIDATION.into())));
                                 let v = self.validate_with_effects(&extrinsics, &with, &effects);
@@ -396,6 +477,7 @@ impl Thread {
                     self.send(Event::Analysed { index, result });
                 }
             }
+            self.end();
         }
     }
 
@@ -433,6 +515,10 @@ impl Thread {
         while let Some(step) = d.step(Some(&mut runner)).map_err(|e| e.to_string())? {
             let _ = tx.send(Event::DiagnosisStep(step.title().to_string(), step.summary()));
             (self.notify)();
+            // The stop also ends the computing between the bench motions.
+            if self.cancel.load(Ordering::Relaxed) {
+                return Err(STOPPED.into());
+            }
         }
         let effects = d.state().map(|s| s.library_effects()).unwrap_or_default();
         let result = d.result().cloned().ok_or("the diagnosis ended without a result")?;

@@ -42,7 +42,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
     );
     let live_on = s.worker.live.load(Ordering::Relaxed);
     if !live_on && ui.button(RichText::new("Start live signal").size(18.0)).clicked() {
-        s.worker.live.store(true, Ordering::Relaxed);
+        s.worker.set_live(true);
     }
     ui.label(format!(
         "Thresholds: fringe visibility ≥ {MIN_VISIBILITY}, fringe amplitude ≥ {MIN_FRINGE_SNR}× the noise σ \

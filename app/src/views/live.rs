@@ -17,7 +17,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
         let label = if live_on { "Stop live signal" } else { "Start live signal" };
         if ui.button(label).on_hover_text("dither the lamella ±0.8 µm along the beam and stream the signal").clicked()
         {
-            s.worker.live.store(!live_on, Ordering::Relaxed);
+            s.worker.set_live(!live_on);
         }
         let pause = if s.live.paused { "Resume scrolling (Space)" } else { "Pause (Space)" };
         if ui.button(pause).clicked() {

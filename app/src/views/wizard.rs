@@ -9,6 +9,7 @@ use photorobot_core::measure::alignment::SignalQuality;
 
 /// Draw the wizard.
 pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
+    confirm_redo(ui, s);
     egui::ScrollArea::vertical().id_salt("wizard").show(ui, |ui| {
         ui.heading("Calibration wizard");
         ui.horizontal(|ui| {
@@ -99,7 +100,7 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
     ui.horizontal(|ui| {
         let label = if pending { format!("Run step {} (F5)", i + 1) } else { format!("Redo step {}", i + 1) };
         if ui.add_enabled(idle && used, egui::Button::new(label)).clicked() {
-            s.run_step(i);
+            s.request_step(i);
         }
         if running_this && ui.button("Cancel (Esc)").clicked() {
             s.cancel();
@@ -142,5 +143,41 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
                 }
             },
         );
+    }
+}
+
+/// The question before a redo that would discard traces: "Redo" runs the step again, "Keep" (or
+/// Esc, or a click beside the question) keeps its traces.
+fn confirm_redo(ui: &mut egui::Ui, s: &mut AppState) {
+    let Some(i) = s.wizard.confirm_redo else { return };
+    let Some(step) = s.wizard.steps.get(i) else {
+        s.wizard.confirm_redo = None;
+        return;
+    };
+    let (count, state) = (step.traces.len(), step.state.clone());
+    let mut answer = None;
+    let modal = egui::Modal::new(egui::Id::unique("confirm redo")).show(ui.ctx(), |ui| {
+        ui.heading(format!("Redo step {}?", i + 1));
+        let how = match &state {
+            StepState::Stopped(e) => format!("it was stopped ({e})"),
+            StepState::Done => "it ran to the end".into(),
+            _ => "it ran before".into(),
+        };
+        let traces = if count == 1 { "trace" } else { "traces" };
+        ui.label(format!("Redo step {} discards its {count} {traces}: {how}.", i + 1));
+        ui.horizontal(|ui| {
+            if ui.button("Redo").clicked() {
+                answer = Some(true);
+            }
+            if ui.button("Keep").clicked() {
+                answer = Some(false);
+            }
+        });
+    });
+    if answer.is_none() && modal.should_close() {
+        answer = Some(false);
+    }
+    if let Some(redo) = answer {
+        s.answer_redo(redo);
     }
 }
