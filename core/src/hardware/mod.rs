@@ -15,6 +15,7 @@ pub mod clock;
 pub mod controller_bench;
 pub mod emulator;
 pub mod pi_gcs;
+pub mod pi_replies;
 pub mod probe;
 pub mod smaract;
 pub mod virtual_stages;

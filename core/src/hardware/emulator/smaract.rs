@@ -122,6 +122,12 @@ impl SmarActEmulator {
         self.shared.state.lock().unwrap_or_else(|e| e.into_inner()).faults.fired.clone()
     }
 
+    /// What the emulator sends back for one command line (without its LF), as over TCP: the reply
+    /// line (empty for none), `None` when it drops the connection.
+    pub fn reply_to(&self, command: &str) -> Option<String> {
+        handle(&self.shared, command).map(|r| r.map_or(String::new(), |line| format!("{line}\n")))
+    }
+
     /// True while any channel moves.
     pub fn any_moving(&self) -> bool {
         let t = self.shared.clock.now_s();
