@@ -182,6 +182,7 @@ impl Workbench {
             });
         });
         self.settings_window(&ctx);
+        views::lab::window(&ctx, &mut self.state);
         self.prompts(&ctx);
         let mut go_to_align = false;
         egui::CentralPanel::default().show(ui, |ui| match self.tab {
@@ -232,6 +233,9 @@ impl Workbench {
         }
         if ui.button("Settings…").clicked() {
             self.editing = Some(self.state.settings.clone());
+        }
+        if ui.button("Lab record and notes…").clicked() {
+            views::lab::open(ui.ctx());
         }
         if ui.button("Export report…").clicked() {
             if let Some(path) = self.state.dialogs.save_report() {

@@ -232,6 +232,8 @@ pub struct SessionFile {
     pub revision: u64,
     /// The technician's notes, saved with the session.
     pub notes: String,
+    /// Who, when and in what air the session is measured (edited in the Lab record window).
+    pub lab: photorobot_core::session::LabRecord,
     /// Saves running on other threads report here.
     saves: (std::sync::mpsc::Sender<SaveOutcome>, std::sync::mpsc::Receiver<SaveOutcome>),
     /// Number of saves still running.
@@ -267,6 +269,7 @@ impl Default for SessionFile {
             dirty: false,
             revision: 0,
             notes: String::new(),
+            lab: photorobot_core::session::LabRecord::default(),
             saves: std::sync::mpsc::channel(),
             saving: 0,
             save_error: None,
@@ -362,6 +365,7 @@ impl AppState {
         self.wizard.running = Some(RunningStep { step: i, label: step.plan.name.clone(), fraction: 0.0 });
         self.worker.send(Command::SetPace(self.settings.pace()));
         self.worker.send(Command::Run { job: i, plan: step.plan.clone() });
+        crate::views::lab::recording_starts(self);
     }
 
     /// Cancel what runs (the traces recorded so far are kept).
@@ -422,6 +426,8 @@ impl AppState {
         self.extrinsics = self.worker.nominal.extrinsics;
         self.session.dir = None;
         self.session.dirty = false;
+        self.session.notes.clear();
+        self.session.lab = Default::default();
         self.status = "new session".into();
     }
 
@@ -494,6 +500,7 @@ impl AppState {
                 _ => self.diagnosis.loaded_record.clone(),
             },
             notes: self.session.notes.clone(),
+            lab: self.session.lab.clone(),
         }
     }
 
@@ -537,6 +544,7 @@ impl AppState {
             self.extrinsics = r.extrinsics;
         }
         self.session.notes = loaded.session.notes;
+        self.session.lab = loaded.session.lab;
         self.analyses.clear();
         self.results.validation = None;
         // The session's diagnosis record is kept for the next save and shown as a record by the

@@ -18,12 +18,12 @@ use photorobot_core::hardware::emulator::{
 use photorobot_core::hardware::pi_replies as replies;
 use photorobot_core::hardware::smaract::{angle_from_mcs, parse_reply, McsReply};
 use photorobot_core::hardware::HwError;
-use photorobot_core::session::Session;
-use photorobot_core::trace::Trace;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::robot::RobotDescription;
 use photorobot_core::plan::Plan;
+use photorobot_core::session::Session;
 use photorobot_core::trace::import::ColumnMapping;
+use photorobot_core::trace::Trace;
 use proptest::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -272,7 +272,12 @@ t_s,q1_um,q2_um,q3_um,q4_deg,q5_deg,q6_deg,wavelength_nm,irradiance,temp_C\n\
 fn session_text() -> String {
     use photorobot_core::session::{BenchInfo, Session};
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
-    let info = BenchInfo { name: "virtual bench".into(), preset: Some("table2-ideal".into()), description: None, seed: Some(1) };
+    let info = BenchInfo {
+        name: "virtual bench".into(),
+        preset: Some("table2-ideal".into()),
+        description: None,
+        seed: Some(1),
+    };
     let mut session = Session::new(info, preset.robot_description().unwrap());
     session.plans = vec![Plan::strategy2()];
     session.notes = "aligned at 21 °C".into();
@@ -402,7 +407,8 @@ proptest! {
 /// enough recorded data): the end index used to overflow and panic the emulator's thread.
 #[test]
 fn the_pi_emulator_refuses_a_data_request_past_the_word_size() {
-    let (pi, _) = emulators();
+    // Its own emulator: the fuzzing tests send the shared one anything, in parallel.
+    let pi = PiEmulator::start(EmuClock::new(1.0), PiEmulatorConfig::default()).unwrap();
     assert_eq!(pi.reply_to("DRC 1 1 2").as_deref(), Some(""));
     assert_eq!(pi.reply_to("ERR?").as_deref(), Some("0\n"));
     assert_eq!(pi.reply_to(&format!("DRR? 2 {} 1", usize::MAX)).as_deref(), Some(""));

@@ -237,6 +237,10 @@ pub trait StageController: Send {
     fn name(&self) -> String;
     /// The axes, in controller order.
     fn axes(&self) -> &[AxisInfo];
+    /// What the controller answered when asked who it is (`*IDN?`), for the lab record.
+    fn identification(&self) -> String {
+        self.name()
+    }
     /// Start an absolute move of several axes together (returns at once).
     fn move_absolute(&mut self, targets: &[(usize, f64)]) -> Result<(), HwError>;
     /// Start a relative move of several axes together (returns at once).

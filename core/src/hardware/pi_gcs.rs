@@ -310,6 +310,10 @@ impl StageController for PiGcs {
         &self.axes
     }
 
+    fn identification(&self) -> String {
+        self.idn.clone()
+    }
+
     fn move_absolute(&mut self, targets: &[(usize, f64)]) -> Result<(), HwError> {
         if targets.is_empty() {
             return Ok(());

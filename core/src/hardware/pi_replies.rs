@@ -48,7 +48,12 @@ pub fn per_axis(controller: &str, command: &str, lines: &[String], ids: &[String
                     (k.trim() == id).then(|| v.trim().to_string())
                 })
                 .ok_or_else(|| {
-                    HwError::bad_reply(controller, command, &lines.join("\\n"), &format!("a line `{id}=<value>` for axis {id}"))
+                    HwError::bad_reply(
+                        controller,
+                        command,
+                        &lines.join("\\n"),
+                        &format!("a line `{id}=<value>` for axis {id}"),
+                    )
                 })
         })
         .collect()
