@@ -26,6 +26,7 @@ pub fn window(ctx: &egui::Context, state: &mut AppState) {
     egui::Window::new("Lab record and notes")
         .open(&mut is_open)
         .default_width(420.0)
+        .default_pos([60.0, 70.0])
         .show(ctx, |ui| ui_section(ui, state));
     ctx.data_mut(|d| d.insert_temp(open_id(), is_open));
 }

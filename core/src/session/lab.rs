@@ -99,3 +99,73 @@ impl LabRecord {
         *self == LabRecord::default()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::session::tests::sample_session;
+    use crate::session::{session_path, Session};
+
+    fn recorded() -> LabRecord {
+        LabRecord {
+            measured_at_utc: Some("2026-11-27T16:49:50Z".into()),
+            operator: Some("Ada Lovelace".into()),
+            ambient_temperature_c: Some(21.3),
+            pressure_hpa: Some(1002.5),
+            relative_humidity_percent: Some(38.0),
+            controllers: vec![ControllerIdentity { name: "pi".into(), identification: "E-712, 0, 1.0.0".into() }],
+        }
+    }
+
+    #[test]
+    fn a_lab_record_round_trips_through_save_and_load() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut s = sample_session(dir.path());
+        s.lab = recorded();
+        s.save(dir.path()).unwrap();
+        assert_eq!(Session::load(dir.path()).unwrap().lab, recorded());
+    }
+
+    #[test]
+    fn a_session_file_without_a_lab_record_loads_with_an_empty_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = sample_session(dir.path());
+        s.save(dir.path()).unwrap();
+        let path = session_path(dir.path());
+        let text = std::fs::read_to_string(&path).unwrap();
+        // A file written before the lab record existed: no `lab` field at all.
+        let start = text.find("\n    lab: ").expect("the field is written");
+        let old = format!("{}\n)\n", text[..start].trim_end());
+        assert!(!old.contains("lab:") && !old.contains("measured_at_utc"), "{old}");
+        std::fs::write(&path, old).unwrap();
+        let back = Session::load(dir.path()).unwrap();
+        assert!(back.lab.is_empty());
+        assert_eq!(back.notes, s.notes);
+    }
+
+    #[test]
+    fn out_of_range_or_malformed_values_name_the_field() {
+        for (lab, field, says) in [
+            (
+                LabRecord { relative_humidity_percent: Some(140.0), ..recorded() },
+                "lab.relative_humidity_percent",
+                "0 to 100 %",
+            ),
+            (LabRecord { pressure_hpa: Some(f64::NAN), ..recorded() }, "lab.pressure_hpa", "500 to 1100 hPa"),
+            (
+                LabRecord { ambient_temperature_c: Some(-80.0), ..recorded() },
+                "lab.ambient_temperature_c",
+                "-40 to 60 °C",
+            ),
+            (LabRecord { measured_at_utc: Some("yesterday".into()), ..recorded() }, "lab.measured_at_utc", "RFC 3339"),
+        ] {
+            let e = lab.validate().unwrap_err();
+            assert_eq!(e.field, field);
+            assert!(e.problem.contains(says), "{}", e.problem);
+        }
+        assert!(recorded().validate().is_ok());
+        let mut stamped = LabRecord::default();
+        stamped.stamp_start();
+        assert!(stamped.validate().is_ok(), "{:?}", stamped.measured_at_utc);
+    }
+}
