@@ -9,6 +9,7 @@ use egui_kittest::kittest::Queryable;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::Workbench;
 use photorobot_app::settings::Settings;
+use std::time::Duration;
 
 #[test]
 fn the_lab_record_and_notes_typed_in_are_saved_with_the_session() {
@@ -41,6 +42,17 @@ fn the_lab_record_and_notes_typed_in_are_saved_with_the_session() {
     h.get_by_role_and_label(Role::MultilineTextInput, "Notes").type_text("fiber cleaved again");
     h.run_steps(2);
     assert_eq!(h.state().state.session.notes, "fiber cleaved again");
+
+    // Recording starts: the time and the bench's identification are recorded by themselves.
+    h.state_mut().state.run_step(0);
+    h.state_mut().state.cancel();
+    wait_until(&mut h, "the cancelled step", Duration::from_secs(60), |w| w.state.wizard.running.is_none());
+    let lab = h.state().state.session.lab.clone();
+    let at = lab.measured_at_utc.clone().expect("stamped when the step started");
+    assert!(at.ends_with('Z') && at.len() == 20, "{at}");
+    assert_eq!(lab.controllers.len(), 1);
+    assert!(lab.controllers[0].identification.contains("virtual bench table2-ideal"), "{:?}", lab.controllers);
+    h.get_by_label(&at);
     screenshot(&mut h, "lab-record");
 
     let root = tempfile::tempdir().unwrap();
@@ -49,6 +61,8 @@ fn the_lab_record_and_notes_typed_in_are_saved_with_the_session() {
     assert_eq!(session.lab.ambient_temperature_c, Some(20.0));
     assert_eq!(session.lab.pressure_hpa, None);
     assert_eq!(session.notes, "fiber cleaved again");
+    assert_eq!(session.lab.measured_at_utc.as_deref(), Some(at.as_str()));
+    assert_eq!(session.lab.controllers, lab.controllers);
     let text = std::fs::read_to_string(root.path().join("lab-session/session.ron")).unwrap();
     assert!(text.contains("Ada Lovelace") && text.contains("fiber cleaved again"));
 }

@@ -414,3 +414,25 @@ fn the_pi_emulator_refuses_a_data_request_past_the_word_size() {
     assert_eq!(pi.reply_to(&format!("DRR? 2 {} 1", usize::MAX)).as_deref(), Some(""));
     assert_eq!(pi.reply_to("ERR?").as_deref(), Some("77\n"));
 }
+
+/// Over TCP, a command with bytes that are not UTF-8 is refused as the controller would refuse an
+/// unknown command, and the connection stays open (it used to be dropped).
+#[test]
+fn the_emulators_refuse_non_utf8_commands_and_keep_the_connection() {
+    use std::io::{BufRead, BufReader, Write};
+    let clock = EmuClock::new(1.0);
+    let pi = PiEmulator::start(clock.clone(), PiEmulatorConfig::default()).unwrap();
+    let mcs = SmarActEmulator::start(clock, SmarActEmulatorConfig::default()).unwrap();
+    let exchange = |addr: std::net::SocketAddr, bytes: &[u8]| -> String {
+        let mut s = std::net::TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(std::time::Duration::from_secs(5))).unwrap();
+        s.write_all(bytes).unwrap();
+        let mut line = String::new();
+        BufReader::new(s).read_line(&mut line).unwrap();
+        line
+    };
+    // PI: no reply to the command, then `ERR?` says 2 (unknown command).
+    assert_eq!(exchange(pi.addr(), b"MOV\xff\xfe 1 2\nERR?\n"), "2\n");
+    // MCS: `:` then bytes >= 0x80 is an unknown command, error 2.
+    assert_eq!(exchange(mcs.addr(), b":\x80\xc3GP0\n"), ":E-1,2\n");
+}

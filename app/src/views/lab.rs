@@ -36,8 +36,15 @@ pub fn recording_starts(state: &mut AppState) {
     let lab = &mut state.session.lab;
     lab.stamp_start();
     if lab.controllers.is_empty() {
-        let bench = state.worker.bench_name.clone();
-        lab.controllers = vec![ControllerIdentity { name: "bench".into(), identification: bench }];
+        lab.controllers = state
+            .worker
+            .bench_identification
+            .iter()
+            .map(|(name, identification)| ControllerIdentity {
+                name: name.clone(),
+                identification: identification.clone(),
+            })
+            .collect();
     }
 }
 

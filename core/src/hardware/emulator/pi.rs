@@ -4,7 +4,7 @@
 
 use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, PhotodiodeFn, Server, SharedAxes};
 use crate::hardware::pi_gcs::{RECORD_ACTUAL_POSITION, RECORD_INPUT_SIGNAL, SERVO_CYCLE_S, TRIGGER_ON_MOVE};
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::sync::{Arc, Mutex};
 
@@ -159,14 +159,9 @@ fn serve(shared: &Shared, stream: TcpStream) {
     let Ok(write_half) = stream.try_clone() else { return };
     let mut writer = write_half;
     let mut reader = BufReader::new(stream);
-    let mut line = String::new();
+    let mut buf = Vec::new();
     loop {
-        line.clear();
-        match reader.read_line(&mut line) {
-            Ok(0) | Err(_) => return,
-            Ok(_) => {}
-        }
-        let command = line.trim_end_matches(['\n', '\r']).to_string();
+        let Some(command) = super::read_command(&mut reader, &mut buf) else { return };
         match reply_text(shared, &command) {
             None => {
                 let _ = writer.shutdown(std::net::Shutdown::Both);
