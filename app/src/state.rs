@@ -255,6 +255,20 @@ struct SaveOutcome {
 }
 
 impl SessionFile {
+    /// Recording starts: the lab record gets the time (once) and the bench's identification.
+    pub fn recording_starts(&mut self, identification: &[(String, String)]) {
+        self.lab.stamp_start();
+        if self.lab.controllers.is_empty() {
+            self.lab.controllers = identification
+                .iter()
+                .map(|(name, identification)| photorobot_core::session::ControllerIdentity {
+                    name: name.clone(),
+                    identification: identification.clone(),
+                })
+                .collect();
+        }
+    }
+
     /// Record a change that a save must keep.
     pub fn mark_dirty(&mut self) {
         self.dirty = true;
@@ -365,7 +379,7 @@ impl AppState {
         self.wizard.running = Some(RunningStep { step: i, label: step.plan.name.clone(), fraction: 0.0 });
         self.worker.send(Command::SetPace(self.settings.pace()));
         self.worker.send(Command::Run { job: i, plan: step.plan.clone() });
-        crate::views::lab::recording_starts(self);
+        self.session.recording_starts(&self.worker.bench_identification);
     }
 
     /// Cancel what runs (the traces recorded so far are kept).

@@ -5,7 +5,7 @@
 
 use crate::state::AppState;
 use egui::{DragValue, TextEdit, Ui};
-use photorobot_core::session::{ControllerIdentity, HUMIDITY_RANGE_PERCENT, PRESSURE_RANGE_HPA, TEMPERATURE_RANGE_C};
+use photorobot_core::session::{HUMIDITY_RANGE_PERCENT, PRESSURE_RANGE_HPA, TEMPERATURE_RANGE_C};
 
 /// Whether the window is open, kept in egui's memory.
 fn open_id() -> egui::Id {
@@ -29,23 +29,6 @@ pub fn window(ctx: &egui::Context, state: &mut AppState) {
         .default_pos([60.0, 70.0])
         .show(ctx, |ui| ui_section(ui, state));
     ctx.data_mut(|d| d.insert_temp(open_id(), is_open));
-}
-
-/// Recording starts: the lab record gets the time (once) and the bench's identification.
-pub fn recording_starts(state: &mut AppState) {
-    let lab = &mut state.session.lab;
-    lab.stamp_start();
-    if lab.controllers.is_empty() {
-        lab.controllers = state
-            .worker
-            .bench_identification
-            .iter()
-            .map(|(name, identification)| ControllerIdentity {
-                name: name.clone(),
-                identification: identification.clone(),
-            })
-            .collect();
-    }
 }
 
 /// An optional quantity: a checkbox named after it (ticked: recorded) and its value, kept within `range`.
