@@ -58,6 +58,9 @@ impl Bench for GuardedBench {
     fn wavelength_nm(&self) -> f64 {
         self.inner.wavelength_nm()
     }
+    fn identification(&self) -> Vec<(String, String)> {
+        self.inner.identification()
+    }
     fn ambient(&self) -> AmbientConditions {
         self.inner.ambient()
     }

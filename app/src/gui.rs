@@ -198,6 +198,7 @@ impl Workbench {
             });
         });
         self.settings_window(&ctx);
+        views::lab::window(&ctx, &mut self.state);
         self.prompts(&ctx);
         self.worker_failure(&ctx);
         let mut go_to_align = false;
@@ -249,6 +250,9 @@ impl Workbench {
         }
         if ui.button("Settings…").clicked() {
             self.editing = Some(self.state.settings.clone());
+        }
+        if ui.button("Lab record and notes…").clicked() {
+            views::lab::open(ui.ctx());
         }
         if ui.button("Export report…").clicked() {
             if let Some(path) = self.state.dialogs.save_report() {

@@ -31,6 +31,8 @@ pub struct Snapshot {
     pub diagnosis: Option<photorobot_core::session::DiagnosisRecord>,
     /// The technician's notes.
     pub notes: String,
+    /// The lab record.
+    pub lab: photorobot_core::session::LabRecord,
 }
 
 impl Snapshot {
@@ -39,6 +41,7 @@ impl Snapshot {
         let mut session = Session::new(self.bench.clone(), self.robot.clone());
         session.plans = self.plans.clone();
         session.notes = self.notes.clone();
+        session.lab = self.lab.clone();
         for (p, (traces, complete)) in self.steps.iter().enumerate() {
             // The k-th trace of a step is its plan's k-th recorded segment.
             let recorded: Vec<usize> =
@@ -75,6 +78,7 @@ impl Snapshot {
         session.calibration = self.calibration;
         session.diagnosis = self.diagnosis;
         session.notes = self.notes;
+        session.lab = self.lab;
         let html = photorobot_core::report::render_html(&session);
         photorobot_core::files::write_atomic(path, html.as_bytes()).map_err(|e| e.to_string())
     }

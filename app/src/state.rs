@@ -234,6 +234,8 @@ pub struct SessionFile {
     pub revision: u64,
     /// The technician's notes, saved with the session.
     pub notes: String,
+    /// Who, when and in what air the session is measured (edited in the Lab record window).
+    pub lab: photorobot_core::session::LabRecord,
     /// Saves running on other threads report here.
     saves: (std::sync::mpsc::Sender<SaveOutcome>, std::sync::mpsc::Receiver<SaveOutcome>),
     /// Number of saves still running.
@@ -255,6 +257,20 @@ struct SaveOutcome {
 }
 
 impl SessionFile {
+    /// Recording starts: the lab record gets the time (once) and the bench's identification.
+    pub fn recording_starts(&mut self, identification: &[(String, String)]) {
+        self.lab.stamp_start();
+        if self.lab.controllers.is_empty() {
+            self.lab.controllers = identification
+                .iter()
+                .map(|(name, identification)| photorobot_core::session::ControllerIdentity {
+                    name: name.clone(),
+                    identification: identification.clone(),
+                })
+                .collect();
+        }
+    }
+
     /// Record a change that a save must keep.
     pub fn mark_dirty(&mut self) {
         self.dirty = true;
@@ -269,6 +285,7 @@ impl Default for SessionFile {
             dirty: false,
             revision: 0,
             notes: String::new(),
+            lab: photorobot_core::session::LabRecord::default(),
             saves: std::sync::mpsc::channel(),
             saving: 0,
             save_error: None,
@@ -367,6 +384,7 @@ impl AppState {
         self.wizard.running = Some(RunningStep { step: i, label: step.plan.name.clone(), fraction: 0.0 });
         self.worker.send(Command::SetPace(self.settings.pace()));
         self.worker.send(Command::Run { job: i, plan: step.plan.clone() });
+        self.session.recording_starts(&self.worker.bench_identification);
     }
 
     /// Cancel what runs (the traces recorded so far are kept); nothing while nothing moves.
@@ -427,6 +445,8 @@ impl AppState {
         self.extrinsics = self.worker.nominal.extrinsics;
         self.session.dir = None;
         self.session.dirty = false;
+        self.session.notes.clear();
+        self.session.lab = Default::default();
         self.status = "new session".into();
     }
 
@@ -499,6 +519,7 @@ impl AppState {
                 _ => self.diagnosis.loaded_record.clone(),
             },
             notes: self.session.notes.clone(),
+            lab: self.session.lab.clone(),
         }
     }
 
@@ -542,6 +563,7 @@ impl AppState {
             self.extrinsics = r.extrinsics;
         }
         self.session.notes = loaded.session.notes;
+        self.session.lab = loaded.session.lab;
         self.analyses.clear();
         self.results.validation = None;
         // The session's diagnosis record is kept for the next save and shown as a record by the

@@ -208,6 +208,8 @@ pub struct Worker {
     handle: Option<JoinHandle<()>>,
     /// The bench's name.
     pub bench_name: String,
+    /// Each controller's name and identification reply (a virtual bench's own), for the lab record.
+    pub bench_identification: Vec<(String, String)>,
     /// The software's model before calibration.
     pub nominal: PhaseModel,
 }
@@ -248,6 +250,7 @@ impl Worker {
         let cancel = Arc::new(AtomicBool::new(false));
         let live = Arc::new(AtomicBool::new(false));
         let bench_name = bench.name();
+        let bench_identification = bench.identification();
         let kept = KeptTraces::default();
         let bench = Box::new(GuardedBench::new(bench, cancel.clone(), kept.clone()));
         let mut state = Thread {
@@ -266,7 +269,7 @@ impl Worker {
             .name("bench worker".into())
             .spawn(move || state.supervise(rx))
             .expect("the OS starts a thread");
-        Self { commands, events, cancel, live, handle: Some(handle), bench_name, nominal }
+        Self { commands, events, cancel, live, handle: Some(handle), bench_name, bench_identification, nominal }
     }
 
     /// Send a command (ignored once the thread is gone).

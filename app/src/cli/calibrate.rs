@@ -19,7 +19,9 @@ use photorobot_core::identify::signs::{SignSource, TranslationSign};
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
-use photorobot_core::session::{find_recovery, recording::record, BenchInfo, Session, AUTOSAVE_FILE};
+use photorobot_core::session::{
+    self as lab, find_recovery, recording::record, BenchInfo, ControllerIdentity, LabRecord, Session, AUTOSAVE_FILE,
+};
 use photorobot_core::trace::import::{read_folder, ColumnMapping};
 use photorobot_core::trace::Trace;
 use std::io::Write;
@@ -68,6 +70,57 @@ pub struct CalibrateArgs {
     /// Print the report as JSON instead of tables.
     #[arg(long)]
     pub json: bool,
+    /// The lab record: who measured, and the ambient conditions read in the lab.
+    #[command(flatten)]
+    pub lab: LabArgs,
+}
+
+/// The lab record's flags (each optional; the start time and the bench's identification are
+/// recorded by themselves).
+#[derive(Debug, Default, clap::Args)]
+pub struct LabArgs {
+    /// Who runs the measurement (kept in the session and the report).
+    #[arg(long, value_name = "NAME")]
+    pub operator: Option<String>,
+    /// Ambient air temperature in the lab (°C, -40 to 60).
+    #[arg(long, value_name = "CELSIUS", value_parser = temperature_c, allow_negative_numbers = true)]
+    pub ambient_temperature_c: Option<f64>,
+    /// Ambient air pressure in the lab (hPa, 500 to 1100).
+    #[arg(long, value_name = "HPA", value_parser = pressure_hpa)]
+    pub pressure_hpa: Option<f64>,
+    /// Relative humidity in the lab (%, 0 to 100).
+    #[arg(long, value_name = "PERCENT", value_parser = humidity_percent, allow_negative_numbers = true)]
+    pub humidity_percent: Option<f64>,
+}
+
+/// A number within `range`, or a message clap shows after the flag's name (exit code 2).
+fn in_range(text: &str, what: &str, range: &std::ops::RangeInclusive<f64>, unit: &str) -> Result<f64, String> {
+    let v: f64 = text.trim().parse().map_err(|_| format!("expected a number ({unit}), found `{text}`"))?;
+    lab::check_range(what, v, range, unit)
+}
+
+fn temperature_c(text: &str) -> Result<f64, String> {
+    in_range(text, "temperature", &lab::TEMPERATURE_RANGE_C, "°C")
+}
+
+fn pressure_hpa(text: &str) -> Result<f64, String> {
+    in_range(text, "pressure", &lab::PRESSURE_RANGE_HPA, "hPa")
+}
+
+fn humidity_percent(text: &str) -> Result<f64, String> {
+    in_range(text, "relative humidity", &lab::HUMIDITY_RANGE_PERCENT, "%")
+}
+
+impl LabArgs {
+    /// Put the flags given into the session's lab record (a flag not given keeps what is there).
+    fn apply(&self, record: &mut LabRecord) {
+        if let Some(o) = &self.operator {
+            record.operator = Some(o.clone());
+        }
+        record.ambient_temperature_c = self.ambient_temperature_c.or(record.ambient_temperature_c);
+        record.pressure_hpa = self.pressure_hpa.or(record.pressure_hpa);
+        record.relative_humidity_percent = self.humidity_percent.or(record.relative_humidity_percent);
+    }
 }
 
 /// Run the calibration and write the session.
@@ -83,6 +136,7 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         Some(dir) => calibrate_from_traces(a, dir, &preset, &nominal, mode)?,
         None => calibrate_on_virtual_bench(a, &preset, &nominal, mode)?,
     };
+    a.lab.apply(&mut session.lab);
     let json = write_session(a, &mut session, &report)?;
     if a.json {
         writeln!(out, "{json}")?;
@@ -205,6 +259,13 @@ fn new_session(a: &CalibrateArgs, preset: &BenchPreset, bench: &VirtualBench, mo
         seed: Some(a.seed.unwrap_or(preset.seed)),
     };
     let mut s = Session::new(info, preset.robot_description()?);
+    // Recording starts now: the lab record gets the time, the flags and the bench's identification.
+    s.lab.stamp_start();
+    a.lab.apply(&mut s.lab);
+    s.lab.controllers = photorobot_core::bench::Bench::identification(bench)
+        .into_iter()
+        .map(|(name, identification)| ControllerIdentity { name, identification })
+        .collect();
     s.plans = if a.plans.is_empty() {
         plans(mode)
     } else {

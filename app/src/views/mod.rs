@@ -8,6 +8,7 @@ pub mod connection;
 pub mod diagnosis;
 pub mod frames;
 pub mod inspector;
+pub mod lab;
 pub mod live;
 pub mod results;
 pub mod robot;

@@ -138,6 +138,11 @@ pub trait Bench: Send {
     fn wavelength_nm(&self) -> f64;
     /// Ambient conditions as measured at the bench (they set the air index).
     fn ambient(&self) -> AmbientConditions;
+    /// Each controller's name and identification reply (`*IDN?`), for the lab record; a simulated
+    /// bench identifies itself.
+    fn identification(&self) -> Vec<(String, String)> {
+        vec![(self.name(), format!("{} (simulated by photorobot-core {})", self.name(), env!("CARGO_PKG_VERSION")))]
+    }
     /// Bench time since the start of the session (s).
     fn clock_s(&self) -> f64;
     /// Run one segment; return its trace when the segment records.

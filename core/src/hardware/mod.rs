@@ -15,6 +15,7 @@ pub mod clock;
 pub mod controller_bench;
 pub mod emulator;
 pub mod pi_gcs;
+pub mod pi_replies;
 pub mod probe;
 pub mod smaract;
 pub mod virtual_stages;
@@ -236,6 +237,10 @@ pub trait StageController: Send {
     fn name(&self) -> String;
     /// The axes, in controller order.
     fn axes(&self) -> &[AxisInfo];
+    /// What the controller answered when asked who it is (`*IDN?`), for the lab record.
+    fn identification(&self) -> String {
+        self.name()
+    }
     /// Start an absolute move of several axes together (returns at once).
     fn move_absolute(&mut self, targets: &[(usize, f64)]) -> Result<(), HwError>;
     /// Start a relative move of several axes together (returns at once).

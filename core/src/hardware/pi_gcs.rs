@@ -6,7 +6,8 @@
 //! Positions are in µm (the E-712's unit for the P-563.3CD axes). Errors keep the controller's
 //! number and PI's text for it ([`GcsError`]).
 
-use super::{parse_f64, parse_i64, AxisInfo, DataRecorder, HwError, Link, RecordedBlock, StageController};
+use super::pi_replies as replies;
+use super::{parse_f64, AxisInfo, DataRecorder, HwError, Link, RecordedBlock, StageController};
 use crate::bench::AxisUnit;
 use std::fmt;
 
@@ -135,21 +136,13 @@ impl PiGcs {
     }
 
     fn read_identity(&mut self) -> Result<(), HwError> {
-        self.idn = self.query("*IDN?")?.join(" ");
-        if self.idn.trim().is_empty() || self.idn.starts_with(':') {
-            let idn = self.idn.clone();
-            return Err(self.bad("*IDN?", &idn, "a PI identification string (is this a PI GCS controller?)"));
-        }
-        let ids = self.query("SAI?")?;
-        self.axes = ids
-            .iter()
-            .map(|s| s.trim().to_string())
-            .filter(|s| !s.is_empty())
+        let lines = self.query("*IDN?")?;
+        self.idn = replies::identity(&self.name, &lines)?;
+        let lines = self.query("SAI?")?;
+        self.axes = replies::axis_ids(&self.name, &lines)?
+            .into_iter()
             .map(|id| AxisInfo { id, unit: AxisUnit::Micrometre })
             .collect();
-        if self.axes.is_empty() {
-            return Err(self.bad("SAI?", "", "at least one axis identifier"));
-        }
         Ok(())
     }
 
@@ -225,8 +218,7 @@ impl PiGcs {
     /// `ERR?`: the pending error code (0 for none); reading it clears it.
     pub fn error_code(&mut self) -> Result<i32, HwError> {
         let lines = self.query_raw("ERR?")?;
-        let line = lines.first().cloned().unwrap_or_default();
-        parse_i64(&self.name, "ERR?", &line, &line).map(|c| c as i32)
+        replies::error_code(&self.name, &lines)
     }
 
     fn query_raw(&mut self, command: &str) -> Result<Vec<String>, HwError> {
@@ -264,20 +256,7 @@ impl PiGcs {
         let ids = self.axis_list(axes)?;
         let command = format!("{cmd} {}", ids.join(" "));
         let lines = self.query(&command)?;
-        let mut out = Vec::with_capacity(ids.len());
-        for id in &ids {
-            let value = lines.iter().find_map(|l| {
-                let (k, v) = l.split_once('=')?;
-                (k.trim() == id).then(|| v.trim().to_string())
-            });
-            match value {
-                Some(v) => out.push(v),
-                None => {
-                    return Err(self.bad(&command, &lines.join("\\n"), &format!("a line `{id}=<value>` for axis {id}")))
-                }
-            }
-        }
-        Ok(out)
+        replies::per_axis(&self.name, &command, &lines, &ids)
     }
 
     fn query_f64(&mut self, cmd: &str, axes: &[usize]) -> Result<Vec<f64>, HwError> {
@@ -331,6 +310,10 @@ impl StageController for PiGcs {
         &self.axes
     }
 
+    fn identification(&self) -> String {
+        self.idn.clone()
+    }
+
     fn move_absolute(&mut self, targets: &[(usize, f64)]) -> Result<(), HwError> {
         if targets.is_empty() {
             return Ok(());
@@ -360,14 +343,7 @@ impl StageController for PiGcs {
     /// shows while waiting.
     fn on_target(&mut self, axes: &[usize]) -> Result<Vec<bool>, HwError> {
         let values = self.query_per_axis("ONT?", axes)?;
-        let out = values
-            .iter()
-            .map(|v| match v.as_str() {
-                "0" => Ok(false),
-                "1" => Ok(true),
-                other => Err(self.bad("ONT?", other, "0 or 1")),
-            })
-            .collect::<Result<Vec<bool>, HwError>>()?;
+        let out = replies::flags(&self.name, "ONT?", &values)?;
         let code = self.error_code()?;
         if code != 0 {
             return Err(HwError::Gcs {
@@ -418,15 +394,7 @@ impl StageController for PiGcs {
     /// `SVO?`.
     fn servo_on(&mut self, axes: &[usize]) -> Result<Option<Vec<bool>>, HwError> {
         let values = self.query_per_axis("SVO?", axes)?;
-        values
-            .iter()
-            .map(|v| match v.as_str() {
-                "0" => Ok(false),
-                "1" => Ok(true),
-                other => Err(self.bad("SVO?", other, "0 or 1")),
-            })
-            .collect::<Result<Vec<bool>, HwError>>()
-            .map(Some)
+        replies::flags(&self.name, "SVO?", &values).map(Some)
     }
 
     fn reference(&mut self, axis: usize) -> Result<(), HwError> {
@@ -466,10 +434,7 @@ impl DataRecorder for PiGcs {
     fn recorded_len(&mut self) -> Result<usize, HwError> {
         let table = 1;
         let lines = self.query(&format!("DRL? {table}"))?;
-        let line = lines.first().cloned().unwrap_or_default();
-        let v = line.split_once('=').map_or(line.as_str(), |p| p.1);
-        let n = parse_i64(&self.name, "DRL?", &line, v)?;
-        usize::try_from(n).map_err(|_| self.bad("DRL?", &line, "a count ≥ 0"))
+        replies::count(&self.name, "DRL?", &lines)
     }
 
     fn read(&mut self, start: usize, count: usize) -> Result<RecordedBlock, HwError> {
@@ -484,44 +449,7 @@ impl DataRecorder for PiGcs {
         let list: Vec<String> = (1..=tables).map(|t| t.to_string()).collect();
         let command = format!("DRR? {} {count} {}", start + 1, list.join(" "));
         let lines = self.query(&command)?;
-        let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(count); tables];
-        let mut in_header = true;
-        let mut ndata = None;
-        for line in &lines {
-            if in_header {
-                let Some(h) = line.strip_prefix('#') else {
-                    return Err(self.bad(&command, line, "a GCS data header line starting with `#`"));
-                };
-                let h = h.trim();
-                if h == "END_HEADER" {
-                    in_header = false;
-                } else if let Some((k, v)) = h.split_once('=') {
-                    if k.trim() == "NDATA" {
-                        ndata = Some(parse_i64(&self.name, &command, line, v)?);
-                    } else if k.trim() == "DIM" {
-                        let dim = parse_i64(&self.name, &command, line, v)?;
-                        if dim != tables as i64 {
-                            return Err(self.bad(&command, line, &format!("DIM = {tables}")));
-                        }
-                    }
-                }
-                continue;
-            }
-            let fields: Vec<&str> = line.split_whitespace().collect();
-            if fields.len() != tables {
-                return Err(self.bad(&command, line, &format!("{tables} numbers per data line")));
-            }
-            for (c, f) in columns.iter_mut().zip(fields) {
-                c.push(parse_f64(&self.name, &command, line, f)?);
-            }
-        }
-        if in_header {
-            return Err(self.bad(&command, &lines.join("\\n"), "a header ending in `# END_HEADER`"));
-        }
-        let n = columns[0].len();
-        if ndata.is_some_and(|d| d != n as i64) {
-            return Err(self.bad(&command, &format!("NDATA = {ndata:?}"), &format!("NDATA = {n} (the lines sent)")));
-        }
+        let mut columns = replies::data_block(&self.name, &command, &lines, tables)?;
         let inputs = columns.split_off(self.armed_axes.len());
         Ok(RecordedBlock { start, axes: columns, inputs })
     }
@@ -529,9 +457,7 @@ impl DataRecorder for PiGcs {
     fn read_input(&mut self, input: &str) -> Result<f64, HwError> {
         let command = format!("TSP? {input}");
         let lines = self.query(&command)?;
-        let line = lines.first().cloned().unwrap_or_default();
-        let v = line.split_once('=').map_or(line.as_str(), |p| p.1);
-        parse_f64(&self.name, &command, &line, v)
+        replies::input_value(&self.name, &command, &lines)
     }
 }
 

@@ -299,6 +299,13 @@ impl StageController for SmarActMcs {
         &self.axes
     }
 
+    /// The driver does not query the MCS's system id: the channels it found (`:GNC`, `:GP`/`:GA`).
+    fn identification(&self) -> String {
+        let kinds: Vec<&str> =
+            self.axes.iter().map(|a| if a.unit == AxisUnit::Degree { "rotary" } else { "linear" }).collect();
+        format!("SmarAct MCS, {} channels ({})", kinds.len(), kinds.join(", "))
+    }
+
     fn move_absolute(&mut self, targets: &[(usize, f64)]) -> Result<(), HwError> {
         for &(a, t) in targets {
             self.move_to(a, t, None)?;

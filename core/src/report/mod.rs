@@ -5,7 +5,8 @@
 //! σ, determined or why not; an undetermined parameter never shows a bare number); the
 //! identifiability warnings; the residual of every observation in units of its σ; the
 //! validation motions before and after calibration (figures and curves); the diagnosis if one
-//! was run; the notes and the list of traces.
+//! was run; the lab record (who, when, ambient conditions, controllers); the notes and the list of
+//! traces.
 
 use crate::calibration::{CalibrationReport, ValidationRow};
 use crate::session::{Session, FORMAT_VERSION};
@@ -13,6 +14,7 @@ use std::fmt::Write as _;
 use svg::{svg_plot, Series};
 
 mod escape;
+mod lab;
 mod svg;
 
 pub use escape::escape;
@@ -38,6 +40,7 @@ pub fn render_html(session: &Session) -> String {
         escape(&title)
     );
     versions(&mut h, session);
+    lab::lab_record(&mut h, session);
     match &session.calibration {
         Some(c) => {
             summary(&mut h, c);

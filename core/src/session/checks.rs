@@ -27,6 +27,7 @@ impl Session {
                 )
             })?;
         }
+        self.lab.validate()?;
         self.check_trace_refs()?;
         self.check_progress()?;
         self.check_results()

@@ -25,10 +25,15 @@
 mod checks;
 mod diagnosis;
 mod folder;
+mod lab;
 pub mod recording;
 
 pub use diagnosis::{DiagnosisRecord, EffectFinding};
 pub use folder::{autosave_path, find_recovery, session_path, Recovery};
+pub use lab::{
+    check_range, now_utc_rfc3339, ControllerIdentity, LabRecord, HUMIDITY_RANGE_PERCENT, PRESSURE_RANGE_HPA,
+    TEMPERATURE_RANGE_C,
+};
 
 use crate::bench::BenchPreset;
 use crate::calibration::CalibrationReport;
@@ -51,7 +56,7 @@ pub const TRACES_DIR: &str = "traces";
 /// samples, so a real one is a few hundred kB; anything larger is refused unread.
 pub const MAX_SESSION_BYTES: u64 = 32 << 20;
 
-const EXPECTED: &str = "a Session(format_version: 1, software, bench, robot, plans, traces, progress, calibration, diagnosis, notes) as in docs/session-format.md";
+const EXPECTED: &str = "a Session(format_version: 1, software, bench, robot, plans, traces, progress, calibration, diagnosis, notes, lab) as in docs/session-format.md";
 
 /// Why a session could not be loaded, saved or used. Every message names the file and the
 /// line or field.
@@ -154,6 +159,10 @@ pub struct Session {
     /// Free text by the technician.
     #[serde(default)]
     pub notes: String,
+    /// When, by whom and in what air it was measured, and the controllers' identification
+    /// (absent in older files: empty).
+    #[serde(default)]
+    pub lab: LabRecord,
 }
 
 impl Session {
@@ -170,6 +179,7 @@ impl Session {
             calibration: None,
             diagnosis: None,
             notes: String::new(),
+            lab: LabRecord::default(),
         }
     }
 

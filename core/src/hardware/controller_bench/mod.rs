@@ -291,6 +291,15 @@ impl Bench for ControllerBench {
         format!("{} ({})", self.config.name, at.join(", "))
     }
 
+    fn identification(&self) -> Vec<(String, String)> {
+        self.config
+            .controllers
+            .iter()
+            .zip(&self.controllers)
+            .map(|(c, d)| (c.name.clone(), d.identification()))
+            .collect()
+    }
+
     fn robot(&self) -> &RobotDescription {
         &self.robot
     }

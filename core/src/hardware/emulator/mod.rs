@@ -437,3 +437,14 @@ pub fn run_emulator(
     }
     Ok(())
 }
+
+/// The next command line from a client, without its LF (or CR LF); `None` once the client is gone.
+/// Bytes that are not UTF-8 are kept as U+FFFD, so that the command is refused as the controller
+/// would refuse it instead of the connection being dropped.
+pub(crate) fn read_command(reader: &mut impl std::io::BufRead, buf: &mut Vec<u8>) -> Option<String> {
+    buf.clear();
+    match reader.read_until(b'\n', buf) {
+        Ok(0) | Err(_) => None,
+        Ok(_) => Some(String::from_utf8_lossy(buf).trim_end_matches(['\n', '\r']).to_string()),
+    }
+}

@@ -4,7 +4,7 @@
 
 use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, PhotodiodeFn, Server, SharedAxes};
 use crate::hardware::pi_gcs::{RECORD_ACTUAL_POSITION, RECORD_INPUT_SIGNAL, SERVO_CYCLE_S, TRIGGER_ON_MOVE};
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::sync::{Arc, Mutex};
 
@@ -142,6 +142,12 @@ impl PiEmulator {
         self.shared.state.lock().unwrap_or_else(|e| e.into_inner()).faults.fired.clone()
     }
 
+    /// What the emulator sends back for one command line (without its LF), as over TCP: the reply
+    /// text (empty for none), `None` when it drops the connection.
+    pub fn reply_to(&self, command: &str) -> Option<String> {
+        reply_text(&self.shared, command)
+    }
+
     /// True while any axis moves.
     pub fn any_moving(&self) -> bool {
         let t = self.shared.clock.now_s();
@@ -153,31 +159,37 @@ fn serve(shared: &Shared, stream: TcpStream) {
     let Ok(write_half) = stream.try_clone() else { return };
     let mut writer = write_half;
     let mut reader = BufReader::new(stream);
-    let mut line = String::new();
+    let mut buf = Vec::new();
     loop {
-        line.clear();
-        match reader.read_line(&mut line) {
-            Ok(0) | Err(_) => return,
-            Ok(_) => {}
-        }
-        let command = line.trim_end_matches(['\n', '\r']).to_string();
-        match handle(shared, &command) {
-            Reply::None => {}
-            Reply::Drop => {
+        let Some(command) = super::read_command(&mut reader, &mut buf) else { return };
+        match reply_text(shared, &command) {
+            None => {
                 let _ = writer.shutdown(std::net::Shutdown::Both);
                 return;
             }
-            Reply::Lines(lines) => {
-                let n = lines.len();
-                let mut text = String::new();
-                for (i, l) in lines.iter().enumerate() {
-                    text.push_str(l);
-                    text.push_str(if i + 1 < n { " \n" } else { "\n" });
-                }
+            Some(text) => {
                 if writer.write_all(text.as_bytes()).is_err() {
                     return;
                 }
             }
+        }
+    }
+}
+
+/// The text sent back for one command line (lines after the first continue with a space before
+/// the LF); empty for no reply, `None` when the connection is dropped.
+fn reply_text(shared: &Shared, command: &str) -> Option<String> {
+    match handle(shared, command) {
+        Reply::None => Some(String::new()),
+        Reply::Drop => None,
+        Reply::Lines(lines) => {
+            let n = lines.len();
+            let mut text = String::new();
+            for (i, l) in lines.iter().enumerate() {
+                text.push_str(l);
+                text.push_str(if i + 1 < n { " \n" } else { "\n" });
+            }
+            Some(text)
         }
     }
 }
@@ -472,7 +484,8 @@ fn recorded_data(shared: &Shared, st: &PiState, now: f64, args: &[&str]) -> Gcs<
     }
     let sources: Vec<(String, u32)> =
         tables.iter().map(|&t| st.recorder.tables[t - 1].clone().ok_or(78)).collect::<Gcs<_>>()?;
-    if start - 1 + count > recorded(st, now) {
+    // Checked: a huge count from the wire is an error, not an overflow.
+    if (start - 1).checked_add(count).is_none_or(|end| end > recorded(st, now)) {
         return Err(77);
     }
     let dt = st.recorder.rate as f64 * SERVO_CYCLE_S;

@@ -3,7 +3,7 @@
 
 use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, Server, SharedAxes};
 use crate::hardware::smaract::{angle_to_mcs, status};
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::sync::{Arc, Mutex};
 
@@ -122,6 +122,12 @@ impl SmarActEmulator {
         self.shared.state.lock().unwrap_or_else(|e| e.into_inner()).faults.fired.clone()
     }
 
+    /// What the emulator sends back for one command line (without its LF), as over TCP: the reply
+    /// line (empty for none), `None` when it drops the connection.
+    pub fn reply_to(&self, command: &str) -> Option<String> {
+        handle(&self.shared, command).map(|r| r.map_or(String::new(), |line| format!("{line}\n")))
+    }
+
     /// True while any channel moves.
     pub fn any_moving(&self) -> bool {
         let t = self.shared.clock.now_s();
@@ -139,14 +145,9 @@ impl SmarActEmulator {
 fn serve(shared: &Shared, stream: TcpStream) {
     let Ok(mut writer) = stream.try_clone() else { return };
     let mut reader = BufReader::new(stream);
-    let mut line = String::new();
+    let mut buf = Vec::new();
     loop {
-        line.clear();
-        match reader.read_line(&mut line) {
-            Ok(0) | Err(_) => return,
-            Ok(_) => {}
-        }
-        let command = line.trim_end_matches(['\n', '\r']).to_string();
+        let Some(command) = super::read_command(&mut reader, &mut buf) else { return };
         match handle(shared, &command) {
             Some(Some(reply)) => {
                 if writer.write_all(format!("{reply}\n").as_bytes()).is_err() {
