@@ -5,6 +5,7 @@ pub mod cli;
 pub mod decimate;
 pub mod dialogs;
 pub mod gui;
+pub mod log;
 pub mod session_io;
 pub mod settings;
 pub mod state;
