@@ -172,6 +172,8 @@ impl Workbench {
                     ui.label("idle");
                 }
                 ui.separator();
+                self.state.messages.sync(&self.state.status);
+                crate::views::messages::toggle(ui, &mut self.state);
                 ui.label(&self.state.status);
                 ui.separator();
                 let q = self.state.q_display;
@@ -181,6 +183,7 @@ impl Workbench {
                 ));
             });
         });
+        views::messages::panel(ui, &mut self.state);
         self.settings_window(&ctx);
         self.prompts(&ctx);
         let mut go_to_align = false;

@@ -310,6 +310,8 @@ pub struct AppState {
     pub session: SessionFile,
     /// The stage controllers' view of every joint axis (a bench on controllers), and when it came.
     pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::bench::AxisStatus>)>,
+    /// Every status and error message, with its time (the message panel).
+    pub messages: crate::views::messages::Messages,
 }
 
 impl AppState {
@@ -335,6 +337,7 @@ impl AppState {
             dialogs,
             session: SessionFile::default(),
             hardware_status: None,
+            messages: Default::default(),
         }
     }
 
@@ -550,6 +553,7 @@ impl AppState {
 
     /// Apply one event.
     pub fn apply(&mut self, e: Event) {
+        self.note_errors(&e);
         match e {
             Event::Samples { t_s, irradiance, q_display, wavelength_nm, gap_um, model_step_nm } => {
                 self.live.push(&t_s, &irradiance, model_step_nm);
@@ -621,6 +625,20 @@ impl AppState {
                 }
                 self.busy = b;
             }
+        }
+        self.messages.sync(&self.status);
+    }
+
+    /// List the errors an event carries that the status line does not show.
+    fn note_errors(&mut self, e: &Event) {
+        use crate::views::messages::Level;
+        match e {
+            Event::Identified(Err(e)) => self.messages.push(Level::Error, format!("identification failed: {e}")),
+            Event::PlanDone { job, outcome: Err(e), .. } => {
+                let title = self.wizard.steps.get(*job).map_or("measurement", |s| s.title);
+                self.messages.push(Level::Error, format!("{title} stopped: {e}"));
+            }
+            _ => {}
         }
     }
 }

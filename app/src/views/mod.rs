@@ -9,6 +9,7 @@ pub mod diagnosis;
 pub mod frames;
 pub mod inspector;
 pub mod live;
+pub mod messages;
 pub mod results;
 pub mod robot;
 pub mod validation;
