@@ -20,7 +20,8 @@ pub const KEEP_ROTATED: usize = 3;
 
 /// A log file rotated by size: when a write would take it past `max_bytes`, `name.N` becomes
 /// `name.N+1` (the oldest beyond `keep` is deleted), the file becomes `name.1`, and a new file
-/// starts. A single write larger than the limit still goes into one file, whole.
+/// starts. A single write larger than the limit still goes into one file, whole (the log's
+/// formatter writes each event in one call, so events are never split across files).
 pub struct RotatingFile {
     path: PathBuf,
     max_bytes: u64,
@@ -174,7 +175,7 @@ mod tests {
         let mut f = RotatingFile::open(&path, 100, 3).unwrap();
         // 10 lines of 40 bytes: two per 100-byte file, so 5 files written, the oldest 1 dropped.
         for k in 0..10 {
-            write!(f, "{:<39}\n", format!("line {k}")).unwrap();
+            f.write_all(format!("{:<39}\n", format!("line {k}")).as_bytes()).unwrap();
         }
         f.flush().unwrap();
         let read = |p: PathBuf| std::fs::read_to_string(p).unwrap();
@@ -189,7 +190,7 @@ mod tests {
         // Reopening appends and counts what is there.
         drop(f);
         let mut f = RotatingFile::open(&path, 100, 3).unwrap();
-        write!(f, "{:<39}\n", "line 10").unwrap();
+        f.write_all(format!("{:<39}\n", "line 10").as_bytes()).unwrap();
         assert!(read(path.clone()).starts_with("line 10"), "80 + 40 bytes > 100: rotated on reopen too");
         assert!(read(RotatingFile::rotated_path(&path, 1)).starts_with("line 8"));
     }
