@@ -70,7 +70,8 @@ fn ctrl_c_stops_calibrate_saved_and_the_printed_resume_command_finishes_it() {
     assert_eq!(run.status.code(), Some(130), "exit code of an interrupted run; stderr: {stderr}");
     assert!(!session.join("session.ron").exists(), "an interrupted run is not a finished session");
     assert!(session.join("session.autosave.ron").exists(), "the measurement so far is saved");
-    let expected = format!("photorobot calibrate --bench table2-ideal --mode joint --seed 7 --out {} --resume", session.display());
+    let expected =
+        format!("photorobot calibrate --bench table2-ideal --mode joint --seed 7 --out {} --resume", session.display());
     let line = stderr.lines().find(|l| l.trim() == expected).unwrap_or_else(|| panic!("no `{expected}` in: {stderr}"));
     // The printed command, run as printed, finishes the session.
     let mut words = line.split_whitespace().skip(1);
@@ -80,7 +81,16 @@ fn ctrl_c_stops_calibrate_saved_and_the_printed_resume_command_finishes_it() {
     assert!(session.join("session.ron").exists() && session.join("report.json").exists());
     // The session's log: both runs, their milestones, the interruption.
     let log = std::fs::read_to_string(session.join("photorobot.log")).unwrap();
-    for milestone in ["calibrate into", "measuring plan", "segment done, autosaved", "measurement interrupted", "measurement done", "identification", "validation done", "session written"] {
+    for milestone in [
+        "calibrate into",
+        "measuring plan",
+        "segment done, autosaved",
+        "measurement interrupted",
+        "measurement done",
+        "identification",
+        "validation done",
+        "session written",
+    ] {
         assert!(log.contains(milestone), "no `{milestone}` in the session log:\n{log}");
     }
     assert!(log.contains("resume=true"), "the resumed run appends to the same log");

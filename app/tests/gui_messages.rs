@@ -23,7 +23,8 @@ fn successive_messages_are_all_listed_with_errors_marked() {
     .unwrap();
     let bad = tmp.path().join("broken.csv");
     std::fs::write(&bad, "t_s,irradiance\n0,zero\n").unwrap();
-    let dialogs = ScriptedDialogs { opens: vec![vec![good.clone()], vec![bad.clone()]], saves: vec![], folders: vec![] };
+    let dialogs =
+        ScriptedDialogs { opens: vec![vec![good.clone()], vec![bad.clone()]], saves: vec![], folders: vec![] };
     let workbench = Workbench::new(Settings::default(), Box::new(dialogs), Box::new(|| {})).unwrap();
     let mut h = harness(workbench);
     open(&mut h, Tab::Traces);
@@ -40,6 +41,9 @@ fn successive_messages_are_all_listed_with_errors_marked() {
     let list = &h.state().state.messages.list;
     assert_eq!(list.iter().map(|m| m.level).collect::<Vec<_>>(), [Level::Info, Level::Error]);
     assert!(list[0].time_s <= list[1].time_s && list[0].time_s > 1.0e9, "times are wall-clock, in order");
+    // Away from the toggle, so the screenshot shows it unhovered.
+    h.hover_at(egui::pos2(700.0, 300.0));
+    h.run_steps(2);
     screenshot(&mut h, "messages");
     h.get_by_label("Close").click();
     h.run_steps(3);

@@ -23,8 +23,8 @@ use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::session::{find_recovery, recording::record_with, BenchInfo, Session, AUTOSAVE_FILE};
 use photorobot_core::trace::import::{read_folder, ColumnMapping};
 use photorobot_core::trace::Trace;
-use std::io::Write;
 use std::cell::RefCell;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 
@@ -177,7 +177,8 @@ fn calibrate_on_virtual_bench(
     // Each plan's bench time from the timing model, every plan from the start (q = 0).
     let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
         .map_err(|problem| plan_error(a, problem))?;
-    let progress = RefCell::new(Progress::new(session.plans.iter().map(|p| (p.name.clone(), p.segments.len())).collect()));
+    let progress =
+        RefCell::new(Progress::new(session.plans.iter().map(|p| (p.name.clone(), p.segments.len())).collect()));
     let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
     let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
     let recorded =
@@ -196,7 +197,12 @@ fn calibrate_on_virtual_bench(
     let name = session.bench.name.clone();
     let mut report =
         report_from_traces(traces, recorded.duration_s, name, nominal, mode).map_err(calibration_failed)?;
-    tracing::info!(converged = report.converged, residual_rms_sigma = report.residual_rms_sigma, "identification: {}", report.termination);
+    tracing::info!(
+        converged = report.converged,
+        residual_rms_sigma = report.residual_rms_sigma,
+        "identification: {}",
+        report.termination
+    );
     report.plan_durations = durations;
     progress.borrow_mut().stage("validating");
     report.validation = validation_rows(&mut bench, nominal, &report.extrinsics);
@@ -511,9 +517,26 @@ mod tests {
 
     #[test]
     fn the_resume_command_repeats_bench_mode_seed_and_folder_quoted_for_the_shell() {
-        let a = args(&["photorobot", "calibrate", "--bench", "femto-lab", "--seed", "3", "--mode", "paper", "--out", "my run/s"]);
-        assert_eq!(resume_command(&a), "photorobot calibrate --bench femto-lab --mode paper --seed 3 --out 'my run/s' --resume");
+        let a = args(&[
+            "photorobot",
+            "calibrate",
+            "--bench",
+            "femto-lab",
+            "--seed",
+            "3",
+            "--mode",
+            "paper",
+            "--out",
+            "my run/s",
+        ]);
+        assert_eq!(
+            resume_command(&a),
+            "photorobot calibrate --bench femto-lab --mode paper --seed 3 --out 'my run/s' --resume"
+        );
         let a = args(&["photorobot", "calibrate", "--bench", "it's.ron", "--out", "s", "--json"]);
-        assert_eq!(resume_command(&a), "photorobot calibrate --bench 'it'\\''s.ron' --mode joint --out s --resume --json");
+        assert_eq!(
+            resume_command(&a),
+            "photorobot calibrate --bench 'it'\\''s.ron' --mode joint --out s --resume --json"
+        );
     }
 }

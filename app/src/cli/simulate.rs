@@ -5,9 +5,9 @@
 use super::common::{load_plan, CliError};
 use super::progress::{Progress, INTERRUPT};
 use photorobot_core::bench::{run_plan_with, Bench, RunControl, VirtualBench};
-use std::cell::RefCell;
 use photorobot_core::files::FileError;
 use photorobot_core::trace::Trace;
+use std::cell::RefCell;
 use std::io::Write;
 use std::path::PathBuf;
 

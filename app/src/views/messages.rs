@@ -78,11 +78,16 @@ pub fn clock_utc(time_s: f64) -> String {
     format!("{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
 }
 
-/// The status bar's toggle: "Messages (N)", red when some are errors.
+/// The status bar's toggle: "Messages (N)", red when some are errors and the panel is closed.
 pub fn toggle(ui: &mut egui::Ui, state: &mut AppState) {
     let m = &mut state.messages;
     let label = format!("Messages ({})", m.list.len());
-    let text = if m.errors() > 0 { egui::RichText::new(label).color(ui.visuals().error_fg_color) } else { label.into() };
+    // Red while closed with errors listed (on the selected button's fill red would not read).
+    let text = if m.errors() > 0 && !m.open {
+        egui::RichText::new(label).color(ui.visuals().error_fg_color)
+    } else {
+        label.into()
+    };
     if ui.selectable_label(m.open, text).on_hover_text("Every status and error message, with its time").clicked() {
         m.open = !m.open;
     }
@@ -107,7 +112,8 @@ pub fn panel(ui: &mut egui::Ui, state: &mut AppState) {
         ui.separator();
         egui::ScrollArea::vertical().stick_to_bottom(true).auto_shrink([false, false]).show(ui, |ui| {
             for m in &state.messages.list {
-                ui.horizontal(|ui| {
+                // Long messages (a file's whole complaint) wrap instead of running off the panel.
+                ui.horizontal_wrapped(|ui| {
                     ui.monospace(clock_utc(m.time_s));
                     match m.level {
                         Level::Info => ui.label(&m.text),
