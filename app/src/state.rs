@@ -311,7 +311,7 @@ pub struct AppState {
     /// The stage controllers' view of every joint axis (a bench on controllers), and when it came.
     pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::bench::AxisStatus>)>,
     /// Every status and error message, with its time (the message panel).
-    pub messages: crate::views::messages::Messages,
+    pub messages: crate::messages::Messages,
 }
 
 impl AppState {
@@ -631,7 +631,7 @@ impl AppState {
 
     /// List the errors an event carries that the status line does not show.
     fn note_errors(&mut self, e: &Event) {
-        use crate::views::messages::Level;
+        use crate::messages::Level;
         match e {
             Event::Identified(Err(e)) => self.messages.push(Level::Error, format!("identification failed: {e}")),
             Event::PlanDone { job, outcome: Err(e), .. } => {

@@ -7,8 +7,8 @@ use common::*;
 use egui_kittest::kittest::Queryable;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::{Tab, Workbench};
+use photorobot_app::messages::Level;
 use photorobot_app::settings::Settings;
-use photorobot_app::views::messages::Level;
 use std::time::Duration;
 
 #[test]
