@@ -188,6 +188,8 @@ impl Workbench {
                     ui.label("idle");
                 }
                 ui.separator();
+                self.state.messages.sync(&self.state.status);
+                crate::views::messages::toggle(ui, &mut self.state);
                 ui.label(&self.state.status);
                 ui.separator();
                 let q = self.state.q_display;
@@ -197,6 +199,7 @@ impl Workbench {
                 ));
             });
         });
+        views::messages::panel(ui, &mut self.state);
         self.settings_window(&ctx);
         views::lab::window(&ctx, &mut self.state);
         self.prompts(&ctx);

@@ -7,6 +7,8 @@ pub mod decimate;
 pub mod dialogs;
 pub mod gui;
 pub mod motion;
+pub mod log;
+pub mod messages;
 pub mod session_io;
 pub mod settings;
 pub mod state;

@@ -331,6 +331,8 @@ pub struct AppState {
     pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::bench::AxisStatus>)>,
     /// The message of a panic the worker caught, until the technician closes it.
     pub worker_failure: Option<String>,
+    /// Every status and error message, with its time (the message panel).
+    pub messages: crate::messages::Messages,
 }
 
 impl AppState {
@@ -357,6 +359,7 @@ impl AppState {
             session: SessionFile::default(),
             hardware_status: None,
             worker_failure: None,
+            messages: Default::default(),
         }
     }
 
@@ -577,6 +580,7 @@ impl AppState {
 
     /// Apply one event.
     pub fn apply(&mut self, e: Event) {
+        self.note_errors(&e);
         match e {
             Event::Samples { t_s, irradiance, q_display, wavelength_nm, gap_um, model_step_nm } => {
                 self.live.push(&t_s, &irradiance, model_step_nm);
@@ -652,6 +656,20 @@ impl AppState {
                 }
                 self.busy = b;
             }
+        }
+        self.messages.sync(&self.status);
+    }
+
+    /// List the errors an event carries that the status line does not show.
+    fn note_errors(&mut self, e: &Event) {
+        use crate::messages::Level;
+        match e {
+            Event::Identified(Err(e)) => self.messages.push(Level::Error, format!("identification failed: {e}")),
+            Event::PlanDone { job, outcome: Err(e), .. } => {
+                let title = self.wizard.steps.get(*job).map_or("measurement", |s| s.title);
+                self.messages.push(Level::Error, format!("{title} stopped: {e}"));
+            }
+            _ => {}
         }
     }
 }

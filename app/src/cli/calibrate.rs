@@ -10,6 +10,7 @@
 //! is written atomically. `--resume` continues a measurement a crash interrupted.
 
 use super::common::{json_text, load_plan, CliError};
+use super::progress::{Progress, INTERRUPT};
 use photorobot_core::bench::{BenchPreset, RunControl, VirtualBench};
 use photorobot_core::calibration::{
     plan_durations, plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
@@ -20,13 +21,14 @@ use photorobot_core::identify::verdict::{FitCheck, Verdict};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::session::{
-    self as lab, find_recovery, recording::record, BenchInfo, ControllerIdentity, LabRecord, Session, AUTOSAVE_FILE,
+    self as lab, find_recovery, recording::record_with, BenchInfo, ControllerIdentity, LabRecord, Session, AUTOSAVE_FILE,
 };
 use photorobot_core::trace::import::{read_folder, ColumnMapping};
 use photorobot_core::trace::Trace;
+use std::cell::RefCell;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::Ordering;
 
 /// Which identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -132,12 +134,14 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         ModeArg::Joint => Mode::Joint,
     };
     refuse_saved_session(a)?;
+    open_log(a, mode);
     let (mut session, report) = match &a.traces {
         Some(dir) => calibrate_from_traces(a, dir, &preset, &nominal, mode)?,
         None => calibrate_on_virtual_bench(a, &preset, &nominal, mode)?,
     };
     a.lab.apply(&mut session.lab);
     let json = write_session(a, &mut session, &report)?;
+    tracing::info!(session = %a.out.display(), converged = report.converged, "session written");
     if a.json {
         writeln!(out, "{json}")?;
     } else {
@@ -226,18 +230,89 @@ fn calibrate_on_virtual_bench(
     let mut session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &bench, mode)? };
     // Each plan's bench time from the timing model, every plan from the start (q = 0).
     let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
-        .map_err(|problem| CliError::Argument { argument: "--plan", problem })?;
-    let cancel = AtomicBool::new(false);
-    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-    let recorded = record(&mut bench, &mut session, &a.out, &mut control)?;
-    recorded.outcome?;
+        .map_err(|problem| plan_error(a, problem))?;
+    let progress =
+        RefCell::new(Progress::new(session.plans.iter().map(|p| (p.name.clone(), p.segments.len())).collect()));
+    let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
+    let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
+    let recorded =
+        record_with(&mut bench, &mut session, &a.out, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))?;
+    if let Err(e) = recorded.outcome {
+        progress.borrow_mut().finish();
+        if INTERRUPT.load(Ordering::SeqCst) {
+            tracing::warn!("measurement interrupted: {e}");
+            return Err(CliError::Interrupted { session: a.out.clone(), resume: resume_command(a) });
+        }
+        return Err(e.into());
+    }
+    tracing::info!(bench_time_s = recorded.duration_s, "measurement done");
+    progress.borrow_mut().stage("identifying");
     let traces = session.load_traces(&a.out)?;
     let name = session.bench.name.clone();
     let mut report =
         report_from_traces(traces, recorded.duration_s, name, nominal, mode).map_err(calibration_failed)?;
+    tracing::info!(
+        converged = report.converged,
+        residual_rms_sigma = report.residual_rms_sigma,
+        "identification: {}",
+        report.termination
+    );
     report.plan_durations = durations;
+    progress.borrow_mut().stage("validating");
     report.validation = validation_rows(&mut bench, nominal, &report.extrinsics);
+    tracing::info!(motions = report.validation.len(), "validation done");
+    progress.borrow_mut().finish();
     Ok((session, report))
+}
+
+/// Plans that cannot run on the bench: `--plan`'s when given, else the mode's or the resumed
+/// session's, which no argument names.
+fn plan_error(a: &CalibrateArgs, problem: String) -> CliError {
+    match (a.plans.is_empty(), a.resume) {
+        (false, _) => CliError::Argument { argument: "--plan", problem },
+        (true, true) => CliError::Failed { what: "the resumed session's plans", problem },
+        (true, false) => CliError::Failed { what: "the mode's plans", problem },
+    }
+}
+
+/// Log into the session folder from now on (`photorobot.log`), starting with what runs.
+fn open_log(a: &CalibrateArgs, mode: Mode) {
+    match crate::log::open_session_log(&a.out) {
+        Ok(path) => tracing::debug!(log = %path.display(), "session log opened"),
+        Err(e) => tracing::warn!("cannot write the log {}: {e}", a.out.join(crate::log::LOG_FILE).display()),
+    }
+    tracing::info!(
+        bench = %a.bench, seed = ?a.seed, mode = ?mode, resume = a.resume, traces = ?a.traces,
+        "calibrate into {}", a.out.display()
+    );
+}
+
+/// The command line that continues this run from its autosave: the same bench, seed and mode,
+/// with `--resume` (the plans are in the autosave).
+pub fn resume_command(a: &CalibrateArgs) -> String {
+    let mode = match a.mode {
+        ModeArg::Paper => "paper",
+        ModeArg::Joint => "joint",
+    };
+    let mut cmd = format!("photorobot calibrate --bench {} --mode {mode}", shell_quote(&a.bench));
+    if let Some(seed) = a.seed {
+        cmd += &format!(" --seed {seed}");
+    }
+    cmd += &format!(" --out {} --resume", shell_quote(&a.out.display().to_string()));
+    if a.json {
+        cmd += " --json";
+    }
+    cmd
+}
+
+/// A word as a POSIX shell reads it back: quoted when it holds anything but safe characters.
+fn shell_quote(word: &str) -> String {
+    let safe = |c: char| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c);
+    if !word.is_empty() && word.chars().all(safe) {
+        word.to_string()
+    } else {
+        format!("'{}'", word.replace('\'', "'\\''"))
+    }
 }
 
 /// A new session on the bench with the plans to measure (the mode's or `--plan`'s); refused when
@@ -474,4 +549,55 @@ fn print_signs(signs: &[TranslationSign], out: &mut dyn Write) -> std::io::Resul
         writeln!(out, "  {:>+10.1} nm  fixed by {source:<34}{agree}  {}", s.dl_nm, s.label)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn args(line: &[&str]) -> CalibrateArgs {
+        match crate::cli::Cli::parse_from(line).command {
+            Some(crate::cli::Command::Calibrate(a)) => a,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn plans_that_cannot_run_blame_the_argument_only_when_one_gave_them() {
+        let limits = "segment 3 leaves the limits of q1".to_string();
+        let given = args(&["photorobot", "calibrate", "--bench", "b", "--out", "o", "--plan", "p.ron"]);
+        assert_eq!(plan_error(&given, limits.clone()).to_string(), format!("argument --plan: {limits}"));
+        let default = args(&["photorobot", "calibrate", "--bench", "b", "--out", "o"]);
+        let e = plan_error(&default, limits.clone());
+        assert_eq!(e.to_string(), format!("the mode's plans failed: {limits}"));
+        assert_eq!(e.exit_code(), 1, "not a wrong command line");
+        let resumed = args(&["photorobot", "calibrate", "--bench", "b", "--out", "o", "--resume"]);
+        assert!(!plan_error(&resumed, limits).to_string().contains("--"), "no argument to blame");
+    }
+
+    #[test]
+    fn the_resume_command_repeats_bench_mode_seed_and_folder_quoted_for_the_shell() {
+        let a = args(&[
+            "photorobot",
+            "calibrate",
+            "--bench",
+            "femto-lab",
+            "--seed",
+            "3",
+            "--mode",
+            "paper",
+            "--out",
+            "my run/s",
+        ]);
+        assert_eq!(
+            resume_command(&a),
+            "photorobot calibrate --bench femto-lab --mode paper --seed 3 --out 'my run/s' --resume"
+        );
+        let a = args(&["photorobot", "calibrate", "--bench", "it's.ron", "--out", "s", "--json"]);
+        assert_eq!(
+            resume_command(&a),
+            "photorobot calibrate --bench 'it'\\''s.ron' --mode joint --out s --resume --json"
+        );
+    }
 }

@@ -57,6 +57,15 @@ pub enum CliError {
         /// Why.
         problem: String,
     },
+    /// Ctrl-C stopped the run at a segment; everything measured is saved in the session's
+    /// autosave and `resume` continues it.
+    #[error("interrupted: the measurement so far is saved in {}; to continue it:\n  {resume}", session.display())]
+    Interrupted {
+        /// The session folder.
+        session: std::path::PathBuf,
+        /// The command line that continues the run.
+        resume: String,
+    },
     /// The run finished and its session was written, but it is not a calibration (the model does
     /// not fit the data, branches tie, or the solver did not converge).
     #[error("not a calibration: {problem} (session written to {})", session.display())]
@@ -86,9 +95,10 @@ impl CliError {
     /// calibration, a bench or plan that failed, a trace that could not be analysed, output that
     /// could not be written), 2 for a command line that is wrong, 3 for a file that cannot be
     /// used (a plan, preset, trace or session that is missing or malformed, a bench preset that
-    /// cannot be built).
+    /// cannot be built), 130 for a run stopped by Ctrl-C (its session saved).
     pub fn exit_code(&self) -> u8 {
         match self {
+            CliError::Interrupted { .. } => super::progress::INTERRUPTED_EXIT_CODE,
             CliError::Bench(BenchError::Config(_)) => 3,
             CliError::NotACalibration { .. }
             | CliError::Failed { .. }

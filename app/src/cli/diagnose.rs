@@ -87,7 +87,10 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let extrinsics = Extrinsics::load(&a.session.join("extrinsics.ron"))?;
     let named = traces[0].meta.bench.trim().trim_start_matches("virtual bench ").to_string();
     let preset = chosen_preset(a, &named)?;
-    let base = analysis_model(preset.as_ref(), extrinsics)?;
+    let base = analysis_model(preset.as_ref(), extrinsics).map_err(|problem| match a.bench {
+        Some(_) => CliError::Argument { argument: "--bench", problem },
+        None => invalid(&a.session.join("traces"), "# bench", format!("the model of bench `{named}`: {problem}")),
+    })?;
     let (mut d, skipped) =
         Diagnosis::from_traces(&base, &traces, extrinsics).map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
     let mut bench = preset.as_ref().map(|p| resumed_bench(p, a.seed, &d)).transpose()?;
@@ -147,19 +150,18 @@ fn chosen_preset(a: &DiagnoseArgs, named: &str) -> Result<Option<BenchPreset>, C
 
 /// The software's model: the preset's robot description (nominal), optics and air; without a
 /// preset, the embedded reference bench's.
-fn analysis_model(preset: Option<&BenchPreset>, extrinsics: Extrinsics) -> Result<PhaseModel, CliError> {
+fn analysis_model(preset: Option<&BenchPreset>, extrinsics: Extrinsics) -> Result<PhaseModel, String> {
     let reference = match preset {
         Some(p) => p.clone(),
-        None => BenchPreset::resolve("table2-ideal")?,
+        None => BenchPreset::resolve("table2-ideal").map_err(|e| e.to_string())?,
     };
     PhaseModel::new(
-        reference.robot_description()?,
+        reference.robot_description().map_err(|e| e.to_string())?,
         extrinsics,
         reference.optics,
         &reference.ambient,
         reference.laser.wavelength_nm,
     )
-    .map_err(|problem| CliError::Argument { argument: "--bench", problem })
 }
 
 /// The session's bench, resumed a minute after the session ended: its time (and drift) goes on
@@ -177,11 +179,16 @@ fn run_steps(
     json: bool,
     out: &mut dyn Write,
 ) -> Result<(), CliError> {
+    // A spinner per workflow step on stderr (the steps have no fraction to show).
+    let mut progress = super::progress::Progress::new(Vec::new());
+    progress.stage("diagnosis: starting");
     loop {
         let step = d
             .step(runner.as_mut().map(|r| &mut **r as &mut dyn MotionRunner))
             .map_err(|e| CliError::Failed { what: "diagnosis", problem: e.to_string() })?;
         let Some(step) = step else { break };
+        tracing::info!("diagnosis step: {}", step.title());
+        progress.stage(&format!("diagnosis: after {}", step.title()));
         if !json {
             writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
         }

@@ -9,6 +9,7 @@ pub mod diagnose;
 pub mod emulate;
 pub mod frames;
 pub mod fringes;
+pub mod progress;
 pub mod report;
 pub mod simulate;
 
@@ -26,6 +27,12 @@ pub struct Cli {
     /// What to do (default: start the GUI).
     #[command(subcommand)]
     pub command: Option<Command>,
+    /// No progress bars; only errors on stderr.
+    #[arg(long, short, global = true)]
+    pub quiet: bool,
+    /// More on stderr: -v info, -vv debug (RUST_LOG overrides).
+    #[arg(long, short, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
 }
 
 /// The subcommands.
@@ -66,7 +73,12 @@ where
     I: IntoIterator<Item = T>,
     T: Into<OsString> + Clone,
 {
-    let cli = Cli::try_parse_from(args)?;
+    run_parsed(Cli::try_parse_from(args)?, out)
+}
+
+/// Run a parsed command line, writing to `out`.
+pub fn run_parsed(cli: Cli, out: &mut dyn Write) -> Result<Outcome, CliError> {
+    progress::set_quiet(cli.quiet);
     match cli.command {
         None | Some(Command::Gui) => Ok(Outcome::StartGui),
         Some(Command::Frames(a)) => frames::frames(&a, out).map(|()| Outcome::Done),

@@ -3,9 +3,11 @@
 //! is `photorobot_core::bench::run_plan`.
 
 use super::common::{load_plan, CliError};
-use photorobot_core::bench::{run_plan, Bench, RunControl, VirtualBench};
+use super::progress::{Progress, INTERRUPT};
+use photorobot_core::bench::{run_plan_with, Bench, RunControl, VirtualBench};
 use photorobot_core::files::FileError;
 use photorobot_core::trace::Trace;
+use std::cell::RefCell;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -42,9 +44,16 @@ fn slug(label: &str) -> String {
 pub fn simulate(a: &SimulateArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let mut bench = VirtualBench::from_preset_name(&a.bench, a.seed)?;
     let plan = load_plan(&a.plan)?;
-    let cancel = std::sync::atomic::AtomicBool::new(false);
-    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-    let run = run_plan(&mut bench, &plan, &mut control);
+    // One bar for the plan; Ctrl-C stops it at the segment and the traces so far are written.
+    let progress = RefCell::new(Progress::new(vec![(plan.name.clone(), plan.segments.len())]));
+    progress.borrow_mut().segment(0, 0);
+    let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
+    let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
+    let run = run_plan_with(&mut bench, &plan, &mut control, &mut |step| {
+        progress.borrow_mut().segment(0, step.segment + 1);
+        Ok(())
+    });
+    progress.borrow_mut().finish();
     let single_file = a.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"));
     if single_file && run.traces.len() > 1 {
         return Err(CliError::Argument {

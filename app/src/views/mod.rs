@@ -10,6 +10,7 @@ pub mod frames;
 pub mod inspector;
 pub mod lab;
 pub mod live;
+pub mod messages;
 pub mod results;
 pub mod robot;
 pub mod validation;

@@ -333,6 +333,7 @@ impl Link {
             .next()
             .ok_or_else(|| err("the address resolves to nothing".into()))?;
         let stream = TcpStream::connect_timeout(&addr, timeout).map_err(|e| err(e.to_string()))?;
+        tracing::info!(controller = %self.controller, address = %self.address, "connected");
         stream.set_read_timeout(Some(timeout)).map_err(|e| err(e.to_string()))?;
         stream.set_write_timeout(Some(timeout)).map_err(|e| err(e.to_string()))?;
         let _ = stream.set_nodelay(true);
@@ -377,8 +378,10 @@ impl Link {
         line.push(b'\n');
         if let Err(e) = reader.get_mut().write_all(&line) {
             self.reader = None;
+            tracing::warn!(controller = %controller, command, "send failed: {e}");
             return Err(HwError::Disconnected { controller, command: command.into(), reason: e.to_string() });
         }
+        tracing::debug!(controller = %self.controller, "> {command}");
         self.log(format!("> {command}"));
         Ok(())
     }
@@ -386,6 +389,14 @@ impl Link {
     /// Read one reply line (without its LF; a trailing space is kept). `command` names the request
     /// in errors.
     pub fn read_line(&mut self, command: &str) -> Result<String, HwError> {
+        let reply = self.read_line_inner(command);
+        if let Err(e) = &reply {
+            tracing::warn!(controller = %self.controller, command, "no reply: {e}");
+        }
+        reply
+    }
+
+    fn read_line_inner(&mut self, command: &str) -> Result<String, HwError> {
         let controller = self.controller.clone();
         let timeout_s = self.timeout_s;
         let reader = self.reader.as_mut().ok_or(HwError::NotConnected { controller: controller.clone() })?;
@@ -421,6 +432,7 @@ impl Link {
                     buf.pop();
                 }
                 let line = String::from_utf8_lossy(&buf).into_owned();
+                tracing::debug!(controller = %controller, "< {line}");
                 self.log(format!("< {line}"));
                 Ok(line)
             }

@@ -31,6 +31,18 @@ pub fn record(
     dir: &Path,
     control: &mut RunControl<'_>,
 ) -> Result<Recorded, SessionError> {
+    record_with(bench, session, dir, control, &mut |_, _| {})
+}
+
+/// [`record`], calling `on_segment(plan, segment)` with each segment about to run (segment
+/// indices in the plan's own numbering), for progress displays.
+pub fn record_with(
+    bench: &mut dyn Bench,
+    session: &mut Session,
+    dir: &Path,
+    control: &mut RunControl<'_>,
+    on_segment: &mut dyn FnMut(usize, usize),
+) -> Result<Recorded, SessionError> {
     let start_s = bench.clock_s();
     let first = session.progress.map_or(0, |p| p.plan);
     let plans = session.plans.clone();
@@ -41,12 +53,17 @@ pub fn record(
             resuming.unwrap_or(Progress { plan: p, next_segment: 0, plan_start_display: bench.position_display() });
         session.progress = Some(progress);
         session.autosave(dir)?;
+        tracing::info!(plan = %plan.name, from_segment = progress.next_segment, "measuring plan {} of {}", p + 1, plans.len());
+        on_segment(p, progress.next_segment);
         let mut on_step = |step: StepDone<'_>| -> Result<(), String> {
             if let Some(t) = step.trace {
                 session.add_trace(dir, t, Some((p, step.segment)), true).map_err(|e| e.to_string())?;
             }
             session.progress = Some(Progress { next_segment: step.segment + 1, ..progress });
-            session.autosave(dir).map_err(|e| e.to_string())
+            session.autosave(dir).map_err(|e| e.to_string())?;
+            tracing::debug!(plan = %plans[p].name, segment = step.segment, label = step.label, recorded = step.trace.is_some(), "segment done, autosaved");
+            on_segment(p, step.segment + 1);
+            Ok(())
         };
         let run = match resuming {
             None => run_plan_with(bench, plan, control, &mut on_step),
@@ -55,6 +72,7 @@ pub fn record(
             }
         };
         if let Err(e) = run.outcome {
+            tracing::warn!(plan = %plan.name, "measurement stopped: {e}");
             if let RunError::Segment { segment, error, .. } = &e {
                 // Resumed runs count the return move as segment 0.
                 let segment = segment.saturating_sub(usize::from(resuming.is_some())) + progress.next_segment;
