@@ -7,7 +7,8 @@
 //! the calibration), every recorded trace (`traces/NNN.csv`, each saved as soon as it is
 //! measured, with the session autosaved after it), the identified extrinsics (`extrinsics.ron`,
 //! loadable by `photorobot frames --extrinsics`) and the whole report (`report.json`). Every file
-//! is written atomically. `--resume` continues a measurement a crash interrupted.
+//! is written atomically. `--resume` continues a measurement a crash interrupted. The folder is locked
+//! while calibrate runs: a second photorobot writing into it is refused.
 
 use super::common::{json_text, load_plan, CliError};
 use photorobot_core::bench::{BenchPreset, RunControl, VirtualBench};
@@ -19,7 +20,9 @@ use photorobot_core::identify::signs::{SignSource, TranslationSign};
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
-use photorobot_core::session::{find_recovery, recording::record, BenchInfo, Session, AUTOSAVE_FILE};
+use photorobot_core::session::{
+    find_recovery, recording::record, BenchInfo, FolderLock, Session, SessionWriter, AUTOSAVE_FILE,
+};
 use photorobot_core::trace::import::{read_folder, ColumnMapping};
 use photorobot_core::trace::Trace;
 use std::io::Write;
@@ -78,6 +81,8 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         ModeArg::Paper => Mode::Paper,
         ModeArg::Joint => Mode::Joint,
     };
+    // The folder is ours until the session is written: a second photorobot is refused.
+    let _lock = FolderLock::acquire(&a.out)?;
     refuse_saved_session(a)?;
     let (mut session, report) = match &a.traces {
         Some(dir) => calibrate_from_traces(a, dir, &preset, &nominal, mode)?,
@@ -169,13 +174,15 @@ fn calibrate_on_virtual_bench(
     mode: Mode,
 ) -> Result<(Session, CalibrationReport), CliError> {
     let mut bench = VirtualBench::new(preset, a.seed)?;
-    let mut session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &bench, mode)? };
+    let session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &bench, mode)? };
     // Each plan's bench time from the timing model, every plan from the start (q = 0).
     let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
         .map_err(|problem| CliError::Argument { argument: "--plan", problem })?;
     let cancel = AtomicBool::new(false);
     let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-    let recorded = record(&mut bench, &mut session, &a.out, &mut control)?;
+    let mut writer = SessionWriter::new(&a.out, session);
+    let recorded = record(&mut bench, &mut writer, &mut control)?;
+    let session = writer.into_session();
     recorded.outcome?;
     let traces = session.load_traces(&a.out)?;
     let name = session.bench.name.clone();
