@@ -57,6 +57,17 @@ impl SessionWriter {
         Self { dir: dir.to_path_buf(), session, on_disk, next_name: 0, storage: Box::new(Disk) }
     }
 
+    /// Take the trace files `other` references as on disk too (the `session.ron` or autosave
+    /// already in the folder), so that the same traces are referenced again, not rewritten.
+    pub fn adopt_files(&mut self, other: &Session) {
+        for r in &other.traces {
+            let names = self.on_disk.entry((r.crc32, r.bytes)).or_default();
+            if !names.contains(&r.file) {
+                names.push(r.file.clone());
+            }
+        }
+    }
+
     /// The same writer writing through `storage` (a failing one in tests).
     pub fn with_storage(mut self, storage: Box<dyn Storage>) -> Self {
         self.storage = storage;
