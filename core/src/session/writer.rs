@@ -229,3 +229,6 @@ fn create_dir(dir: &Path) -> Result<(), FileError> {
         source,
     })
 }
+
+#[cfg(test)]
+mod tests;
