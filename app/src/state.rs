@@ -492,7 +492,12 @@ impl AppState {
         let tx = self.session.saves.0.clone();
         let jobs = self.session.jobs.get_or_insert_with(|| {
             crate::session_io::spawn_writer(Box::new(move |job, result| {
-                let _ = tx.send(SaveOutcome { autosave: job.autosave, revision: job.revision, dir: job.dir.clone(), result });
+                let _ = tx.send(SaveOutcome {
+                    autosave: job.autosave,
+                    revision: job.revision,
+                    dir: job.dir.clone(),
+                    result,
+                });
             }))
         });
         if let Err(std::sync::mpsc::SendError(job)) = jobs.send(job) {
@@ -627,7 +632,7 @@ impl AppState {
                 let dir = self.session.dir.get_or_insert_with(untitled_dir).clone();
                 self.save_in_background(dir, true);
             }
-            Event::SegmentDone(trace) => self.segment_done(trace),
+            Event::SegmentDone(trace) => self.segment_done(*trace),
             Event::Identified(r) => match r {
                 Ok(report) => {
                     self.extrinsics = report.extrinsics;

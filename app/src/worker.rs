@@ -157,7 +157,7 @@ pub enum Event {
         outcome: Result<(), String>,
     },
     /// A segment of the running plan was recorded (its whole trace), before the next one starts.
-    SegmentDone(Trace),
+    SegmentDone(Box<Trace>),
     /// Identification finished.
     Identified(Result<Box<CalibrationReport>, String>),
     /// Validation finished.
@@ -528,7 +528,7 @@ impl Thread {
         let (segment_tx, notify) = (self.tx.clone(), &self.notify);
         let mut on_step = |step: photorobot_core::bench::StepDone<'_>| {
             if let Some(trace) = step.trace.filter(|_| report_progress) {
-                let _ = segment_tx.send(Event::SegmentDone(trace.clone()));
+                let _ = segment_tx.send(Event::SegmentDone(Box::new(trace.clone())));
                 notify();
             }
             Ok(())

@@ -176,7 +176,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
         .map_err(io("cannot create temporary file"))?;
     tmp.write_all(bytes).map_err(io("cannot write"))?;
     tmp.as_file().sync_all().map_err(io("cannot flush to disk"))?;
-    tmp.persist(path).map_err(|e| FileError::Io { file: path.to_path_buf(), action: "cannot replace", source: e.error })?;
+    tmp.persist(path).map_err(|e| FileError::Io {
+        file: path.to_path_buf(),
+        action: "cannot replace",
+        source: e.error,
+    })?;
     sync_dir(&dir)
 }
 

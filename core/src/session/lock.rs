@@ -6,7 +6,8 @@
 
 use super::SessionError;
 use crate::files::FileError;
-use std::fs::{File, OpenOptions, TryLockError};
+use fs4::TryLockError;
+use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
@@ -37,7 +38,9 @@ impl FolderLock {
             .truncate(false)
             .open(&path)
             .map_err(io("cannot open the lock file", &path))?;
-        match file.try_lock() {
+        // fs4's lock is the operating system's (flock on Unix, LockFileEx on Windows), as std's
+        // `File::try_lock` is from Rust 1.89, above this workspace's minimum Rust version.
+        match fs4::FileExt::try_lock(&file) {
             Ok(()) => {}
             Err(TryLockError::WouldBlock) => {
                 let mut holder = String::new();

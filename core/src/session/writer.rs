@@ -135,8 +135,9 @@ impl SessionWriter {
         let autosave = autosave_path(&self.dir);
         match std::fs::remove_file(&autosave) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                return Err(FileError::Io { file: autosave, action: "cannot remove the autosave file", source: e }
-                    .into());
+                return Err(
+                    FileError::Io { file: autosave, action: "cannot remove the autosave file", source: e }.into()
+                );
             }
             _ => files::sync_dir(&self.dir)?,
         }

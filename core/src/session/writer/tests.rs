@@ -148,7 +148,8 @@ fn a_second_program_is_refused_a_locked_folder_with_the_holder_named() {
     let dir = tmp.path().join("session");
     let held = FolderLock::acquire(&dir).unwrap();
     let err = FolderLock::acquire(&dir).unwrap_err().to_string();
-    let expected = format!("{}: the session folder is open in another photorobot (process {})", dir.display(), std::process::id());
+    let expected =
+        format!("{}: the session folder is open in another photorobot (process {})", dir.display(), std::process::id());
     assert!(err.starts_with(&expected), "{err}");
     drop(held);
     FolderLock::acquire(&dir).expect("free again once the holder closed it");
