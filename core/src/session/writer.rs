@@ -35,6 +35,9 @@ pub struct SessionWriter {
     session: Session,
     /// Trace files written or referenced in this folder, by (CRC-32, bytes) of their content.
     on_disk: HashMap<(u32, u64), Vec<String>>,
+    /// The (CRC-32, bytes) of the CSV of traces seen before, by [`fingerprint`]: an unchanged
+    /// trace is recognised without formatting its CSV again.
+    seen: HashMap<u64, (u32, u64)>,
     /// Where to look for the next free trace name.
     next_name: usize,
     storage: Box<dyn Storage>,
@@ -54,7 +57,7 @@ impl SessionWriter {
         for r in &session.traces {
             on_disk.entry((r.crc32, r.bytes)).or_default().push(r.file.clone());
         }
-        Self { dir: dir.to_path_buf(), session, on_disk, next_name: 0, storage: Box::new(Disk) }
+        Self { dir: dir.to_path_buf(), session, on_disk, seen: HashMap::new(), next_name: 0, storage: Box::new(Disk) }
     }
 
     /// Take the trace files `other` references as on disk too (the `session.ron` or autosave
@@ -161,19 +164,19 @@ impl SessionWriter {
         complete: bool,
         used: &mut HashSet<String>,
     ) -> Result<TraceRef, SessionError> {
-        let bytes = trace.to_csv_bytes(&self.dir.join(TRACES_DIR))?;
-        let key = (crc32fast::hash(&bytes), bytes.len() as u64);
-        let known = self.on_disk.get(&key).and_then(|names| {
-            names.iter().find(|n| !used.contains(n.as_str()) && self.dir.join(n.as_str()).is_file()).cloned()
-        });
-        let file = match known {
-            Some(file) => file,
+        let print = fingerprint(trace);
+        let seen = self.seen.get(&print).and_then(|key| Some((*key, self.free_file(key, used)?)));
+        let (key, file) = match seen {
+            Some((key, file)) => (key, file),
             None => {
-                let file = self.free_name(used);
-                create_dir(&self.dir.join(TRACES_DIR))?;
-                self.storage.write_atomic(&self.dir.join(&file), &bytes)?;
-                self.on_disk.entry(key).or_default().push(file.clone());
-                file
+                let bytes = trace.to_csv_bytes(&self.dir.join(TRACES_DIR))?;
+                let key = (crc32fast::hash(&bytes), bytes.len() as u64);
+                self.seen.insert(print, key);
+                let file = match self.free_file(&key, used) {
+                    Some(file) => file,
+                    None => self.write_trace(key, &bytes, used)?,
+                };
+                (key, file)
             }
         };
         used.insert(file.clone());
@@ -187,6 +190,21 @@ impl SessionWriter {
             step,
             complete,
         })
+    }
+
+    /// A file on disk holding the content `key` that `used` does not hold yet.
+    fn free_file(&self, key: &(u32, u64), used: &HashSet<String>) -> Option<String> {
+        let names = self.on_disk.get(key)?;
+        names.iter().find(|n| !used.contains(n.as_str()) && self.dir.join(n.as_str()).is_file()).cloned()
+    }
+
+    /// Write a new trace file under a free name.
+    fn write_trace(&mut self, key: (u32, u64), bytes: &[u8], used: &HashSet<String>) -> Result<String, SessionError> {
+        let file = self.free_name(used);
+        create_dir(&self.dir.join(TRACES_DIR))?;
+        self.storage.write_atomic(&self.dir.join(&file), bytes)?;
+        self.on_disk.entry(key).or_default().push(file.clone());
+        Ok(file)
     }
 
     /// The first `traces/NNN.csv` from where the last search ended that is neither on disk nor
@@ -221,6 +239,22 @@ impl SessionWriter {
         }
         let _ = files::sync_dir(&self.dir.join(TRACES_DIR));
     }
+}
+
+/// A 64-bit hash of everything a trace's CSV is made of (its metadata and every value's bits):
+/// equal for equal traces, and much cheaper than formatting the CSV.
+fn fingerprint(trace: &Trace) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    format!("{:?}", trace.meta).hash(&mut h);
+    for (name, values) in trace.columns() {
+        name.hash(&mut h);
+        values.len().hash(&mut h);
+        for v in values {
+            v.to_bits().hash(&mut h);
+        }
+    }
+    h.finish()
 }
 
 fn create_dir(dir: &Path) -> Result<(), FileError> {
