@@ -101,6 +101,8 @@ pub struct Workbench {
     pub recovery: Option<(std::path::PathBuf, usize)>,
     /// The window may close (nothing unsaved, or the user said so).
     pub quit: bool,
+    /// Why a session folder could not be opened (shown until acknowledged).
+    pub open_error: Option<String>,
 }
 
 /// An action that would lose unsaved changes.
@@ -130,7 +132,15 @@ impl Workbench {
             after_save: None,
             recovery: None,
             quit: false,
+            open_error: None,
         })
+    }
+
+    /// At start, with no session open: offer the newest untitled session a crash left unsaved.
+    pub fn offer_untitled_recovery(&mut self) {
+        if self.state.session.dir.is_none() && self.recovery.is_none() {
+            self.recovery = crate::session_io::newest_untitled(&self.state.session.untitled_base);
+        }
     }
 
     /// Draw one frame.
@@ -318,6 +328,8 @@ impl Workbench {
     fn perform(&mut self, action: Pending) {
         match action {
             Pending::New => self.state.start_new_session(),
+            // A folder open in another photorobot is refused before anything is read from it.
+            Pending::Open(dir) if self.refuse_locked(&dir) => {}
             Pending::Open(dir) => match crate::session_io::recoverable(&dir) {
                 Some(n) => self.recovery = Some((dir, n)),
                 None => self.open(&dir, false),
@@ -329,9 +341,33 @@ impl Workbench {
         }
     }
 
+    /// Whether `dir` is open in another photorobot (the error is then on show).
+    fn refuse_locked(&mut self, dir: &std::path::Path) -> bool {
+        match self.state.acquire_lock(dir) {
+            Ok(_) => false,
+            Err(e) => {
+                self.state.status = format!("cannot open: {e}");
+                self.open_error = Some(e);
+                true
+            }
+        }
+    }
+
     fn open(&mut self, dir: &std::path::Path, recover: bool) {
+        // The folder stays locked while its session is open here.
+        let lock = match self.state.acquire_lock(dir) {
+            Ok(lock) => lock,
+            Err(e) => {
+                self.state.status = format!("cannot open: {e}");
+                self.open_error = Some(e);
+                return;
+            }
+        };
         match crate::session_io::load(dir, recover) {
             Ok(loaded) => {
+                if lock.is_some() {
+                    self.state.session.lock = lock;
+                }
                 self.state.apply_loaded(loaded, dir);
                 // A recovered session is newer than what is saved: it needs a save.
                 if recover {
@@ -392,7 +428,10 @@ impl Workbench {
                     if ui.button("Recover the autosave").clicked() {
                         answer = Some(true);
                     }
-                    if ui.button("Open the saved session").clicked() {
+                    // An untitled session has no saved session to open instead.
+                    if photorobot_core::session::session_path(&dir).is_file()
+                        && ui.button("Open the saved session").clicked()
+                    {
                         answer = Some(false);
                     }
                     if ui.button("Cancel").clicked() {
@@ -404,6 +443,14 @@ impl Workbench {
                 self.recovery = None;
                 self.open(&dir, recover);
             }
+        }
+        if let Some(e) = self.open_error.clone() {
+            egui::Window::new("Cannot open the session").collapsible(false).resizable(false).show(ctx, |ui| {
+                ui.colored_label(egui::Color32::from_rgb(220, 80, 60), e);
+                if ui.button("OK").clicked() {
+                    self.open_error = None;
+                }
+            });
         }
     }
 
@@ -580,6 +627,8 @@ pub fn run_native() -> eframe::Result {
                     Workbench::new(Settings::default(), Box::new(NativeDialogs), notify(cc.egui_ctx.clone()))
                 })
                 .map_err(|e| -> Box<dyn std::error::Error + Send + Sync> { e.into() })?;
+            let mut workbench = workbench;
+            workbench.offer_untitled_recovery();
             Ok(Box::new(App { workbench }))
         }),
     )

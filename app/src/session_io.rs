@@ -1,13 +1,17 @@
 //! The workbench's session files: a snapshot of the wizard's data written as a
-//! `photorobot_core::session` off the UI thread (saved, or autosaved after every measured step),
+//! `photorobot_core::session` by one writer thread, in the order queued (saved, or autosaved after
+//! every measured segment), the untitled sessions a crash left to recover,
 //! a session read back sorted by plan, recovery of an autosave, recent folders and the HTML
 //! report export. Owns no format (that is the core's) and no UI state: [`crate::state`] takes the
 //! snapshot and puts a loaded session into the views.
 
 use crate::settings::Settings;
-use photorobot_core::session::{find_recovery, BenchInfo, Session};
+use photorobot_core::session::{
+    autosave_path, find_recovery, session_path, BenchInfo, FolderLock, Session, SessionWriter,
+};
 use photorobot_core::trace::Trace;
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{channel, Sender};
 
 /// Most recent session folders kept in the settings.
 pub const RECENT: usize = 8;
@@ -36,39 +40,32 @@ pub struct Snapshot {
 }
 
 impl Snapshot {
-    /// The session, its traces written into `dir/traces/`.
-    pub fn write(&self, dir: &Path) -> Result<Session, String> {
-        let mut session = Session::new(self.bench.clone(), self.robot.clone());
-        session.plans = self.plans.clone();
-        session.notes = self.notes.clone();
-        session.lab = self.lab.clone();
-        for (p, (traces, complete)) in self.steps.iter().enumerate() {
+    /// Put the snapshot into the writer's session: its fields, and its traces referenced (the
+    /// ones already on disk as they are, new ones written to new files).
+    pub fn write_into(&self, writer: &mut SessionWriter) -> Result<(), String> {
+        let mut traces = Vec::new();
+        for (p, (step, complete)) in self.steps.iter().enumerate() {
             // The k-th trace of a step is its plan's k-th recorded segment.
             let recorded: Vec<usize> =
                 self.plans[p].segments.iter().enumerate().filter(|(_, g)| g.is_recorded()).map(|(i, _)| i).collect();
-            for (k, t) in traces.iter().enumerate() {
+            for (k, t) in step.iter().enumerate() {
                 let segment = recorded.get(k).copied().unwrap_or(k);
                 // The last trace of a stopped step may be partial.
-                let whole = *complete || k + 1 < traces.len();
-                session.add_trace(dir, t, Some((p, segment)), whole).map_err(|e| e.to_string())?;
+                let whole = *complete || k + 1 < step.len();
+                traces.push((t, Some((p, segment)), whole));
             }
         }
-        for t in &self.imported {
-            session.add_trace(dir, t, None, true).map_err(|e| e.to_string())?;
-        }
+        traces.extend(self.imported.iter().map(|t| (t, None, true)));
+        writer.set_traces(traces).map_err(|e| e.to_string())?;
+        let session = writer.session_mut();
+        session.bench = self.bench.clone();
+        session.robot = self.robot.clone();
+        session.plans = self.plans.clone();
+        session.notes = self.notes.clone();
+        session.lab = self.lab.clone();
         session.calibration = self.calibration.clone();
         session.diagnosis = self.diagnosis.clone();
-        Ok(session)
-    }
-
-    /// Save as `session.ron` in `dir` (atomic; removes the autosave).
-    pub fn save(&self, dir: &Path) -> Result<(), String> {
-        self.write(dir)?.save(dir).map_err(|e| e.to_string())
-    }
-
-    /// Save as the autosave file of `dir`.
-    pub fn autosave(&self, dir: &Path) -> Result<(), String> {
-        self.write(dir)?.autosave(dir).map_err(|e| e.to_string())
+        Ok(())
     }
 
     /// Write the session's HTML report (traces are not needed for it).
@@ -123,9 +120,97 @@ pub fn recoverable(dir: &Path) -> Option<usize> {
     find_recovery(dir).ok().flatten().map(|r| r.traces)
 }
 
+/// The folder of the untitled sessions (`~/.local/share/photorobot`).
+pub fn untitled_base() -> PathBuf {
+    let base = std::env::var_os("HOME").map_or_else(std::env::temp_dir, |h| PathBuf::from(h).join(".local/share"));
+    base.join("photorobot")
+}
+
 /// Where the workbench autosaves a session that has no folder yet.
 pub fn untitled_dir() -> PathBuf {
-    let base = std::env::var_os("HOME").map_or_else(std::env::temp_dir, |h| PathBuf::from(h).join(".local/share"));
+    untitled_dir_in(&untitled_base())
+}
+
+/// A new untitled session folder in `base` (named by the time and the process).
+pub fn untitled_dir_in(base: &Path) -> PathBuf {
     let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    base.join("photorobot").join(format!("untitled-{stamp}"))
+    base.join(format!("untitled-{stamp}-{}", std::process::id()))
+}
+
+/// Whether `dir` is an untitled session's folder.
+pub fn is_untitled(dir: &Path) -> bool {
+    dir.file_name().is_some_and(|n| n.to_string_lossy().starts_with("untitled-"))
+}
+
+/// The newest untitled session in `base` that a crash left unsaved (an autosave, no
+/// `session.ron`, not open in another photorobot), and how many traces it holds.
+pub fn newest_untitled(base: &Path) -> Option<(PathBuf, usize)> {
+    let mut found: Vec<(std::time::SystemTime, PathBuf)> = std::fs::read_dir(base)
+        .ok()?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|d| is_untitled(d) && !session_path(d).exists())
+        .filter_map(|d| Some((std::fs::metadata(autosave_path(&d)).ok()?.modified().ok()?, d)))
+        .collect();
+    found.sort();
+    found.into_iter().rev().find_map(|(_, d)| {
+        // A folder another photorobot holds is its session, not a crashed one.
+        FolderLock::acquire(&d).ok()?;
+        recoverable(&d).map(|n| (d, n))
+    })
+}
+
+/// A save for the writer thread.
+pub struct SaveJob {
+    /// What to write.
+    pub snapshot: Snapshot,
+    /// The session folder.
+    pub dir: PathBuf,
+    /// The autosave file, or `session.ron`.
+    pub autosave: bool,
+    /// The session's revision when the snapshot was taken.
+    pub revision: u64,
+}
+
+/// Called by the writer thread after each job, with its result.
+pub type SaveDone = Box<dyn FnMut(&SaveJob, Result<(), String>) + Send>;
+
+/// Start the thread that writes every save and autosave of the workbench, one at a time in the
+/// order queued (two saves never write the same folder at once). It ends when the sender is
+/// dropped; if it cannot start, sending fails and the caller reports the save as failed.
+pub fn spawn_writer(mut done: SaveDone) -> Sender<SaveJob> {
+    let (tx, rx) = channel::<SaveJob>();
+    let _ = std::thread::Builder::new().name("session writer".into()).spawn(move || {
+        let mut writer: Option<SessionWriter> = None;
+        for job in rx {
+            let result = write_job(&mut writer, &job);
+            done(&job, result);
+        }
+    });
+    tx
+}
+
+/// One save: the writer of the job's folder (a new one, knowing the trace files the folder's
+/// session and autosave reference, when the folder changed), then the session or autosave.
+fn write_job(writer: &mut Option<SessionWriter>, job: &SaveJob) -> Result<(), String> {
+    let previous = writer.as_ref().map(|w| w.dir().to_path_buf());
+    if previous.as_deref() != Some(job.dir.as_path()) {
+        let bench = job.snapshot.bench.clone();
+        let mut w = SessionWriter::new(&job.dir, Session::new(bench, job.snapshot.robot.clone()));
+        for file in [session_path(&job.dir), autosave_path(&job.dir)] {
+            if let Ok(on_disk) = Session::load_file(&file) {
+                w.adopt_files(&on_disk);
+            }
+        }
+        *writer = Some(w);
+    }
+    let Some(w) = writer.as_mut() else { return Err("no session writer".into()) };
+    job.snapshot.write_into(w)?;
+    if job.autosave { w.autosave() } else { w.save() }.map_err(|e| e.to_string())?;
+    // Saved elsewhere, the untitled folder it was autosaved in is a copy: removed, so that it is
+    // not offered for recovery at the next start.
+    if let Some(untitled) = previous.filter(|p| !job.autosave && p != &job.dir && is_untitled(p)) {
+        let _ = std::fs::remove_dir_all(untitled);
+    }
+    Ok(())
 }

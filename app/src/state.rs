@@ -242,6 +242,12 @@ pub struct SessionFile {
     pub saving: usize,
     /// Why the last save of `session.ron` failed, until a save succeeds.
     pub save_error: Option<String>,
+    /// The writer thread's queue (started at the first save): every save in order, one at a time.
+    jobs: Option<std::sync::mpsc::Sender<crate::session_io::SaveJob>>,
+    /// The lock of the session folder, held while the session is in it.
+    pub lock: Option<photorobot_core::session::FolderLock>,
+    /// Where untitled sessions are autosaved (and looked for at start).
+    pub untitled_base: std::path::PathBuf,
 }
 
 /// What a save on another thread reports back.
@@ -289,6 +295,9 @@ impl Default for SessionFile {
             saves: std::sync::mpsc::channel(),
             saving: 0,
             save_error: None,
+            jobs: None,
+            lock: None,
+            untitled_base: crate::session_io::untitled_base(),
         }
     }
 }
@@ -450,6 +459,7 @@ impl AppState {
         self.session.dirty = false;
         self.session.notes.clear();
         self.session.lab = Default::default();
+        self.session.lock = None;
         self.status = "new session".into();
     }
 
@@ -490,17 +500,59 @@ impl AppState {
         }
     }
 
-    /// Save the session in `dir` on another thread (`autosave`: the autosave file, else
-    /// `session.ron`); the result comes back as a status message.
+    /// Save the session in `dir` on the writer thread (`autosave`: the autosave file, else
+    /// `session.ron`), after every save queued before it; the result comes back as a status
+    /// message. The folder is locked first: one held by another photorobot is not written.
     pub fn save_in_background(&mut self, dir: std::path::PathBuf, autosave: bool) {
-        let snap = self.snapshot();
-        let tx = self.session.saves.0.clone();
         let revision = self.session.revision;
         self.session.saving += 1;
-        std::thread::spawn(move || {
-            let result = if autosave { snap.autosave(&dir) } else { snap.save(&dir) };
-            let _ = tx.send(SaveOutcome { autosave, revision, dir, result });
+        let lock = match self.acquire_lock(&dir) {
+            Ok(lock) => lock,
+            Err(e) => {
+                let _ = self.session.saves.0.send(SaveOutcome { autosave, revision, dir, result: Err(e) });
+                return;
+            }
+        };
+        if lock.is_some() {
+            self.session.lock = lock;
+        }
+        let job = crate::session_io::SaveJob { snapshot: self.snapshot(), dir, autosave, revision };
+        let tx = self.session.saves.0.clone();
+        let jobs = self.session.jobs.get_or_insert_with(|| {
+            crate::session_io::spawn_writer(Box::new(move |job, result| {
+                let _ = tx.send(SaveOutcome {
+                    autosave: job.autosave,
+                    revision: job.revision,
+                    dir: job.dir.clone(),
+                    result,
+                });
+            }))
         });
+        if let Err(std::sync::mpsc::SendError(job)) = jobs.send(job) {
+            self.session.jobs = None;
+            let result = Err("the session writer is not running; nothing was written".to_string());
+            let _ = self.session.saves.0.send(SaveOutcome { autosave, revision, dir: job.dir, result });
+        }
+    }
+
+    /// The lock of `dir` for this session: `None` when it holds it already, an error naming the
+    /// folder when another photorobot has it open.
+    pub fn acquire_lock(&self, dir: &Path) -> Result<Option<photorobot_core::session::FolderLock>, String> {
+        if self.session.lock.as_ref().is_some_and(|l| l.dir() == dir) {
+            return Ok(None);
+        }
+        photorobot_core::session::FolderLock::acquire(dir).map(Some).map_err(|e| e.to_string())
+    }
+
+    /// A segment of the running step was recorded: keep it and autosave, so that a crash costs
+    /// at most the segment being measured.
+    fn segment_done(&mut self, trace: Trace) {
+        let Some(step) = self.wizard.running.as_ref().and_then(|r| self.wizard.steps.get_mut(r.step)) else { return };
+        step.traces.push(trace);
+        self.session.mark_dirty();
+        let base = &self.session.untitled_base;
+        let dir = self.session.dir.get_or_insert_with(|| crate::session_io::untitled_dir_in(base)).clone();
+        self.save_in_background(dir, true);
     }
 
     /// A snapshot of what a session file keeps, for a save on another thread.
@@ -611,6 +663,7 @@ impl AppState {
                 let dir = self.session.dir.get_or_insert_with(untitled_dir).clone();
                 self.save_in_background(dir, true);
             }
+            Event::SegmentDone(trace) => self.segment_done(*trace),
             Event::Identified(r) => match r {
                 Ok(report) => {
                     self.extrinsics = report.extrinsics;

@@ -5,7 +5,7 @@
 //! Samples stream out while a segment records; pacing holds the bench clock to the wall clock
 //! (times a speed factor) so a virtual bench looks like a real one, or runs as fast as it can.
 
-use photorobot_core::bench::{run_plan, Bench, BenchPreset, RunControl, VirtualBench};
+use photorobot_core::bench::{run_plan_with, Bench, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::calibration::{report_from_traces, CalibrationReport, Mode};
 use photorobot_core::diagnose::motions::BenchRunner;
 use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
@@ -164,6 +164,8 @@ pub enum Event {
         /// `Err` with the reason when it did not run to the end.
         outcome: Result<(), String>,
     },
+    /// A segment of the running plan was recorded (its whole trace), before the next one starts.
+    SegmentDone(Box<Trace>),
     /// Identification finished.
     Identified(Result<Box<CalibrationReport>, String>),
     /// Validation finished.
@@ -611,7 +613,16 @@ impl Thread {
         let mut on_progress = |_: f64| {};
         let mut control =
             RunControl { cancel: &self.cancel, on_samples: &mut on_samples, on_progress: &mut on_progress };
-        let run = run_plan(self.bench.as_mut(), plan, &mut control);
+        // Each recorded segment goes to the UI at once, to be autosaved.
+        let (segment_tx, notify) = (self.tx.clone(), &self.notify);
+        let mut on_step = |step: photorobot_core::bench::StepDone<'_>| {
+            if let Some(trace) = step.trace.filter(|_| report_progress) {
+                let _ = segment_tx.send(Event::SegmentDone(Box::new(trace.clone())));
+                notify();
+            }
+            Ok(())
+        };
+        let run = run_plan_with(self.bench.as_mut(), plan, &mut control, &mut on_step);
         if report_progress {
             let done = (self.bench.clock_s() - bench_t0) / total_s;
             let _ = self.tx.send(Event::Progress { label: plan.name.clone(), fraction: done.clamp(0.0, 1.0) });

@@ -157,8 +157,10 @@ pub fn to_ron_string<T: Serialize>(value: &T, origin: &Path) -> Result<String, F
         .map_err(|e| FileError::Serialise { file: origin.to_path_buf(), message: e.to_string() })
 }
 
-/// Write bytes atomically: into a temporary file beside the target, flushed to disk, then
-/// renamed over it. A crash leaves either the old file or the new one, never half of one.
+/// Write bytes atomically: into a temporary file of a unique name beside the target (so two
+/// saves at once never share one), flushed to disk, renamed over the target, then the folder
+/// itself flushed so the rename survives a power cut. A crash leaves either the old file or the
+/// new one, never half of one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
     let io = |action: &'static str| move |source| FileError::Io { file: path.to_path_buf(), action, source };
     let dir = match path.parent() {
@@ -166,17 +168,32 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
         _ => PathBuf::from("."),
     };
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "file".into());
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp).map_err(io("cannot create temporary file"))?;
-        f.write_all(bytes).map_err(io("cannot write"))?;
-        f.sync_all().map_err(io("cannot flush to disk"))?;
-        std::fs::rename(&tmp, path).map_err(io("cannot replace"))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    // Dropping the temporary file on an error removes it.
+    let mut tmp = tempfile::Builder::new()
+        .prefix(&format!(".{name}."))
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+        .map_err(io("cannot create temporary file"))?;
+    tmp.write_all(bytes).map_err(io("cannot write"))?;
+    tmp.as_file().sync_all().map_err(io("cannot flush to disk"))?;
+    tmp.persist(path).map_err(|e| FileError::Io {
+        file: path.to_path_buf(),
+        action: "cannot replace",
+        source: e.error,
+    })?;
+    sync_dir(&dir)
+}
+
+/// Flush a folder's entries (a rename or a removal in it) to disk.
+pub fn sync_dir(dir: &Path) -> Result<(), FileError> {
+    // Only Unix can open a folder to flush it; elsewhere the rename is as durable as it gets.
+    #[cfg(unix)]
+    std::fs::File::open(dir).and_then(|d| d.sync_all()).map_err(|source| FileError::Io {
+        file: dir.to_path_buf(),
+        action: "cannot flush the folder to disk",
+        source,
+    })?;
+    Ok(())
 }
 
 /// Serialise to RON and save atomically.
@@ -212,6 +229,31 @@ mod tests {
         assert_eq!(back, Doc { a_um: 2.5 });
         let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert_eq!(names.len(), 1);
+    }
+
+    #[test]
+    fn concurrent_atomic_saves_of_one_file_never_mix() {
+        // One temporary name per process made two saves at once write into the same file.
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("doc.txt");
+        let writers: Vec<_> = (0..8u8)
+            .map(|k| {
+                let p = p.clone();
+                std::thread::spawn(move || {
+                    let body = vec![b'a' + k; 200_000];
+                    for _ in 0..5 {
+                        write_atomic(&p, &body).unwrap();
+                    }
+                })
+            })
+            .collect();
+        for w in writers {
+            w.join().unwrap();
+        }
+        let back = std::fs::read(&p).unwrap();
+        assert_eq!(back.len(), 200_000);
+        assert!(back.iter().all(|b| *b == back[0]), "the file mixes two saves");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "a temporary file was left");
     }
 
     #[test]

@@ -7,7 +7,7 @@ use photorobot_core::model::air::AmbientConditions;
 use photorobot_core::model::robot::RobotDescription;
 use photorobot_core::plan::{MotionLimits, Plan, TimedSegment};
 use photorobot_core::session::recording::record;
-use photorobot_core::session::{find_recovery, BenchInfo, Session};
+use photorobot_core::session::{find_recovery, BenchInfo, Session, SessionWriter};
 use photorobot_core::trace::{Trace, TraceMeta};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -108,10 +108,10 @@ fn a_crash_mid_strategy_loses_no_completed_step_and_the_run_resumes() {
     for crash_at in [3usize, 7] {
         let dir = tempfile::tempdir().unwrap();
         let mut bench = CrashingBench { inner: virtual_bench(), segments_run: 0, crash_at, returned: vec![] };
-        let mut session = new_session(&bench);
+        let mut session = SessionWriter::new(dir.path(), new_session(&bench));
         let crashed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-            record(&mut bench, &mut session, dir.path(), &mut control)
+            record(&mut bench, &mut session, &mut control)
         }));
         assert!(crashed.is_err(), "the bench crashed");
         let completed = bench.returned.clone();
@@ -126,7 +126,7 @@ fn a_crash_mid_strategy_loses_no_completed_step_and_the_run_resumes() {
         let offer = find_recovery(dir.path()).unwrap().expect("an autosave to recover");
         assert_eq!(offer.traces, completed.len());
         assert!(!offer.saved_session_exists);
-        let mut recovered = Session::recover(dir.path()).unwrap();
+        let recovered = Session::recover(dir.path()).unwrap();
         assert_eq!(recovered.load_traces(dir.path()).unwrap(), completed, "crash at segment {crash_at}");
         // The folder cannot be opened as a saved session, and says why.
         let err = Session::load(dir.path()).unwrap_err().to_string();
@@ -135,10 +135,11 @@ fn a_crash_mid_strategy_loses_no_completed_step_and_the_run_resumes() {
         // Resume on a fresh bench (the old one is gone with the crash) and finish.
         let mut fresh = virtual_bench();
         let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-        let done = record(&mut fresh, &mut recovered, dir.path(), &mut control).unwrap();
+        let mut recovered = SessionWriter::new(dir.path(), recovered);
+        let done = record(&mut fresh, &mut recovered, &mut control).unwrap();
         done.outcome.unwrap();
-        assert!(recovered.measured());
-        recovered.save(dir.path()).unwrap();
+        assert!(recovered.session().measured());
+        recovered.save().unwrap();
         assert_eq!(find_recovery(dir.path()).unwrap(), None, "nothing left to recover after saving");
 
         // Every recorded step of both plans, once, in plan order, the crashed ones unchanged.
@@ -157,14 +158,11 @@ fn a_crash_mid_strategy_loses_no_completed_step_and_the_run_resumes() {
         let from = |t: &Trace| t.joints_display(0);
         let again = {
             let mut uninterrupted_bench = virtual_bench();
-            let mut uninterrupted = new_session(&uninterrupted_bench);
             let uninterrupted_dir = tempfile::tempdir().unwrap();
+            let mut uninterrupted = SessionWriter::new(uninterrupted_dir.path(), new_session(&uninterrupted_bench));
             let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-            record(&mut uninterrupted_bench, &mut uninterrupted, uninterrupted_dir.path(), &mut control)
-                .unwrap()
-                .outcome
-                .unwrap();
-            uninterrupted.load_traces(uninterrupted_dir.path()).unwrap()
+            record(&mut uninterrupted_bench, &mut uninterrupted, &mut control).unwrap().outcome.unwrap();
+            uninterrupted.session().load_traces(uninterrupted_dir.path()).unwrap()
         };
         for (k, (a, b)) in from(resumed).iter().zip(from(&again[completed.len()])).enumerate() {
             assert!((a - b).abs() < 0.05, "joint {k}: resumed step starts at {a}, uninterrupted at {b}");

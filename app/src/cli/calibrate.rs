@@ -7,7 +7,8 @@
 //! the calibration), every recorded trace (`traces/NNN.csv`, each saved as soon as it is
 //! measured, with the session autosaved after it), the identified extrinsics (`extrinsics.ron`,
 //! loadable by `photorobot frames --extrinsics`) and the whole report (`report.json`). Every file
-//! is written atomically. `--resume` continues a measurement a crash interrupted.
+//! is written atomically. `--resume` continues a measurement a crash interrupted. The folder is locked
+//! while calibrate runs: a second photorobot writing into it is refused.
 
 use super::common::{json_text, load_plan, CliError};
 use super::progress::{Progress, INTERRUPT};
@@ -21,7 +22,8 @@ use photorobot_core::identify::verdict::{FitCheck, Verdict};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::session::{
-    self as lab, find_recovery, recording::record_with, BenchInfo, ControllerIdentity, LabRecord, Session, AUTOSAVE_FILE,
+    self as lab, find_recovery, recording::record_with, BenchInfo, ControllerIdentity, FolderLock, LabRecord, Session,
+    SessionWriter, AUTOSAVE_FILE,
 };
 use photorobot_core::trace::import::{read_folder, ColumnMapping};
 use photorobot_core::trace::Trace;
@@ -133,6 +135,8 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         ModeArg::Paper => Mode::Paper,
         ModeArg::Joint => Mode::Joint,
     };
+    // The folder is ours until the session is written: a second photorobot is refused.
+    let _lock = FolderLock::acquire(&a.out)?;
     refuse_saved_session(a)?;
     open_log(a, mode);
     let (mut session, report) = match &a.traces {
@@ -227,7 +231,7 @@ fn calibrate_on_virtual_bench(
     mode: Mode,
 ) -> Result<(Session, CalibrationReport), CliError> {
     let mut bench = VirtualBench::new(preset, a.seed)?;
-    let mut session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &bench, mode)? };
+    let session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &bench, mode)? };
     // Each plan's bench time from the timing model, every plan from the start (q = 0).
     let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
         .map_err(|problem| plan_error(a, problem))?;
@@ -235,8 +239,10 @@ fn calibrate_on_virtual_bench(
         RefCell::new(Progress::new(session.plans.iter().map(|p| (p.name.clone(), p.segments.len())).collect()));
     let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
     let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
+    let mut writer = SessionWriter::new(&a.out, session);
     let recorded =
-        record_with(&mut bench, &mut session, &a.out, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))?;
+        record_with(&mut bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))?;
+    let session = writer.into_session();
     if let Err(e) = recorded.outcome {
         progress.borrow_mut().finish();
         if INTERRUPT.load(Ordering::SeqCst) {

@@ -154,7 +154,7 @@ impl Session {
         Ok(files::save_ron(&path, self)?)
     }
 
-    /// Write a trace into the session folder (`traces/NNN.csv`, atomically) and reference it.
+    /// Write a trace into the session folder (a new `traces/NNN.csv`, atomically) and reference it.
     pub fn add_trace(
         &mut self,
         dir: &Path,
@@ -162,7 +162,11 @@ impl Session {
         step: Option<(usize, usize)>,
         complete: bool,
     ) -> Result<&TraceRef, SessionError> {
-        let file = format!("{TRACES_DIR}/{:03}.csv", self.traces.len());
+        // A name no file of the folder and no reference has: a trace file is never rewritten.
+        let file = (self.traces.len()..)
+            .map(|n| format!("{TRACES_DIR}/{n:03}.csv"))
+            .find(|f| !dir.join(f).exists() && self.traces.iter().all(|r| &r.file != f))
+            .expect("a free name");
         let path = dir.join(&file);
         create_dir(&dir.join(TRACES_DIR))?;
         let bytes = trace.to_csv_bytes(&path)?;

@@ -20,13 +20,16 @@
 //!
 //! Files: `folder` loads and saves a session folder (version first, traces checked), `checks`
 //! holds the checks beyond the syntax, `diagnosis` the diagnosis record, `recording` measuring
-//! into a session.
+//! into a session, `writer` the incremental writing both the recording and the workbench use
+//! (trace files never rewritten, the session file last), `lock` the lock of an open folder.
 
 mod checks;
 mod diagnosis;
 mod folder;
 mod lab;
+pub mod lock;
 pub mod recording;
+pub mod writer;
 
 pub use diagnosis::{DiagnosisRecord, EffectFinding};
 pub use folder::{autosave_path, find_recovery, session_path, Recovery};
@@ -34,6 +37,8 @@ pub use lab::{
     check_range, now_utc_rfc3339, ControllerIdentity, LabRecord, HUMIDITY_RANGE_PERCENT, PRESSURE_RANGE_HPA,
     TEMPERATURE_RANGE_C,
 };
+pub use lock::{FolderLock, LOCK_FILE};
+pub use writer::SessionWriter;
 
 use crate::bench::BenchPreset;
 use crate::calibration::CalibrationReport;
@@ -68,6 +73,14 @@ pub enum SessionError {
     /// A trace of the session could not be read or written.
     #[error(transparent)]
     Trace(#[from] TraceError),
+    /// The folder is open in another photorobot (its lock file is held).
+    #[error("{}", lock::locked_message(.dir, *.pid))]
+    Locked {
+        /// The session folder.
+        dir: std::path::PathBuf,
+        /// The process holding it, when it wrote its id.
+        pid: Option<u32>,
+    },
 }
 
 /// The bench a session was measured on.
