@@ -11,6 +11,67 @@ pub trait Laser: Send {
     fn set_wavelength(&mut self, nm: f64) -> Result<(), HwError>;
     /// Start a linear sweep (returns at once).
     fn start_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<(), HwError>;
+    /// A name for messages ("Keysight laser").
+    fn name(&self) -> String {
+        "laser".into()
+    }
+    /// Configure a sweep without starting it, so that [`Laser::start_sweep`] with the same
+    /// parameters only has to start it. The default does nothing.
+    fn prepare_sweep(&mut self, _from_nm: f64, _to_nm: f64, _rate_nm_per_s: f64) -> Result<(), HwError> {
+        Ok(())
+    }
+    /// True while a started sweep runs. The default (a laser without a state query) says no: the
+    /// sweep is taken as done when the segment's time is up.
+    fn sweep_running(&mut self) -> Result<bool, HwError> {
+        Ok(false)
+    }
+    /// The wavelengths the laser logged during its last sweep, or `None` when it keeps no log.
+    fn lambda_log(&mut self) -> Result<Option<LambdaLog>, HwError> {
+        Ok(None)
+    }
+    /// Stop a running sweep where it is. The default does nothing.
+    fn stop_sweep(&mut self) -> Result<(), HwError> {
+        Ok(())
+    }
+    /// Open the link again after a fault. The default does nothing.
+    fn reconnect(&mut self) -> Result<(), HwError> {
+        Ok(())
+    }
+}
+
+/// The wavelengths a laser logged during a continuous sweep: one point per trigger, every `step_nm`
+/// of the sweep from `from_nm`, so point `k` was logged `k·|step_nm| / rate_nm_per_s` seconds after
+/// the sweep started.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LambdaLog {
+    /// Start of the sweep (nm).
+    pub from_nm: f64,
+    /// End of the sweep (nm).
+    pub to_nm: f64,
+    /// Distance between logged points (nm, positive).
+    pub step_nm: f64,
+    /// Sweep speed (nm/s, positive).
+    pub rate_nm_per_s: f64,
+    /// The logged wavelengths (nm).
+    pub wavelengths_nm: Vec<f64>,
+}
+
+impl LambdaLog {
+    /// Number of points a complete sweep logs.
+    pub fn expected_points(&self) -> usize {
+        ((self.to_nm - self.from_nm).abs() / self.step_nm + 1e-6).floor() as usize + 1
+    }
+
+    /// The wavelength `t_s` seconds after the sweep started: linear between the logged points
+    /// (taken at their trigger times), the first or last point outside them; `None` for an empty log.
+    pub fn wavelength_at(&self, t_s: f64) -> Option<f64> {
+        let w = &self.wavelengths_nm;
+        let last = w.len().checked_sub(1)?;
+        let x = (t_s * self.rate_nm_per_s / self.step_nm).clamp(0.0, last as f64);
+        let k = (x.floor() as usize).min(last);
+        let f = x - k as f64;
+        Some(if k == last { w[last] } else { w[k] + f * (w[k + 1] - w[k]) })
+    }
 }
 
 /// A laser the software cannot drive (no laser driver yet): it stays at its nominal wavelength, and a
