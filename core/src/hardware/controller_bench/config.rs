@@ -182,7 +182,10 @@ impl HardwareConfig {
                 return Err(bad("laser.address", format!("expected host:port, found `{}`", l.address)));
             }
             if !(l.timeout_s.is_finite() && l.timeout_s > 0.0) {
-                return Err(bad("laser.timeout_s", format!("expected a positive number of seconds, found {}", l.timeout_s)));
+                return Err(bad(
+                    "laser.timeout_s",
+                    format!("expected a positive number of seconds, found {}", l.timeout_s),
+                ));
             }
         }
         if !c.controllers.iter().any(|k| k.name == c.photodiode.controller) {

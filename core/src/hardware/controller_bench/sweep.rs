@@ -39,7 +39,8 @@ impl ControllerBench {
         let Some(log) = self.laser.lambda_log()? else { return Ok(None) };
         let expected = log.expected_points();
         if log.wavelengths_nm.len() < expected {
-            let at = log.wavelengths_nm.last().map_or("before its first point".to_string(), |w| format!("at {w:.4} nm"));
+            let at =
+                log.wavelengths_nm.last().map_or("before its first point".to_string(), |w| format!("at {w:.4} nm"));
             return Err(HwError::Usage {
                 controller: self.laser.name(),
                 problem: format!(

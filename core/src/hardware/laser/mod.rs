@@ -64,17 +64,13 @@ pub struct ScpiLaser {
 impl ScpiLaser {
     /// Connect to a laser of `family` at `address`, read `*IDN?` (refusing another vendor's), and
     /// empty its error queue. `nominal_nm` is its resting wavelength.
-    pub fn connect(
-        family: LaserFamily,
-        address: &str,
-        timeout_s: f64,
-        nominal_nm: f64,
-    ) -> Result<Self, HwError> {
+    pub fn connect(family: LaserFamily, address: &str, timeout_s: f64, nominal_nm: f64) -> Result<Self, HwError> {
         let name = format!("{family:?} laser");
         let dialect = dialect(family)
             .ok_or_else(|| HwError::Usage { controller: name.clone(), problem: "family None has no driver".into() })?;
         let link = Link::connect(&name, address, timeout_s)?;
-        let mut laser = ScpiLaser { name, dialect, link, nominal_nm, idn: String::new(), prepared: None, started: None };
+        let mut laser =
+            ScpiLaser { name, dialect, link, nominal_nm, idn: String::new(), prepared: None, started: None };
         laser.init()?;
         Ok(laser)
     }
@@ -88,7 +84,10 @@ impl ScpiLaser {
                 &self.name,
                 "*IDN?",
                 &idn,
-                &format!("an identification naming {} (is this the configured laser family?)", self.dialect.vendors.join(" or ")),
+                &format!(
+                    "an identification naming {} (is this the configured laser family?)",
+                    self.dialect.vendors.join(" or ")
+                ),
             ));
         }
         // Errors left from before this connection are not ours.

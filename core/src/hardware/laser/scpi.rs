@@ -54,9 +54,9 @@ pub fn parse_block_header(bytes: &[u8]) -> Result<Option<(usize, usize)>, String
 /// The data of a complete block reply (`#<n><len><bytes>`, an optional trailing newline).
 pub fn parse_block(bytes: &[u8]) -> Result<&[u8], String> {
     let (head, len) = parse_block_header(bytes)?.ok_or("a complete block header")?;
-    let data = bytes.get(head..head + len).ok_or_else(|| {
-        format!("{len} bytes of data as announced, found {}", bytes.len().saturating_sub(head))
-    })?;
+    let data = bytes
+        .get(head..head + len)
+        .ok_or_else(|| format!("{len} bytes of data as announced, found {}", bytes.len().saturating_sub(head)))?;
     match &bytes[head + len..] {
         [] | [b'\n'] | [b'\r', b'\n'] => Ok(data),
         rest => Err(format!("nothing after the block but a newline, found {} more bytes", rest.len())),
