@@ -9,6 +9,7 @@
 
 pub mod laser;
 pub mod local;
+pub mod optical_bench;
 pub mod pi;
 pub mod smaract;
 
