@@ -226,6 +226,25 @@ mod tests {
     }
 
     #[test]
+    fn the_laser_entry_is_optional_and_checked() {
+        let c = HardwareConfig::femto();
+        let laser = c.laser.as_ref().expect("the embedded bench names its laser");
+        assert_eq!((laser.family, laser.address.as_str()), (LaserFamily::Keysight, "127.0.0.1:5025"));
+        let line = "    laser: Some((family: Keysight, address: \"127.0.0.1:5025\", timeout_s: 2.0)),\n";
+        assert!(FEMTO_HARDWARE_RON.contains(line));
+        let without = HardwareConfig::from_ron_str(&FEMTO_HARDWARE_RON.replace(line, ""), Path::new("hw.ron")).unwrap();
+        assert_eq!(without.laser, None, "a file written before the laser entry still loads");
+        let bad = FEMTO_HARDWARE_RON.replace("address: \"127.0.0.1:5025\"", "address: \"lab-laser\"");
+        let err = HardwareConfig::from_ron_str(&bad, Path::new("hw.ron")).unwrap_err().to_string();
+        assert!(err.contains("field `laser.address`: expected host:port, found `lab-laser`"), "{err}");
+        let none = FEMTO_HARDWARE_RON.replace(line, "    laser: Some((family: None)),\n");
+        assert_eq!(
+            HardwareConfig::from_ron_str(&none, Path::new("hw.ron")).unwrap().laser.unwrap().family,
+            LaserFamily::None
+        );
+    }
+
+    #[test]
     fn bad_configurations_name_the_field() {
         let cases = [
             (

@@ -345,7 +345,8 @@ fn sweep_command(shared: &Shared, st: &mut State, now: f64, key: &str, arg: &str
         "TRIG:OUTP:STEP" if !keysight => st.step = step_arg(st, arg)?,
         "WAV:SWE:MODE" => {
             let want = if keysight { "CONT" } else { "1" };
-            if !arg.eq_ignore_ascii_case(want) && !(keysight && arg.eq_ignore_ascii_case("CONTINUOUS")) {
+            let long_form = keysight && arg.eq_ignore_ascii_case("CONTINUOUS");
+            if !(arg.eq_ignore_ascii_case(want) || long_form) {
                 return Err(OUT_OF_RANGE);
             }
             st.continuous = true;

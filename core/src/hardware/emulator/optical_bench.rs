@@ -48,12 +48,15 @@ impl OpticalBenchEmulators {
     }
 }
 
+/// (name, host:port) of each emulator.
+pub type Addresses = [(String, String)];
+
 /// Serve a whole optical bench until `stop` is set; `on_ready` gets every emulator's address.
 pub fn run_optical_bench(
     preset: &BenchPreset,
     family: LaserFamily,
     stop: &AtomicBool,
-    on_ready: &mut dyn FnMut(&[(String, String)]),
+    on_ready: &mut dyn FnMut(&Addresses),
 ) -> Result<(), String> {
     let emus = OpticalBenchEmulators::start(preset, family, 1)?;
     on_ready(&emus.addresses(family));
