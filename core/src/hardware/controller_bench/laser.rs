@@ -114,3 +114,28 @@ impl FixedLaser {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_lambda_log_is_read_at_its_trigger_times() {
+        // Three points 0.5 nm apart at 10 nm/s: logged at 0, 50 and 100 ms; the laser ran 2 pm slow
+        // in the middle.
+        let log = LambdaLog {
+            from_nm: 1550.0,
+            to_nm: 1551.0,
+            step_nm: 0.5,
+            rate_nm_per_s: 10.0,
+            wavelengths_nm: vec![1550.0, 1550.498, 1551.0],
+        };
+        assert_eq!(log.expected_points(), 3);
+        let at = |t: f64| log.wavelength_at(t).unwrap();
+        assert!((at(0.05) - 1550.498).abs() < 1e-9);
+        assert!((at(0.025) - 1550.249).abs() < 1e-9);
+        assert!((at(0.075) - 1550.749).abs() < 1e-9);
+        assert_eq!((at(-1.0), at(1.0)), (1550.0, 1551.0), "clamped outside the sweep");
+        assert_eq!(LambdaLog { wavelengths_nm: vec![], ..log }.wavelength_at(0.0), None);
+    }
+}
