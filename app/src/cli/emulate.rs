@@ -1,7 +1,13 @@
-//! `photorobot emulate pi|smaract [--port N]`: serve a stage-controller protocol emulator on loopback.
-//! Owns only argument parsing and printing; the emulators are `photorobot_core::hardware::emulator`.
+//! `photorobot emulate pi|smaract|laser|all [--port N] [--family keysight|santec]`: serve a
+//! stage-controller or tunable-laser protocol emulator (or all of them as one optical bench) on
+//! loopback. Owns only argument parsing and printing; the emulators are
+//! `photorobot_core::hardware::emulator`.
 
 use super::common::CliError;
+use photorobot_core::bench::BenchPreset;
+use photorobot_core::hardware::controller_bench::LaserFamily;
+use photorobot_core::hardware::emulator::laser::run_laser_emulator;
+use photorobot_core::hardware::emulator::optical_bench::run_optical_bench;
 use photorobot_core::hardware::emulator::{run_emulator, EmulatorKind};
 use std::io::Write;
 use std::sync::atomic::AtomicBool;
@@ -13,6 +19,19 @@ pub enum EmulatedController {
     Pi,
     /// SmarAct MCS, ASCII protocol over TCP (default port 5000).
     Smaract,
+    /// A tunable laser, SCPI over a raw socket (default port 5025 Keysight, 5000 Santec).
+    Laser,
+    /// The PI, the MCS and the laser on one emulated optical bench (default ports).
+    All,
+}
+
+/// The laser's command set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LaserKind {
+    /// Keysight 816x / N777x.
+    Keysight,
+    /// Santec TSL-570.
+    Santec,
 }
 
 /// Arguments of `photorobot emulate`.
@@ -21,32 +40,133 @@ pub struct EmulateArgs {
     /// The controller to emulate.
     #[arg(value_enum)]
     pub controller: EmulatedController,
-    /// TCP port on 127.0.0.1 (default: the controller's, 50000 for PI, 5000 for SmarAct).
+    /// TCP port on 127.0.0.1 (default: the device's; not with `all`).
     #[arg(long)]
     pub port: Option<u16>,
+    /// The laser's command set (`laser`, `all`).
+    #[arg(long, value_enum, default_value = "keysight")]
+    pub family: LaserKind,
+    /// The virtual-bench preset whose optics the photodiode sees (`all`).
+    #[arg(long, default_value = "table2-ideal")]
+    pub bench: String,
+}
+
+fn family(k: LaserKind) -> LaserFamily {
+    match k {
+        LaserKind::Keysight => LaserFamily::Keysight,
+        LaserKind::Santec => LaserFamily::Santec,
+    }
 }
 
 /// Serve the emulator until the process is stopped (Ctrl-C).
 pub fn emulate(a: &EmulateArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    serve(a, out, &AtomicBool::new(false))
+}
+
+/// Serve until `stop` is set.
+fn serve(a: &EmulateArgs, out: &mut dyn Write, stop: &AtomicBool) -> Result<(), CliError> {
+    let mut ready_error = None;
+    let mut say = |text: String| {
+        if let Err(e) = writeln!(out, "{text}").and_then(|()| out.flush()) {
+            ready_error = Some(e);
+        }
+    };
     let kind = match a.controller {
         EmulatedController::Pi => EmulatorKind::Pi,
         EmulatedController::Smaract => EmulatorKind::SmarAct,
+        EmulatedController::Laser => {
+            let f = family(a.family);
+            run_laser_emulator(f, a.port, stop, &mut |addr| {
+                say(format!("{f:?} laser (SCPI) emulator listening on {addr}, real time; Ctrl-C to stop"))
+            })?;
+            return ready_error.map_or(Ok(()), |e| Err(e.into()));
+        }
+        EmulatedController::All => {
+            if a.port.is_some() {
+                return Err(CliError::Argument {
+                    argument: "--port",
+                    problem: "`emulate all` serves every emulator on its default port; give no --port".into(),
+                });
+            }
+            let preset = BenchPreset::resolve(&a.bench)?;
+            let f = family(a.family);
+            run_optical_bench(&preset, f, stop, &mut |addresses| {
+                let list: Vec<String> = addresses.iter().map(|(n, at)| format!("{n} at {at}")).collect();
+                say(format!("optical bench `{}` emulated: {}; real time; Ctrl-C to stop", preset.name, list.join(", ")))
+            })
+            .map_err(|problem| CliError::Failed { what: "emulate all", problem })?;
+            return ready_error.map_or(Ok(()), |e| Err(e.into()));
+        }
     };
-    let stop = AtomicBool::new(false);
-    let mut ready_error = None;
-    run_emulator(kind, a.port, &stop, &mut |addr| {
+    run_emulator(kind, a.port, stop, &mut |addr| {
         let name = match kind {
             EmulatorKind::Pi => "PI E-712 (GCS 2)",
             EmulatorKind::SmarAct => "SmarAct MCS (ASCII)",
         };
-        if let Err(e) =
-            writeln!(out, "{name} emulator listening on {addr}, real time; Ctrl-C to stop").and_then(|()| out.flush())
-        {
-            ready_error = Some(e);
-        }
+        say(format!("{name} emulator listening on {addr}, real time; Ctrl-C to stop"))
     })?;
-    match ready_error {
-        Some(e) => Err(e.into()),
-        None => Ok(()),
+    ready_error.map_or(Ok(()), |e| Err(e.into()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use std::io::{BufRead, BufReader};
+    use std::sync::atomic::Ordering;
+
+    fn args(line: &[&str]) -> EmulateArgs {
+        match super::super::Cli::try_parse_from(line).unwrap().command {
+            Some(super::super::Command::Emulate(a)) => a,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn emulate_laser_serves_the_santec_command_set() {
+        let a = args(&["photorobot", "emulate", "laser", "--family", "santec", "--port", "0"]);
+        assert_eq!((a.controller, a.family), (EmulatedController::Laser, LaserKind::Santec));
+        let stop = AtomicBool::new(false);
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::scope(|s| {
+            let server = s.spawn(|| {
+                let mut out = Vec::new();
+                let mut w = TellFirstLine { out: &mut out, tx: Some(tx) };
+                serve(&a, &mut w, &stop)
+            });
+            let line = rx.recv_timeout(std::time::Duration::from_secs(5)).unwrap();
+            assert!(line.starts_with("Santec laser (SCPI) emulator listening on 127.0.0.1:"), "{line}");
+            let addr = line.split_whitespace().find(|w| w.starts_with("127.0.0.1:")).unwrap().trim_end_matches(',');
+            let stream = std::net::TcpStream::connect(addr).unwrap();
+            stream.set_read_timeout(Some(std::time::Duration::from_secs(2))).unwrap();
+            (&stream).write_all(b"*IDN?\n").unwrap();
+            let mut reply = String::new();
+            BufReader::new(&stream).read_line(&mut reply).unwrap();
+            assert!(reply.starts_with("SANTEC,TSL-570"), "{reply}");
+            stop.store(true, Ordering::Relaxed);
+            server.join().unwrap().unwrap();
+        });
+        let e = serve(&args(&["photorobot", "emulate", "all", "--port", "1"]), &mut Vec::new(), &stop).unwrap_err();
+        assert!(e.to_string().contains("give no --port"), "{e}");
+    }
+
+    /// A writer that sends the first line written to a channel.
+    struct TellFirstLine<'a> {
+        out: &'a mut Vec<u8>,
+        tx: Option<std::sync::mpsc::Sender<String>>,
+    }
+
+    impl Write for TellFirstLine<'_> {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.out.extend_from_slice(buf);
+            if let (Some(tx), Some(end)) = (&self.tx, self.out.iter().position(|&b| b == b'\n')) {
+                let _ = tx.send(String::from_utf8_lossy(&self.out[..end]).into_owned());
+                self.tx = None;
+            }
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
     }
 }

@@ -54,7 +54,8 @@ pub enum Command {
     Report(report::ReportArgs),
     /// Start the workbench GUI (the default when no command is given).
     Gui,
-    /// Serve a stage-controller protocol emulator (PI E-712 or SmarAct MCS) on 127.0.0.1.
+    /// Serve a stage-controller or tunable-laser protocol emulator (PI E-712, SmarAct MCS, Keysight or
+    /// Santec laser, or all on one optical bench) on 127.0.0.1.
     Emulate(emulate::EmulateArgs),
 }
 

@@ -14,6 +14,7 @@
 pub mod clock;
 pub mod controller_bench;
 pub mod emulator;
+pub mod laser;
 pub mod pi_gcs;
 pub mod pi_replies;
 pub mod probe;

@@ -85,6 +85,31 @@ pub struct PhotodiodeConfig {
     pub wavelength_input: Option<String>,
 }
 
+/// Which command set a tunable laser speaks (SCPI over a raw TCP socket).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LaserFamily {
+    /// Keysight 816x / N777x: `:SOUR0:WAV...` in metres, lambda log of f64 metres.
+    Keysight,
+    /// Santec TSL-570: `:WAV...` in nm, wavelength log of u32 in 0.1 pm.
+    Santec,
+    /// No laser the software can drive: it rests at the preset's wavelength and sweeps are refused.
+    None,
+}
+
+/// The bench's tunable laser on the network.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LaserConfig {
+    /// Command set.
+    pub family: LaserFamily,
+    /// host:port (the instrument's raw SCPI socket, e.g. port 5025).
+    #[serde(default)]
+    pub address: String,
+    /// Reply timeout (s, real time). Default 2 s.
+    #[serde(default = "default_timeout")]
+    pub timeout_s: f64,
+}
+
 /// How a bench's controllers are reached and mapped to the joints.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -110,6 +135,9 @@ pub struct HardwareConfig {
     /// Extra time allowed for a segment beyond twice its planned duration (s, bench time). Default 10 s.
     #[serde(default = "default_margin")]
     pub timeout_margin_s: f64,
+    /// The tunable laser, if the software drives one (default: none).
+    #[serde(default)]
+    pub laser: Option<LaserConfig>,
 }
 
 const EXPECTED: &str =
@@ -149,6 +177,17 @@ impl HardwareConfig {
                 return Err(bad(&format!("joints[{i}].sign"), format!("expected 1.0 or -1.0, found {}", j.sign)));
             }
         }
+        if let Some(l) = &c.laser {
+            if l.family != LaserFamily::None && !l.address.contains(':') {
+                return Err(bad("laser.address", format!("expected host:port, found `{}`", l.address)));
+            }
+            if !(l.timeout_s.is_finite() && l.timeout_s > 0.0) {
+                return Err(bad(
+                    "laser.timeout_s",
+                    format!("expected a positive number of seconds, found {}", l.timeout_s),
+                ));
+            }
+        }
         if !c.controllers.iter().any(|k| k.name == c.photodiode.controller) {
             return Err(bad(
                 "photodiode.controller",
@@ -184,6 +223,25 @@ mod tests {
             assert!(c.controllers.iter().any(|k| k.name == d.controller), "{}", l.name);
         }
         assert_eq!(c.photodiode.wavelength_input.as_deref(), Some("6"));
+    }
+
+    #[test]
+    fn the_laser_entry_is_optional_and_checked() {
+        let c = HardwareConfig::femto();
+        let laser = c.laser.as_ref().expect("the embedded bench names its laser");
+        assert_eq!((laser.family, laser.address.as_str()), (LaserFamily::Keysight, "127.0.0.1:5025"));
+        let line = "    laser: Some((family: Keysight, address: \"127.0.0.1:5025\", timeout_s: 2.0)),\n";
+        assert!(FEMTO_HARDWARE_RON.contains(line));
+        let without = HardwareConfig::from_ron_str(&FEMTO_HARDWARE_RON.replace(line, ""), Path::new("hw.ron")).unwrap();
+        assert_eq!(without.laser, None, "a file written before the laser entry still loads");
+        let bad = FEMTO_HARDWARE_RON.replace("address: \"127.0.0.1:5025\"", "address: \"lab-laser\"");
+        let err = HardwareConfig::from_ron_str(&bad, Path::new("hw.ron")).unwrap_err().to_string();
+        assert!(err.contains("field `laser.address`: expected host:port, found `lab-laser`"), "{err}");
+        let none = FEMTO_HARDWARE_RON.replace(line, "    laser: Some((family: None)),\n");
+        assert_eq!(
+            HardwareConfig::from_ron_str(&none, Path::new("hw.ron")).unwrap().laser.unwrap().family,
+            LaserFamily::None
+        );
     }
 
     #[test]

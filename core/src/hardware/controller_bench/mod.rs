@@ -12,6 +12,7 @@ mod acquisition;
 mod config;
 mod laser;
 mod run;
+mod sweep;
 
 use super::clock::EmuClock;
 use super::{HwError, PiGcs, SmarActMcs, StageController};
@@ -25,7 +26,8 @@ use run::Stop;
 use std::sync::Arc;
 
 pub use config::{ControllerConfig, ControllerKind, HardwareConfig, JointConfig, PhotodiodeConfig, FEMTO_HARDWARE_RON};
-pub use laser::{FixedLaser, Laser};
+pub use config::{LaserConfig, LaserFamily};
+pub use laser::{FixedLaser, LambdaLog, Laser};
 
 /// Where a joint is driven.
 #[derive(Debug, Clone, Copy)]
@@ -158,6 +160,7 @@ impl ControllerBench {
             c.reconnect().map_err(fault)?;
             *e = None;
         }
+        self.laser.reconnect().map_err(fault)?;
         self.velocities = [f64::NAN; 6];
         self.q_display = self.read_joints().map_err(fault)?;
         Ok(())

@@ -3,6 +3,7 @@
 //! joint got there, and stopping everything after a fault.
 
 use super::acquisition::Acquisition;
+use super::sweep::sweep_rate;
 use super::ControllerBench;
 use crate::bench::RunControl;
 use crate::hardware::HwError;
@@ -32,6 +33,9 @@ impl ControllerBench {
         if let TimedMotion::Sweep { from_nm, .. } = seg.motion {
             self.laser.set_wavelength(from_nm)?;
         }
+        if let Some((from_nm, to_nm, rate)) = sweep_rate(seg) {
+            self.laser.prepare_sweep(from_nm, to_nm, rate)?;
+        }
         if seg.record {
             *acq = Some(self.arm_recorder(meta)?);
             if let Some(a) = acq.as_mut() {
@@ -43,18 +47,23 @@ impl ControllerBench {
         if let Some(a) = acq.as_mut() {
             a.t_trigger_s = t_trigger;
         }
-        if let TimedMotion::Sweep { from_nm, to_nm } = seg.motion {
-            let rate = (to_nm - from_nm).abs() / seg.duration_s.max(f64::MIN_POSITIVE);
+        let mut t_sweep = None;
+        if let Some((from_nm, to_nm, rate)) = sweep_rate(seg) {
+            t_sweep = Some(self.bench_now());
             self.laser.start_sweep(from_nm, to_nm, rate)?;
         }
         let Some(done_at) = self.follow_motion(seg, acq, control, t_start)? else {
             return Ok(Stop::Cancelled);
         };
+        let log = if t_sweep.is_some() { self.finish_sweep(seg)? } else { None };
         if matches!(seg.motion, TimedMotion::Move { .. }) {
             self.check_arrival(seg)?;
         }
         if let Some(a) = acq.as_mut() {
             self.finish_acquisition(a, seg, done_at)?;
+            if let (Some(log), Some(t0)) = (&log, t_sweep) {
+                self.apply_lambda_log(a, log, t0);
+            }
         }
         if matches!(seg.motion, TimedMotion::Sweep { .. }) {
             let nominal = self.laser.nominal_nm();
@@ -236,6 +245,13 @@ impl ControllerBench {
                 Err(e) => format!("NOT stopped ({e})"),
             };
             said.push(format!("{}: {outcome}", cfg.name));
+        }
+        let laser_stop = match self.laser.stop_sweep() {
+            Err(e) if e.needs_reconnect() => self.laser.reconnect().and_then(|()| self.laser.stop_sweep()),
+            other => other,
+        };
+        if let Err(e) = laser_stop {
+            said.push(format!("{}: sweep NOT stopped ({e})", self.laser.name()));
         }
         let nominal = self.laser.nominal_nm();
         if self.laser.set_wavelength(nominal).is_err() {

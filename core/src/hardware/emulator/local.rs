@@ -137,6 +137,11 @@ impl LocalEmulators {
         Box::new(EmulatedLaser::new(self.laser.clone(), self.nominal_nm))
     }
 
+    /// The emulated laser the photodiode sees, for a [`super::LaserEmulator`] serving it over SCPI.
+    pub fn emu_laser(&self) -> Arc<EmuLaser> {
+        self.laser.clone()
+    }
+
     /// The clock the emulators run on (the bench clock of a bench on them).
     pub fn clock(&self) -> Arc<EmuClock> {
         self.clock.clone()

@@ -7,7 +7,9 @@
 //! are read, at their own sample times, and a photodiode closure can ask any emulator where its axes
 //! were at that time.
 
+pub mod laser;
 pub mod local;
+pub mod optical_bench;
 pub mod pi;
 pub mod smaract;
 
@@ -19,6 +21,7 @@ use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
+pub use laser::{LaserEmulator, LaserEmulatorConfig};
 pub use local::LocalEmulators;
 pub use pi::{PiEmulator, PiEmulatorConfig};
 pub use smaract::{SmarActEmulator, SmarActEmulatorConfig};
