@@ -240,8 +240,7 @@ fn calibrate_on_virtual_bench(
     let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
     let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
     let mut writer = SessionWriter::new(&a.out, session);
-    let recorded =
-        record_with(&mut bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))?;
+    let recorded = record_with(&mut bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))?;
     let session = writer.into_session();
     if let Err(e) = recorded.outcome {
         progress.borrow_mut().finish();
