@@ -126,12 +126,8 @@ pub fn untitled_base() -> PathBuf {
     base.join("photorobot")
 }
 
-/// Where the workbench autosaves a session that has no folder yet.
-pub fn untitled_dir() -> PathBuf {
-    untitled_dir_in(&untitled_base())
-}
-
-/// A new untitled session folder in `base` (named by the time and the process).
+/// A new untitled session folder in `base` (named by the time and the process): where the
+/// workbench autosaves a session that has no folder yet.
 pub fn untitled_dir_in(base: &Path) -> PathBuf {
     let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
     base.join(format!("untitled-{stamp}-{}", std::process::id()))

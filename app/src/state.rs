@@ -6,7 +6,7 @@
 
 use crate::decimate::Decimator;
 use crate::dialogs::Dialogs;
-use crate::session_io::{remember, untitled_dir, Loaded, Snapshot};
+use crate::session_io::{remember, Loaded, Snapshot};
 use crate::settings::Settings;
 use crate::worker::{Command, EffectValidation, Event, ValidationPair, Worker};
 use photorobot_core::bench::BenchPreset;
@@ -660,7 +660,8 @@ impl AppState {
                 self.wizard.running = None;
                 // Autosave after every measured step: a crash never costs a measurement.
                 self.session.mark_dirty();
-                let dir = self.session.dir.get_or_insert_with(untitled_dir).clone();
+                let base = &self.session.untitled_base;
+                let dir = self.session.dir.get_or_insert_with(|| crate::session_io::untitled_dir_in(base)).clone();
                 self.save_in_background(dir, true);
             }
             Event::SegmentDone(trace) => self.segment_done(*trace),
