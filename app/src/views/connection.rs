@@ -9,7 +9,7 @@ use crate::settings::{default_port, mapping_of, ConnectionSettings, ControllerAd
 use crate::state::AppState;
 use crate::worker::{Command, Worker};
 use egui::{Color32, RichText};
-use photorobot_core::bench::{AxisStatus, AxisUnit, BenchError, BenchPreset};
+use photorobot_core::bench::{AxisStatus, AxisUnit, BenchPreset};
 use photorobot_core::hardware::controller_bench::{ControllerKind, HardwareConfig, LaserConfig};
 use photorobot_core::hardware::emulator::{EmuClock, LaserEmulator, LocalEmulators};
 use photorobot_core::hardware::probe::{identify, Identity};
@@ -19,8 +19,9 @@ use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::{Drive, RobotDescription};
 
 mod laser;
-pub use laser::LaserIdentity;
-use laser::{laser_row, open_laser};
+pub use crate::hardware_bench::LaserIdentity;
+use crate::hardware_bench::{at_address, open_hardware_bench};
+use laser::laser_row;
 
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Arc;
@@ -99,15 +100,6 @@ pub const STATUS_PERIOD_S: f64 = 0.25;
 
 const GOOD: Color32 = Color32::from_rgb(60, 180, 90);
 const BAD: Color32 = Color32::from_rgb(230, 90, 70);
-
-/// An error message that names the address it concerns.
-fn at_address(e: &str, name: &str, address: &str) -> String {
-    let mut msg = if e.contains(address) { e.to_string() } else { format!("{e} ({name} at {address})") };
-    if e.contains("no reply to") {
-        msg.push_str(": nothing answered in time; is this the right address and port, and a controller of this kind?");
-    }
-    msg
-}
 
 /// The hardware configuration the settings describe.
 fn hardware_config(c: &ConnectionSettings) -> HardwareConfig {
@@ -307,8 +299,6 @@ fn open_bench(
     let preset = BenchPreset::resolve(preset_name).map_err(|e| e.to_string())?;
     let robot = mapped(preset.robot_description().map_err(|e| e.to_string())?, c);
     let clock = local.unwrap_or_else(|| EmuClock::new(1.0));
-    let config = hardware_config(c);
-    let (laser, identity) = open_laser(&config, preset.laser.wavelength_nm)?;
     let nominal = PhaseModel::new(
         robot.clone(),
         Extrinsics::nominal_design(),
@@ -316,12 +306,7 @@ fn open_bench(
         &preset.ambient,
         preset.laser.wavelength_nm,
     )?;
-    let bench =
-        ControllerBench::connect(robot, config, preset.motion, preset.ambient, laser, clock).map_err(|e| match e {
-            // The message names the controller and what happened; "bench fault:" adds nothing here.
-            BenchError::Fault(m) | BenchError::Config(m) => m,
-            other => other.to_string(),
-        })?;
+    let (bench, identity) = open_hardware_bench(&preset, robot, hardware_config(c), clock)?;
     Ok(Box::new((bench, nominal, identity)))
 }
 

@@ -1,44 +1,13 @@
 //! The tunable laser in the Connection view: its family (or none), address, identification
 //! (`*IDN?`, wavelength, sweep state) and the local laser emulator on the emulators' optical bench.
 
-use super::{at_address, ConnectionPanel, Done, BAD, GOOD};
+use super::{ConnectionPanel, Done, BAD, GOOD};
+use crate::hardware_bench::open_laser;
 use crate::settings::{laser_default_port, ConnectionSettings};
 use crate::state::AppState;
 use egui::RichText;
-use photorobot_core::hardware::controller_bench::{FixedLaser, HardwareConfig, Laser, LaserConfig, LaserFamily};
+use photorobot_core::hardware::controller_bench::{HardwareConfig, LaserConfig, LaserFamily};
 use photorobot_core::hardware::emulator::{LaserEmulator, LaserEmulatorConfig, LocalEmulators};
-use photorobot_core::hardware::laser::ScpiLaser;
-use photorobot_core::hardware::HwError;
-
-/// What the tunable laser answered: `*IDN?`, its wavelength and whether it sweeps.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LaserIdentity {
-    /// The `*IDN?` reply.
-    pub idn: String,
-    /// The wavelength it reports (nm).
-    pub wavelength_nm: f64,
-    /// A sweep is running.
-    pub sweeping: bool,
-}
-
-/// Open the laser `config` names and read its identity (`None`: no laser to drive, a
-/// [`FixedLaser`] at `nominal_nm` on which sweeps are refused).
-pub(super) fn open_laser(
-    config: &HardwareConfig,
-    nominal_nm: f64,
-) -> Result<(Box<dyn Laser>, Option<LaserIdentity>), String> {
-    match &config.laser {
-        Some(l) if l.family != LaserFamily::None => {
-            let at = |e: HwError| at_address(&e.to_string(), &format!("{:?} laser", l.family), &l.address);
-            let mut laser = ScpiLaser::connect(l.family, &l.address, l.timeout_s, nominal_nm).map_err(at)?;
-            let wavelength_nm = laser.wavelength_nm().map_err(at)?;
-            let sweeping = laser.sweep_running().map_err(at)?;
-            let id = LaserIdentity { idn: laser.idn().to_string(), wavelength_nm, sweeping };
-            Ok((Box::new(laser), Some(id)))
-        }
-        _ => Ok((Box::new(FixedLaser::new(nominal_nm)), None)),
-    }
-}
 
 impl ConnectionPanel {
     /// Serve the emulators' laser over SCPI (the settings' family, Keysight when none is driven) at
