@@ -6,6 +6,7 @@ pub mod cli;
 pub mod decimate;
 pub mod dialogs;
 pub mod gui;
+pub mod hardware_bench;
 pub mod log;
 pub mod messages;
 pub mod motion;

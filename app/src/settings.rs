@@ -3,7 +3,7 @@
 //! mapping. Data is not kept here: sessions are files.
 
 use crate::worker::Pace;
-use photorobot_core::hardware::controller_bench::{ControllerKind, HardwareConfig};
+use photorobot_core::hardware::controller_bench::{ControllerKind, HardwareConfig, LaserFamily};
 use photorobot_core::model::robot::RobotDescription;
 use serde::{Deserialize, Serialize};
 
@@ -99,6 +99,41 @@ pub struct ConnectionSettings {
     pub timeout_s: f64,
     /// q1..q6 to controller and channel.
     pub mapping: Vec<JointDrive>,
+    /// The tunable laser.
+    pub laser: LaserAddress,
+}
+
+/// The tunable laser's command set and place on the network (family `None`: a laser the
+/// software does not drive; sweeps are refused).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LaserAddress {
+    /// Command set.
+    pub family: LaserFamily,
+    /// Host name or IP address.
+    pub host: String,
+    /// TCP port of the raw SCPI socket (Keysight: 5025, Santec TSL-570: 5000).
+    pub port: u16,
+}
+
+impl Default for LaserAddress {
+    /// The laser of `assets/benches/femto-hardware.ron`, on 127.0.0.1.
+    fn default() -> Self {
+        let family = HardwareConfig::femto().laser.map_or(LaserFamily::None, |l| l.family);
+        LaserAddress { family, host: "127.0.0.1".into(), port: laser_default_port(family) }
+    }
+}
+
+impl LaserAddress {
+    /// host:port.
+    pub fn address(&self) -> String {
+        format!("{}:{}", self.host.trim(), self.port)
+    }
+}
+
+/// The laser family's usual raw-socket port.
+pub fn laser_default_port(family: LaserFamily) -> u16 {
+    photorobot_core::hardware::emulator::laser::default_port(family)
 }
 
 impl Default for ConnectionSettings {
@@ -121,6 +156,7 @@ impl Default for ConnectionSettings {
             controllers,
             timeout_s: config.controllers.first().map_or(2.0, |c| c.timeout_s),
             mapping: mapping_of(&RobotDescription::femto_6dof()),
+            laser: LaserAddress::default(),
         }
     }
 }

@@ -1,5 +1,5 @@
 //! GUI test of the Connection view (egui_kittest, headless): local emulators started from the panel,
-//! both controllers identified, the hardware bench connected, a jog through the drivers seen in the
+//! both controllers and the tunable laser identified, the hardware bench connected, a jog through the drivers seen in the
 //! status table, a dropped link and Reconnect, a wrong device and a closed port explained, the settings persisted. With
 //! PHOTOROBOT_SCREENSHOTS=1 the view is written to screenshots/connection.png (Mesa llvmpipe):
 //! `PHOTOROBOT_SCREENSHOTS=1 cargo test -p photorobot --test connection`.
@@ -12,6 +12,7 @@ use egui_kittest::Harness;
 use photorobot_app::dialogs::ScriptedDialogs;
 use photorobot_app::gui::{App, Tab, Workbench};
 use photorobot_app::settings::Settings;
+use photorobot_core::hardware::controller_bench::LaserFamily;
 use photorobot_core::hardware::emulator::{Fault, FaultSpec};
 use std::time::Duration;
 
@@ -73,12 +74,23 @@ fn start_emulators_and_identify_both(h: &mut Kittest) {
     for node in h.get_all_by_label("Identify") {
         node.click();
     }
-    wait_until(h, "both identifications", Duration::from_secs(20), |w| identified(w, 0) && identified(w, 1));
+    wait_until(h, "three identifications", Duration::from_secs(20), |w| {
+        identified(w, 0) && identified(w, 1) && w.connection.laser_identity.is_some()
+    });
     let ids = h.state().connection.identities.clone();
     assert!(ids.iter().all(|r| r.as_ref().unwrap().is_ok()), "{ids:?}");
     h.get_by_label_contains("E-712 (emulated)");
     h.get_by_label("SmarAct MCS, 3 channels: 0 rotary (°), 1 rotary (°), 2 rotary (°)");
     h.get_by_label("axes: 1 (µm), 2 (µm), 3 (µm)");
+    // The laser row: the emulated Keysight on the emulators' optical bench, at the preset's wavelength.
+    let laser = h.state().connection.laser_emulator.as_ref().expect("a laser emulator runs").addr();
+    assert_eq!(h.state().state.settings.connection.laser.address(), laser.to_string());
+    h.get_by_label("Keysight Technologies,8164B (emulated),MY00000000,V5.25(72637)");
+    let preset = photorobot_core::bench::BenchPreset::resolve(&h.state().state.settings.preset).unwrap();
+    let nominal_nm = preset.laser.wavelength_nm;
+    let id = h.state().connection.laser_identity.clone().unwrap().unwrap();
+    assert!((id.wavelength_nm - nominal_nm).abs() < 1e-6 && !id.sweeping, "{id:?} at {nominal_nm} nm");
+    h.get_by_label(&format!("wavelength {nominal_nm:.4} nm, not sweeping"));
 }
 
 /// Connect: the worker now runs on the controllers; the status table reads them.
@@ -95,6 +107,10 @@ fn connect_and_read_the_status(h: &mut Kittest) {
     h.get_by_label("q1 = 0.0000 µm");
     assert_eq!(h.query_all_by_label("150.0000 µm").count(), 3, "the PI axes at their 150 µm joint zero");
     assert_eq!(h.query_all_by_label("on target").count(), 6);
+    // Connect opened the laser through its driver and shows what it answered.
+    let id = h.state().connection.laser_identity.clone();
+    assert!(id.as_ref().is_some_and(|r| r.as_ref().is_ok_and(|id| id.idn.contains("8164B"))), "{id:?}");
+    h.get_by_label("Keysight Technologies,8164B (emulated),MY00000000,V5.25(72637)");
 }
 
 /// A jog through the drivers (Robot tab); the status table follows on the Connection tab.
@@ -142,6 +158,14 @@ fn disconnect_to_the_virtual_bench(h: &mut Kittest) {
     h.get_by_label("Disconnect").click();
     wait_until(h, "the disconnection", Duration::from_secs(20), |w| w.connection.connected.is_none());
     assert!(h.state().state.worker.bench_name.contains("virtual bench"), "{}", h.state().state.worker.bench_name);
+    // No tunable laser: the row says sweeps are refused, and Identify has nothing to ask.
+    let family = h.state().state.settings.connection.laser.family;
+    h.state_mut().state.settings.connection.laser.family = LaserFamily::None;
+    h.run_steps(2);
+    h.get_by_label_contains("plans with sweeps are refused on this bench");
+    assert_eq!(h.query_all_by_label("Identify").count(), 3);
+    h.state_mut().state.settings.connection.laser.family = family;
+    h.run_steps(2);
 }
 
 /// A wrong device: the PI driver at the MCS emulator's port.

@@ -12,11 +12,14 @@
 
 use super::common::{json_text, load_plan, CliError};
 use super::progress::{Progress, INTERRUPT};
-use photorobot_core::bench::{BenchPreset, RunControl, VirtualBench};
+use crate::hardware_bench::open_hardware_bench;
+use photorobot_core::bench::{Bench, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::calibration::{
     plan_durations, plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
 };
 use photorobot_core::files::{save_ron, write_atomic};
+use photorobot_core::hardware::emulator::EmuClock;
+use photorobot_core::hardware::HardwareConfig;
 use photorobot_core::identify::signs::{SignSource, TranslationSign};
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
 use photorobot_core::model::extrinsics::Extrinsics;
@@ -45,9 +48,14 @@ pub enum ModeArg {
 #[derive(Debug, clap::Args)]
 pub struct CalibrateArgs {
     /// Bench preset: an embedded name (table2-ideal, femto-lab) or a preset file (RON). With
-    /// --traces, the model of the bench that recorded them (robot, optics, laser).
+    /// --traces, the model of the bench that recorded them (robot, optics, laser). Or a hardware
+    /// bench file (a HardwareConfig, e.g. assets/benches/femto-hardware.ron): the plans run on its
+    /// stage controllers and laser, modelled by --model.
     #[arg(long, value_name = "PRESET")]
     pub bench: String,
+    /// With a hardware bench file: the preset whose robot, optics and motion limits model it.
+    #[arg(long, value_name = "PRESET", default_value = "table2-ideal")]
+    pub model: String,
     /// Random seed of the virtual bench (default: the preset's).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -129,7 +137,8 @@ impl LabArgs {
 
 /// Run the calibration and write the session.
 pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let preset = BenchPreset::resolve(&a.bench)?;
+    let hardware = hardware_bench_file(&a.bench)?;
+    let preset = BenchPreset::resolve(if hardware.is_some() { &a.model } else { &a.bench })?;
     let nominal = nominal_model(&preset)?;
     let mode = match a.mode {
         ModeArg::Paper => Mode::Paper,
@@ -141,7 +150,10 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
     open_log(a, mode);
     let (mut session, report) = match &a.traces {
         Some(dir) => calibrate_from_traces(a, dir, &preset, &nominal, mode)?,
-        None => calibrate_on_virtual_bench(a, &preset, &nominal, mode)?,
+        None => match hardware {
+            Some(config) => calibrate_on_hardware(a, config, &preset, &nominal, mode)?,
+            None => calibrate_on_virtual_bench(a, &preset, &nominal, mode)?,
+        },
     };
     a.lab.apply(&mut session.lab);
     let json = write_session(a, &mut session, &report)?;
@@ -231,7 +243,58 @@ fn calibrate_on_virtual_bench(
     mode: Mode,
 ) -> Result<(Session, CalibrationReport), CliError> {
     let mut bench = VirtualBench::new(preset, a.seed)?;
-    let session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &bench, mode)? };
+    let seed = Some(a.seed.unwrap_or(preset.seed));
+    measure_identify_validate(a, preset, nominal, mode, &mut bench, (seed, &[]))
+}
+
+/// `--bench` as a hardware bench file, when it is one (a file that parses as a HardwareConfig, or
+/// names `controllers:` and is then reported as a broken one); `None` for a preset.
+fn hardware_bench_file(bench: &str) -> Result<Option<HardwareConfig>, CliError> {
+    let path = Path::new(bench);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = photorobot_core::files::read_text(path)?;
+    match HardwareConfig::from_ron_str(&text, path) {
+        Ok(config) => Ok(Some(config)),
+        Err(e) if text.contains("controllers:") => Err(e.into()),
+        Err(_) => Ok(None),
+    }
+}
+
+/// Measure the plans on the stage controllers and the laser of `config` (the same bench the
+/// Connection view opens), identify, and run the validation motions on them.
+fn calibrate_on_hardware(
+    a: &CalibrateArgs,
+    config: HardwareConfig,
+    preset: &BenchPreset,
+    nominal: &PhaseModel,
+    mode: Mode,
+) -> Result<(Session, CalibrationReport), CliError> {
+    let robot = preset.robot_description()?;
+    let laser_name = config.laser.as_ref().map_or(String::new(), |l| format!("{:?} laser", l.family));
+    let (mut bench, laser) = open_hardware_bench(preset, robot, config, EmuClock::new(1.0))
+        .map_err(|problem| CliError::Failed { what: "the hardware bench", problem })?;
+    match &laser {
+        Some(l) => tracing::info!(laser = %l.idn, wavelength_nm = l.wavelength_nm, "laser connected"),
+        None => tracing::warn!("no tunable laser: plans with sweeps are refused on this bench"),
+    }
+    // The lab record names the laser beside the controllers.
+    let extra: Vec<(String, String)> = laser.map(|l| (laser_name, l.idn)).into_iter().collect();
+    measure_identify_validate(a, preset, nominal, mode, &mut bench, (None, &extra))
+}
+
+/// Measure the session's plans on `bench` (each trace saved as it is recorded, the session
+/// autosaved after it), identify, and run the validation motions on the same bench.
+fn measure_identify_validate(
+    a: &CalibrateArgs,
+    preset: &BenchPreset,
+    nominal: &PhaseModel,
+    mode: Mode,
+    bench: &mut dyn Bench,
+    identity: (Option<u64>, &[(String, String)]),
+) -> Result<(Session, CalibrationReport), CliError> {
+    let session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &*bench, mode, identity)? };
     // Each plan's bench time from the timing model, every plan from the start (q = 0).
     let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
         .map_err(|problem| plan_error(a, problem))?;
@@ -240,7 +303,7 @@ fn calibrate_on_virtual_bench(
     let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
     let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
     let mut writer = SessionWriter::new(&a.out, session);
-    let recorded = record_with(&mut bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))?;
+    let recorded = record_with(bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))?;
     let session = writer.into_session();
     if let Err(e) = recorded.outcome {
         progress.borrow_mut().finish();
@@ -264,7 +327,7 @@ fn calibrate_on_virtual_bench(
     );
     report.plan_durations = durations;
     progress.borrow_mut().stage("validating");
-    report.validation = validation_rows(&mut bench, nominal, &report.extrinsics);
+    report.validation = validation_rows(bench, nominal, &report.extrinsics);
     tracing::info!(motions = report.validation.len(), "validation done");
     progress.borrow_mut().finish();
     Ok((session, report))
@@ -303,6 +366,9 @@ pub fn resume_command(a: &CalibrateArgs) -> String {
     if let Some(seed) = a.seed {
         cmd += &format!(" --seed {seed}");
     }
+    if a.model != "table2-ideal" {
+        cmd += &format!(" --model {}", shell_quote(&a.model));
+    }
     cmd += &format!(" --out {} --resume", shell_quote(&a.out.display().to_string()));
     if a.json {
         cmd += " --json";
@@ -322,7 +388,13 @@ fn shell_quote(word: &str) -> String {
 
 /// A new session on the bench with the plans to measure (the mode's or `--plan`'s); refused when
 /// `--out` holds an unfinished measurement that `--resume` should continue.
-fn new_session(a: &CalibrateArgs, preset: &BenchPreset, bench: &VirtualBench, mode: Mode) -> Result<Session, CliError> {
+fn new_session(
+    a: &CalibrateArgs,
+    preset: &BenchPreset,
+    bench: &dyn Bench,
+    mode: Mode,
+    (seed, extra): (Option<u64>, &[(String, String)]),
+) -> Result<Session, CliError> {
     if find_recovery(&a.out)?.is_some() {
         return Err(CliError::Argument {
             argument: "--out",
@@ -336,7 +408,7 @@ fn new_session(a: &CalibrateArgs, preset: &BenchPreset, bench: &VirtualBench, mo
         name: photorobot_core::bench::Bench::name(bench),
         preset: Some(a.bench.clone()),
         description: Some(preset.clone()),
-        seed: Some(a.seed.unwrap_or(preset.seed)),
+        seed,
     };
     let mut s = Session::new(info, preset.robot_description()?);
     // Recording starts now: the lab record gets the time, the flags and the bench's identification.
@@ -344,6 +416,7 @@ fn new_session(a: &CalibrateArgs, preset: &BenchPreset, bench: &VirtualBench, mo
     a.lab.apply(&mut s.lab);
     s.lab.controllers = photorobot_core::bench::Bench::identification(bench)
         .into_iter()
+        .chain(extra.iter().cloned())
         .map(|(name, identification)| ControllerIdentity { name, identification })
         .collect();
     s.plans = if a.plans.is_empty() {

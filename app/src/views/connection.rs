@@ -9,14 +9,19 @@ use crate::settings::{default_port, mapping_of, ConnectionSettings, ControllerAd
 use crate::state::AppState;
 use crate::worker::{Command, Worker};
 use egui::{Color32, RichText};
-use photorobot_core::bench::{AxisStatus, AxisUnit, BenchError, BenchPreset};
-use photorobot_core::hardware::controller_bench::{ControllerKind, FixedLaser, HardwareConfig, Laser};
-use photorobot_core::hardware::emulator::{EmuClock, LocalEmulators};
+use photorobot_core::bench::{AxisStatus, AxisUnit, BenchPreset};
+use photorobot_core::hardware::controller_bench::{ControllerKind, HardwareConfig, LaserConfig};
+use photorobot_core::hardware::emulator::{EmuClock, LaserEmulator, LocalEmulators};
 use photorobot_core::hardware::probe::{identify, Identity};
 use photorobot_core::hardware::{ControllerBench, HwError};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::{Drive, RobotDescription};
+
+mod laser;
+pub use crate::hardware_bench::LaserIdentity;
+use crate::hardware_bench::{at_address, open_hardware_bench};
+use laser::laser_row;
 
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Arc;
@@ -32,7 +37,8 @@ fn kind_name(kind: ControllerKind) -> &'static str {
 /// What a background job reports.
 enum Done {
     Identified(usize, Result<Identity, String>),
-    Connected(Result<Box<(ControllerBench, PhaseModel)>, String>),
+    Connected(Result<Box<(ControllerBench, PhaseModel, Option<LaserIdentity>)>, String>),
+    LaserIdentified(Result<LaserIdentity, String>),
 }
 
 /// The bench the worker runs on, as the panel connected it.
@@ -50,6 +56,11 @@ pub struct Connected {
 pub struct ConnectionPanel {
     /// The local emulators, while running.
     pub emulators: Option<LocalEmulators>,
+    /// The local laser emulator (on the emulators' optical bench), while running.
+    pub laser_emulator: Option<LaserEmulator>,
+    /// What the laser answered (Identify, or at Connect).
+    pub laser_identity: Option<Result<LaserIdentity, String>>,
+    laser_identifying: bool,
     /// Identify result per controller (index into the settings' controllers).
     pub identities: Vec<Option<Result<Identity, String>>>,
     identifying: Vec<bool>,
@@ -69,6 +80,9 @@ impl Default for ConnectionPanel {
     fn default() -> Self {
         Self {
             emulators: None,
+            laser_emulator: None,
+            laser_identity: None,
+            laser_identifying: false,
             identities: vec![],
             identifying: vec![],
             connecting: false,
@@ -87,15 +101,6 @@ pub const STATUS_PERIOD_S: f64 = 0.25;
 const GOOD: Color32 = Color32::from_rgb(60, 180, 90);
 const BAD: Color32 = Color32::from_rgb(230, 90, 70);
 
-/// An error message that names the address it concerns.
-fn at_address(e: &str, name: &str, address: &str) -> String {
-    let mut msg = if e.contains(address) { e.to_string() } else { format!("{e} ({name} at {address})") };
-    if e.contains("no reply to") {
-        msg.push_str(": nothing answered in time; is this the right address and port, and a controller of this kind?");
-    }
-    msg
-}
-
 /// The hardware configuration the settings describe.
 fn hardware_config(c: &ConnectionSettings) -> HardwareConfig {
     let mut config = HardwareConfig::femto();
@@ -105,6 +110,7 @@ fn hardware_config(c: &ConnectionSettings) -> HardwareConfig {
         }
         k.timeout_s = c.timeout_s;
     }
+    config.laser = Some(LaserConfig { family: c.laser.family, address: c.laser.address(), timeout_s: c.timeout_s });
     config
 }
 
@@ -131,11 +137,16 @@ impl ConnectionPanel {
                         self.identities[i] = Some(r);
                     }
                 }
+                Done::LaserIdentified(r) => {
+                    self.laser_identifying = false;
+                    self.laser_identity = Some(r);
+                }
                 Done::Connected(r) => {
                     self.connecting = false;
                     match r {
                         Ok(opened) => {
-                            let (bench, nominal) = *opened;
+                            let (bench, nominal, laser) = *opened;
+                            self.laser_identity = laser.map(Ok);
                             let name = photorobot_core::bench::Bench::name(&bench);
                             let ctx2 = ctx.clone();
                             let worker = Worker::start(
@@ -184,13 +195,9 @@ impl ConnectionPanel {
         let c = s.settings.connection.clone();
         let preset_name = s.settings.preset.clone();
         let addresses: Vec<(String, String)> = c.controllers.iter().map(|a| (a.name.clone(), a.address())).collect();
-        // On the local emulators the bench shares their clock and drives their laser; on real
-        // controllers the clock is the wall clock and the laser stays at its wavelength.
-        let local = self
-            .emulators
-            .as_ref()
-            .filter(|e| same_addresses(&e.addresses(), &addresses))
-            .map(|e| (e.laser(), e.clock()));
+        // On the local emulators the bench shares their clock; on real controllers the clock is
+        // the wall clock. The laser is the one the settings name, on either.
+        let local = self.emulators.as_ref().filter(|e| same_addresses(&e.addresses(), &addresses)).map(|e| e.clock());
         let tx = self.jobs.0.clone();
         let ctx = ctx.clone();
         self.connecting = true;
@@ -266,6 +273,10 @@ impl ConnectionPanel {
                 if !moved.is_empty() {
                     msg.push_str(&format!("; {}", moved.join(", ")));
                 }
+                match self.start_laser_emulator(s, &e) {
+                    Ok(m) => msg.push_str(&format!("; {m}")),
+                    Err(m) => msg.push_str(&format!("; no laser emulator: {m}")),
+                }
                 self.message = Some(Ok(msg));
                 self.emulators = Some(e);
             }
@@ -283,13 +294,11 @@ fn same_addresses(a: &[(String, String)], b: &[(String, String)]) -> bool {
 fn open_bench(
     preset_name: &str,
     c: &ConnectionSettings,
-    local: Option<(Box<dyn Laser>, Arc<EmuClock>)>,
-) -> Result<Box<(ControllerBench, PhaseModel)>, String> {
+    local: Option<Arc<EmuClock>>,
+) -> Result<Box<(ControllerBench, PhaseModel, Option<LaserIdentity>)>, String> {
     let preset = BenchPreset::resolve(preset_name).map_err(|e| e.to_string())?;
     let robot = mapped(preset.robot_description().map_err(|e| e.to_string())?, c);
-    let (laser, clock) = local.unwrap_or_else(|| {
-        (Box::new(FixedLaser::new(preset.laser.wavelength_nm)) as Box<dyn Laser>, EmuClock::new(1.0))
-    });
+    let clock = local.unwrap_or_else(|| EmuClock::new(1.0));
     let nominal = PhaseModel::new(
         robot.clone(),
         Extrinsics::nominal_design(),
@@ -297,13 +306,8 @@ fn open_bench(
         &preset.ambient,
         preset.laser.wavelength_nm,
     )?;
-    let bench = ControllerBench::connect(robot, hardware_config(c), preset.motion, preset.ambient, laser, clock)
-        .map_err(|e| match e {
-            // The message names the controller and what happened; "bench fault:" adds nothing here.
-            BenchError::Fault(m) | BenchError::Config(m) => m,
-            other => other.to_string(),
-        })?;
-    Ok(Box::new((bench, nominal)))
+    let (bench, identity) = open_hardware_bench(&preset, robot, hardware_config(c), clock)?;
+    Ok(Box::new((bench, nominal, identity)))
 }
 
 /// Put `worker` in place of the running one: a new session on the new bench (as changing the
@@ -394,6 +398,9 @@ fn hardware(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx: &
     let locked = p.connected.is_some() || p.connecting;
     ui.label(RichText::new("Controllers").strong());
     controllers(ui, s, p, ctx, locked);
+    ui.add_space(4.0);
+    ui.label(RichText::new("Tunable laser").strong());
+    laser_row(ui, s, p, ctx, locked);
     timeout_and_emulators(ui, s, p, locked);
     ui.add_space(6.0);
     mapping(ui, s, p, locked);
@@ -494,10 +501,14 @@ fn timeout_and_emulators(ui: &mut egui::Ui, s: &mut AppState, p: &mut Connection
             .clicked()
         {
             p.emulators = None;
+            p.laser_emulator = None;
             p.message = Some(Ok("local emulators stopped".into()));
         }
         if let Some(e) = &p.emulators {
-            let list: Vec<String> = e.addresses().iter().map(|(n, a)| format!("{n} {a}")).collect();
+            let mut list: Vec<String> = e.addresses().iter().map(|(n, a)| format!("{n} {a}")).collect();
+            if let Some(l) = &p.laser_emulator {
+                list.push(format!("laser {}", l.addr()));
+            }
             ui.label(RichText::new(format!("emulators: {}", list.join(", "))).weak());
         }
     });
