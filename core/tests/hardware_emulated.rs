@@ -576,3 +576,24 @@ fn connecting_checks_the_mapping_and_the_referencing() {
     r.mcs.set_referenced(1, true);
     assert_eq!(connect(RobotDescription::femto_6dof()), None);
 }
+
+#[test]
+fn a_joint_that_moves_by_a_hair_gets_a_velocity_the_controller_accepts() {
+    // The IGM's validation motions move some joints by rounding noise: the speed that makes all
+    // joints arrive together is then below what the controller's VEL can express (0.000000).
+    let _one = serial();
+    let preset = preset_2khz();
+    let r = rig(1.0, &preset, 3);
+    let mut bench = hardware_bench(&r, &preset, 2.0);
+    let plan = Plan {
+        name: "hair".into(),
+        description: String::new(),
+        segments: vec![Segment::Move {
+            to: JointTarget::default().with(0, 20.0).with(1, 1e-9),
+            record: true,
+            label: "X move, Y by a hair".into(),
+        }],
+    };
+    let outcome = run(&mut bench, &plan).outcome;
+    assert!(outcome.is_ok(), "{outcome:?}");
+}

@@ -12,6 +12,10 @@ use crate::plan::{TimedMotion, TimedSegment};
 use crate::trace::TraceMeta;
 use std::time::Duration;
 
+/// The slowest speed a joint is commanded, as a fraction of its limit: controllers print speeds
+/// with six decimals and refuse 0 (PI GCS error 8).
+const MIN_SPEED_FRACTION: f64 = 1e-4;
+
 /// How a segment that met no fault ended.
 pub(super) enum Stop {
     /// It ran to its end.
@@ -173,7 +177,8 @@ impl ControllerBench {
         // All joints arrive together: the slowest sets the time.
         let time = (0..6).map(|j| d[j] / limit(j)).fold(0.0, f64::max);
         for (j, &dj) in d.iter().enumerate() {
-            let v = if dj > 0.0 && time > 0.0 { dj / time } else { limit(j) };
+            // A joint that moves by rounding noise still gets a speed the controller can express.
+            let v = if dj > 0.0 && time > 0.0 { (dj / time).max(MIN_SPEED_FRACTION * limit(j)) } else { limit(j) };
             if (v - self.velocities[j]).abs() > 1e-9 * v || self.velocities[j].is_nan() {
                 let m = self.joints[j];
                 self.controllers[m.controller].set_velocity(m.axis, v)?;
