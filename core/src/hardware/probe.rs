@@ -11,16 +11,16 @@ pub struct Identity {
     pub controller: String,
     /// host:port asked.
     pub address: String,
-    /// The identification: the `*IDN?` reply of a PI controller; for an MCS (which has no
-    /// identification query in the ASCII subset) its channel count and each channel's sensor type.
+    /// The identification: the `*IDN?` reply of a PI controller; for an MCS its system ID
+    /// (`:GSI`, where the firmware answers it), channel count and each channel's sensor type.
     pub reply: String,
     /// The axes or channels found, with their units.
     pub axes: Vec<AxisInfo>,
 }
 
 /// Connect to `address`, identify the controller of `kind` there and disconnect. PI: `*IDN?` and
-/// `SAI?` (no `SVO`: the servo state is left alone). MCS: `:SCM0`, `:GNC` and the `:GP`/`:GA` probe
-/// of each channel (what connecting does; nothing moves). A controller of another protocol is an error
+/// `SAI?` (no `SVO`: the servo state is left alone). MCS: `:SCM0`, `:GNC`, the `:GP`/`:GA` probe
+/// of each channel and `:GSI` (what connecting does; nothing moves). A controller of another protocol is an error
 /// (a bad reply or no reply), not an identity.
 pub fn identify(kind: ControllerKind, name: &str, address: &str, timeout_s: f64) -> Result<Identity, HwError> {
     let (reply, axes) = match kind {
@@ -38,7 +38,8 @@ pub fn identify(kind: ControllerKind, name: &str, address: &str, timeout_s: f64)
                     format!("{} {sensor} ({})", a.id, a.unit.symbol())
                 })
                 .collect();
-            (format!("SmarAct MCS, {} channels: {}", axes.len(), channels.join(", ")), axes)
+            let id = mcs.system_id().map_or(String::new(), |id| format!(" system ID {id},"));
+            (format!("SmarAct MCS,{id} {} channels: {}", axes.len(), channels.join(", ")), axes)
         }
     };
     Ok(Identity { controller: name.to_string(), address: address.to_string(), reply, axes })
@@ -59,7 +60,7 @@ mod tests {
         assert!(id.reply.contains("E-712"), "{}", id.reply);
         assert_eq!(id.axes.iter().map(|a| a.id.as_str()).collect::<Vec<_>>(), ["1", "2", "3"]);
         let id = identify(ControllerKind::SmarActMcs, "SmarAct MCS", &mcs_addr, 1.0).unwrap();
-        assert_eq!(id.reply, "SmarAct MCS, 3 channels: 0 rotary (°), 1 rotary (°), 2 rotary (°)");
+        assert_eq!(id.reply, "SmarAct MCS, system ID 3118000001, 3 channels: 0 rotary (°), 1 rotary (°), 2 rotary (°)");
         // A PI driver at the MCS port: the MCS answers `:E-1,1`, which is no identification.
         let err = identify(ControllerKind::PiGcs, "PI E-712", &mcs_addr, 1.0).unwrap_err().to_string();
         assert!(err.contains("is this a PI GCS controller?"), "{err}");

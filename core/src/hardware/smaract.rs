@@ -1,6 +1,6 @@
 //! SmarAct MCS (first generation) driver: the ASCII protocol over TCP (port 5000), synchronous mode.
 //! Owns command formatting (`:SCM0`, `:GP`, `:GA`, `:MPA`, `:MPR`, `:MAA`, `:MAR`, `:GS`, `:S`, `:FRM`,
-//! `:SCLS`, `:GPPK`), reply parsing, MCS error codes, and the linear/rotary probe at connect.
+//! `:SCLS`, `:GPPK`, `:GSI`), reply parsing, MCS error codes, and the linear/rotary probe at connect.
 //!
 //! The controller speaks nm for linear positioners and µ° plus a revolution count for rotary ones;
 //! this driver speaks µm and degrees ([`crate::bench::AxisUnit`]).
@@ -104,6 +104,8 @@ pub enum McsReply {
     PhysicalPositionKnown { channel: i64, known: bool },
     /// `:N<count>`.
     Channels(i64),
+    /// `:ID<system id>`: the controller's serial system ID (`:GSI`).
+    SystemId(u64),
 }
 
 /// Parse one reply line; `None` if it is not one of the replies above.
@@ -111,6 +113,9 @@ pub fn parse_reply(line: &str) -> Option<McsReply> {
     let body = line.trim().strip_prefix(':')?;
     let nums = |s: &str| -> Option<Vec<i64>> { s.split(',').map(|f| f.trim().parse::<i64>().ok()).collect() };
     // Longest prefixes first.
+    if let Some(rest) = body.strip_prefix("ID") {
+        return rest.trim().parse::<u64>().ok().map(McsReply::SystemId);
+    }
     if let Some(rest) = body.strip_prefix("PPK") {
         let v = nums(rest)?;
         return (v.len() == 2 && (v[1] == 0 || v[1] == 1))
@@ -153,6 +158,8 @@ pub struct SmarActMcs {
     limits: Vec<(f64, f64)>,
     /// Last commanded target per channel, to tell "stopped at the target" from "stopped short".
     targets: Vec<Option<f64>>,
+    /// The system ID `:GSI` answered; `None` where the firmware refuses the query.
+    system_id: Option<u64>,
 }
 
 impl SmarActMcs {
@@ -161,7 +168,14 @@ impl SmarActMcs {
     /// `limits` gives each channel's travel range in its unit (µm or °); channels beyond it get ±∞.
     pub fn connect(name: &str, address: &str, timeout_s: f64, limits: &[(f64, f64)]) -> Result<Self, HwError> {
         let link = Link::connect(name, address, timeout_s)?;
-        let mut m = SmarActMcs { name: name.to_string(), link, axes: vec![], limits: limits.to_vec(), targets: vec![] };
+        let mut m = SmarActMcs {
+            name: name.to_string(),
+            link,
+            axes: vec![],
+            limits: limits.to_vec(),
+            targets: vec![],
+            system_id: None,
+        };
         m.init()?;
         Ok(m)
     }
@@ -189,7 +203,23 @@ impl SmarActMcs {
         self.targets = vec![None; axes.len()];
         self.limits.resize(axes.len(), (f64::NEG_INFINITY, f64::INFINITY));
         self.axes = axes;
+        self.system_id = self.read_system_id()?;
         Ok(())
+    }
+
+    /// `:GSI`: the system ID, or `None` from a controller that answers it with an error (an
+    /// older firmware); any other reply is a protocol error.
+    fn read_system_id(&mut self) -> Result<Option<u64>, HwError> {
+        match self.request(":GSI")? {
+            McsReply::SystemId(id) => Ok(Some(id)),
+            McsReply::Error(_) => Ok(None),
+            other => Err(self.bad(":GSI", &format!("{other:?}"), "`:ID<system id>`")),
+        }
+    }
+
+    /// The system ID read at connect, if the controller gave one.
+    pub fn system_id(&self) -> Option<u64> {
+        self.system_id
     }
 
     /// Record every command and reply.
@@ -210,7 +240,7 @@ impl SmarActMcs {
         self.link.send(command)?;
         let line = self.link.read_line(command)?;
         parse_reply(&line)
-            .ok_or_else(|| self.bad(command, &line, "an MCS reply `:E`, `:P`, `:A`, `:S`, `:PPK` or `:N`"))
+            .ok_or_else(|| self.bad(command, &line, "an MCS reply `:E`, `:P`, `:A`, `:S`, `:PPK`, `:N` or `:ID`"))
     }
 
     /// Send a command whose only reply is the acknowledgement `:E<ch>,0`.
@@ -299,11 +329,13 @@ impl StageController for SmarActMcs {
         &self.axes
     }
 
-    /// The driver does not query the MCS's system id: the channels it found (`:GNC`, `:GP`/`:GA`).
+    /// The system ID (`:GSI`) where the controller gives one, and the channels it found (`:GNC`,
+    /// `:GP`/`:GA`).
     fn identification(&self) -> String {
         let kinds: Vec<&str> =
             self.axes.iter().map(|a| if a.unit == AxisUnit::Degree { "rotary" } else { "linear" }).collect();
-        format!("SmarAct MCS, {} channels ({})", kinds.len(), kinds.join(", "))
+        let id = self.system_id.map_or(String::new(), |id| format!(" system ID {id},"));
+        format!("SmarAct MCS,{id} {} channels ({})", kinds.len(), kinds.join(", "))
     }
 
     fn move_absolute(&mut self, targets: &[(usize, f64)]) -> Result<(), HwError> {
@@ -433,12 +465,31 @@ mod tests {
         assert_eq!(parse_reply(":S1,4"), Some(McsReply::Status { channel: 1, code: 4 }));
         assert_eq!(parse_reply(":PPK0,1"), Some(McsReply::PhysicalPositionKnown { channel: 0, known: true }));
         assert_eq!(parse_reply(":N3"), Some(McsReply::Channels(3)));
-        for bad in ["", ":", "P0,1", ":P0", ":P0,x", ":A0,1", ":E0,-5", ":Q0,1", ":PPK0,2", ":S1,2,3"] {
+        assert_eq!(parse_reply(":ID3118000001"), Some(McsReply::SystemId(3_118_000_001)));
+        for bad in
+            ["", ":", "P0,1", ":P0", ":P0,x", ":A0,1", ":E0,-5", ":Q0,1", ":PPK0,2", ":S1,2,3", ":ID", ":ID-4", ":IDx"]
+        {
             assert_eq!(parse_reply(bad), None, "{bad}");
         }
         // A multi-byte character after the colon is refused, not split inside.
         assert_eq!(parse_reply(":é0,1"), None);
         assert_eq!(parse_reply(":\u{80}"), None);
+    }
+
+    #[test]
+    fn the_system_id_is_read_where_the_firmware_gives_one() {
+        use crate::hardware::emulator::{EmuClock, SmarActEmulator, SmarActEmulatorConfig};
+        let clock = EmuClock::new(1.0);
+        let with = SmarActEmulator::start(clock.clone(), SmarActEmulatorConfig::default()).unwrap();
+        let mcs = SmarActMcs::connect("MCS", &with.addr().to_string(), 1.0, &[]).unwrap();
+        assert_eq!(mcs.system_id(), Some(3_118_000_001));
+        assert_eq!(mcs.identification(), "SmarAct MCS, system ID 3118000001, 3 channels (rotary, rotary, rotary)");
+        // An older firmware answers `:GSI` with an error: the controller still connects, named by its channels.
+        let config = SmarActEmulatorConfig { system_id: None, ..Default::default() };
+        let without = SmarActEmulator::start(clock, config).unwrap();
+        let mcs = SmarActMcs::connect("MCS", &without.addr().to_string(), 1.0, &[]).unwrap();
+        assert_eq!(mcs.system_id(), None);
+        assert_eq!(mcs.identification(), "SmarAct MCS, 3 channels (rotary, rotary, rotary)");
     }
 
     proptest::proptest! {

@@ -2,7 +2,8 @@
 //! `session.lock` in the folder, held while a session is open in the workbench or measured into
 //! by the command line. A second program refused the lock gets an error naming the folder and
 //! the process that holds it. The operating system drops the lock when the holder exits, even
-//! after a crash, so a stale lock file never blocks anyone.
+//! after a crash, so a stale lock file never blocks anyone. Whoever takes the lock removes the
+//! temporary files an earlier holder left when it was killed in the middle of an atomic save.
 
 use super::SessionError;
 use crate::files::FileError;
@@ -56,12 +57,32 @@ impl FolderLock {
             .and_then(|()| file.seek(SeekFrom::Start(0)))
             .and_then(|_| file.write_all(pid.as_bytes()))
             .map_err(io("cannot write", &path))?;
+        remove_stray_temporaries(dir);
+        remove_stray_temporaries(&dir.join(super::TRACES_DIR));
         Ok(Self { dir: dir.to_path_buf(), _file: file })
     }
 
     /// The folder held.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+}
+
+/// Remove the `.NAME.XXXXXX.tmp` files of interrupted atomic saves (`files::write_atomic`) from
+/// `dir`. Only the lock holder writes there, so none of them belongs to a save in progress. Best
+/// effort: a file that cannot be removed stays, and the session is unaffected by it.
+fn remove_stray_temporaries(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let is_file = entry.file_type().is_ok_and(|t| t.is_file());
+        if is_file && name.starts_with('.') && name.ends_with(".tmp") {
+            match std::fs::remove_file(entry.path()) {
+                Ok(()) => tracing::info!("removed {}, left by an interrupted save", entry.path().display()),
+                Err(e) => tracing::warn!("cannot remove {}: {e}", entry.path().display()),
+            }
+        }
     }
 }
 

@@ -29,6 +29,8 @@ pub struct SmarActEmulatorConfig {
     pub linear_accel_nm_per_s2: f64,
     /// Acceleration (µ°/s²).
     pub rotary_accel_udeg_per_s2: f64,
+    /// The system ID `:GSI` answers; `None` emulates a firmware that refuses the query (error 2).
+    pub system_id: Option<u64>,
 }
 
 impl Default for SmarActEmulatorConfig {
@@ -45,6 +47,7 @@ impl Default for SmarActEmulatorConfig {
             rotary_speed_udeg_per_s: 2e6,
             linear_accel_nm_per_s2: 1e7,
             rotary_accel_udeg_per_s2: 20e6,
+            system_id: Some(3_118_000_001),
         }
     }
 }
@@ -59,6 +62,7 @@ struct Channel {
 struct McsState {
     channels: Vec<Channel>,
     faults: Faults,
+    system_id: Option<u64>,
 }
 
 struct Shared {
@@ -94,7 +98,7 @@ impl SmarActEmulator {
             .collect();
         let shared = Arc::new(Shared {
             clock,
-            state: Mutex::new(McsState { channels, faults: Faults::default() }),
+            state: Mutex::new(McsState { channels, faults: Faults::default(), system_id: config.system_id }),
             axes: Arc::new(Mutex::new(axes)),
         });
         let s2 = shared.clone();
@@ -175,7 +179,9 @@ fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
     let Some(body) = command.strip_prefix(':') else {
         return Some(Some(":E-1,1".into()));
     };
-    const NAMES: [&str; 13] = ["SCLS", "SCM", "GNC", "GPPK", "GP", "GA", "GS", "MPA", "MPR", "MAA", "MAR", "FRM", "S"];
+    // Longer names before their prefixes (GSI before GS).
+    const NAMES: [&str; 14] =
+        ["SCLS", "SCM", "GNC", "GPPK", "GP", "GA", "GSI", "GS", "MPA", "MPR", "MAA", "MAR", "FRM", "S"];
     let name = NAMES.iter().find(|n| body.starts_with(*n)).copied();
     let args = name.map_or("", |n| &body[n.len()..]);
     let fired = st.faults.take(command, now);
@@ -253,7 +259,7 @@ fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str)
     let fields = Fields::parse(args)?;
     let mut axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
     match name {
-        "SCM" | "GNC" | "GPPK" | "GP" | "GA" | "GS" => query(st, &mut axes, now, name, &fields),
+        "SCM" | "GNC" | "GSI" | "GPPK" | "GP" | "GA" | "GS" => query(st, &mut axes, now, name, &fields),
         "MPA" | "MPR" | "MAA" | "MAR" => move_channel(st, &mut axes, now, name, &fields),
         "S" | "SCLS" | "FRM" => control(st, &mut axes, now, name, &fields),
         _ => Err((-1, 2)),
@@ -275,6 +281,10 @@ fn query(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, fields: 
         "GNC" => {
             fields.count(0)?;
             Ok(format!(":N{}", st.channels.len()))
+        }
+        "GSI" => {
+            fields.count(0)?;
+            st.system_id.map(|id| format!(":ID{id}")).ok_or((-1, 2))
         }
         "GPPK" => {
             fields.count(1)?;

@@ -154,3 +154,24 @@ fn a_second_program_is_refused_a_locked_folder_with_the_holder_named() {
     drop(held);
     FolderLock::acquire(&dir).expect("free again once the holder closed it");
 }
+
+#[test]
+fn taking_the_lock_removes_the_temporaries_of_an_interrupted_save_and_nothing_else() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("session");
+    let traces = dir.join(crate::session::TRACES_DIR);
+    std::fs::create_dir_all(&traces).unwrap();
+    // What `write_atomic` leaves when the process is killed between creating and renaming.
+    let strays = [dir.join(".session.ron.a1B2c3.tmp"), traces.join(".004.csv.Xy9z8w.tmp")];
+    let kept = [dir.join("session.ron"), dir.join("notes.tmp"), dir.join(".hidden"), traces.join("004.csv")];
+    for f in strays.iter().chain(&kept) {
+        std::fs::write(f, "x").unwrap();
+    }
+    let _held = FolderLock::acquire(&dir).unwrap();
+    for f in &strays {
+        assert!(!f.exists(), "{} removed", f.display());
+    }
+    for f in &kept {
+        assert!(f.exists(), "{} kept", f.display());
+    }
+}
