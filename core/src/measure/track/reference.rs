@@ -67,3 +67,76 @@ pub(super) fn accumulate_reference(samples: &Samples, state: &State, seg_harm: &
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::kernel::{accumulate, ShapeView};
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// The optimised kernel's normal equations equal the reference's within rounding, on
+        /// random segments (lengths across chunk and lane boundaries), states, harmonics and
+        /// fringe models.
+        #[test]
+        fn kernel_matches_the_reference(
+            seg_len in proptest::collection::vec(0usize..300, 1..6),
+            seed in 0u64..10_000,
+            shaped in proptest::bool::ANY,
+        ) {
+            use rand::{Rng, SeedableRng};
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let n_knots = seg_len.len() + 1;
+            let mut seg_first = vec![0usize];
+            let mut c = Vec::new();
+            for (j, &m) in seg_len.iter().enumerate() {
+                c.extend((0..m).map(|i| j as f64 + (i as f64 + 0.5) / m as f64));
+                seg_first.push(c.len());
+            }
+            let n = c.len();
+            let y: Vec<f64> = (0..n).map(|_| rng.random_range(-0.5..2.5)).collect();
+            let hint: Vec<f64> = (0..n).map(|k| 3.0 * k as f64 + rng.random_range(-1.0..1.0)).collect();
+            let mut harm = || Harmonic {
+                cos_rel: rng.random_range(-0.05..0.05),
+                sin_rel: rng.random_range(-0.05..0.05),
+                cos3_rel: rng.random_range(-0.01..0.01),
+                sin3_rel: rng.random_range(-0.01..0.01),
+            };
+            let seg_harm: Vec<Harmonic> = (0..n_knots).map(|_| harm()).collect();
+            let sh: Vec<Harmonic> = (0..n).map(|_| harm()).collect();
+            let r: Vec<f64> = (0..n).map(|_| rng.random_range(0.5..2.0)).collect();
+            let ca: Vec<f64> = (0..n).map(|_| rng.random_range(-0.1..0.1)).collect();
+            let state = State {
+                intercept: rng.random_range(-10.0..10.0),
+                rad_per_hint_nm: 0.008,
+                hint_ref: hint.first().copied().unwrap_or(0.0),
+                gamma: rng.random_range(-0.01..0.01),
+                delta: (0..n_knots).map(|_| rng.random_range(-1.0..1.0)).collect(),
+                offset: (0..n_knots).map(|_| rng.random_range(0.5..1.5)).collect(),
+                amplitude: (0..n_knots).map(|_| rng.random_range(0.1..0.5)).collect(),
+            };
+            let shape = shaped.then_some(ShapeView { harm: &sh, r: &r, ca: &ca });
+            let samples = Samples { y: &y, hint: &hint, c: &c, seg_first: &seg_first, shape };
+            let (mut fast, mut slow) = (NormalEq::new(n_knots), NormalEq::new(n_knots));
+            accumulate(&samples, &state, &seg_harm, &mut fast);
+            accumulate_reference(&samples, &state, &seg_harm, &mut slow);
+            prop_assert_eq!(fast.count, slow.count);
+            // rounding of sums of `count` terms of magnitude up to (B·u)² (u ≤ 0.008·3n rad)
+            let umax = 1.0 + 0.024 * n as f64;
+            let tol = 1e-13 * (1 + n) as f64 * umax * umax;
+            let close = |a: f64, b: f64| (a - b).abs() <= tol;
+            for j in 0..n_knots {
+                for i in 0..6 {
+                    prop_assert!(close(fast.diag[j][i], slow.diag[j][i]), "diag {j} {i}");
+                    prop_assert!(close(fast.off[j][i], slow.off[j][i]), "off {j} {i}");
+                }
+                for i in 0..3 {
+                    prop_assert!(close(fast.rhs[j][i], slow.rhs[j][i]), "rhs {j} {i}");
+                    prop_assert!(close(fast.border[j][i], slow.border[j][i]), "border {j} {i}");
+                }
+            }
+            prop_assert!(close(fast.s_gg, slow.s_gg) && close(fast.r_g, slow.r_g) && close(fast.nu2, slow.nu2));
+        }
+    }
+}
