@@ -34,6 +34,7 @@ fn add_outer(m: &mut [f64; 6], w: f64, a: &Vector3<f64>, b: &Vector3<f64>) {
 
 /// The normal equations of the linearised model
 /// ν = I - A - B·f(ψ) ≈ h·δ + ΔA + r·f·ΔB + h·u·γ, sample by sample.
+#[allow(clippy::needless_range_loop)] // knots j and j + 1 of several per-knot arrays
 pub(super) fn accumulate_reference(samples: &Samples, state: &State, seg_harm: &[Harmonic], normal: &mut NormalEq) {
     normal.reset();
     let n_knots = state.delta.len();
