@@ -364,6 +364,12 @@ pub(super) fn accumulate_avx2(samples: &Samples, state: &State, seg_harm: &[Harm
 /// segment by segment (samples of segment j are `seg_first[j]..seg_first[j + 1]`), into
 /// `normal`. Uses AVX2/FMA when the CPU has them.
 pub(super) fn accumulate(samples: &Samples, state: &State, seg_harm: &[Harmonic], normal: &mut NormalEq) {
+    #[cfg(test)]
+    {
+        if super::reference::USE_REFERENCE.get() {
+            return super::reference::accumulate_reference(samples, state, seg_harm, normal);
+        }
+    }
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {

@@ -34,6 +34,8 @@ mod result;
 mod window;
 
 #[cfg(test)]
+mod reference;
+#[cfg(test)]
 mod tests;
 
 pub use config::{EnvelopeSource, FringeModel, GouyCorrection, KnownEnvelope, TrackConfig};

@@ -774,3 +774,67 @@ proptest::proptest! {
         let _ = count_extrema(&ys[..n], CountDirection::Hint(&hint), WL, N_AIR, &HysteresisConfig::default());
     }
 }
+
+/// The tracker's phase with the optimised kernel and with the scalar reference
+/// ([`super::reference`]): (largest phase difference rad, both results).
+fn phase_vs_reference(t: &Trace, cfg: &TrackConfig) -> Option<(f64, PhaseTrack, PhaseTrack)> {
+    let fast = track_phase(&t.intensity, &t.hint, WL, N_AIR, cfg);
+    super::reference::USE_REFERENCE.set(true);
+    let slow = track_phase(&t.intensity, &t.hint, WL, N_AIR, cfg);
+    super::reference::USE_REFERENCE.set(false);
+    assert_eq!(fast.is_ok(), slow.is_ok(), "fast {fast:?} vs reference {slow:?}");
+    let (fast, slow) = (fast.ok()?, slow.ok()?);
+    let diff = fast.phase_rad.iter().zip(&slow.phase_rad).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    Some((diff, fast, slow))
+}
+
+/// Largest phase difference allowed between the optimised and the reference tracker, rad
+/// (1e-6 rad = 0.12 pm): floating-point noise, far below the tracker's nm accuracy.
+const REFERENCE_PHASE_TOL_RAD: f64 = 1e-6;
+
+#[test]
+fn tracker_matches_the_reference_kernel_on_the_test_motions() {
+    let traces: Vec<(&str, Trace)> = vec![
+        ("long back-and-forth", long_scan(100_000, 1e-3, 9)),
+        ("lateral", lateral(1e-3, 0.3, 1)),
+        ("axial", axial(1e-3, 1.1, 2)),
+        ("rotation", rotation(1e-3, 2.0, 3)),
+        ("reversal", reversal(1e-3, 0.0, 4)),
+        ("multi-beam slow move", multi_beam_move(-3.9, (1.05, 1.05), 31_500, 1e-3, 40)),
+    ];
+    for (name, t) in &traces {
+        for cfg in [TrackConfig::default(), gouy_cfg(t)] {
+            let (diff, fast, slow) = phase_vs_reference(t, &cfg).expect("both track");
+            eprintln!("{name}: |Δφ| ≤ {diff:.2e} rad, iterations {} vs {}", fast.iterations, slow.iterations);
+            assert!(diff < REFERENCE_PHASE_TOL_RAD, "{name}: phase {diff:.3e} rad from the reference");
+            let sig = (fast.sigma_total_nm - slow.sigma_total_nm).abs();
+            assert!(sig < 1e-6 * slow.sigma_total_nm.max(1.0), "{name}: σ_total differs by {sig} nm");
+        }
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+    /// Random motions (a few moves of random length and speed, with pauses), noise, phase
+    /// offset and envelope: the optimised tracker's phase stays within
+    /// [`REFERENCE_PHASE_TOL_RAD`] of the reference's.
+    #[test]
+    fn tracker_matches_the_reference_kernel_on_random_motions(
+        moves in proptest::collection::vec((-6000.0f64..6000.0, 5.0f64..30.0, 0usize..300), 1..5),
+        noise in 1e-4f64..3e-3,
+        phase in 0.0f64..TAU,
+        seed in 0u64..1000,
+    ) {
+        let mut q = pause(0.0, 100);
+        let mut at = 0.0;
+        for &(len, speed, rest) in &moves {
+            q.extend(move_segment(at, at + len, speed, 40));
+            at += len;
+            q.extend(pause(at, rest));
+        }
+        let t = make_trace(&q, &|x| x, &mild(), noise, phase, seed);
+        if let Some((diff, _, _)) = phase_vs_reference(&t, &TrackConfig::default()) {
+            proptest::prop_assert!(diff < REFERENCE_PHASE_TOL_RAD, "phase {diff:.3e} rad from the reference");
+        }
+    }
+}
