@@ -48,7 +48,7 @@ pub fn open_laser(config: &HardwareConfig, nominal_nm: f64) -> Result<(Box<dyn L
 
 /// Connect the controllers and the laser of `config` as `robot` (its `drive` fields map the
 /// joints), with `preset`'s motion limits and ambient conditions, on `clock` (the wall clock,
-/// [`EmuClock::new`]`(1.0)`, except on in-process emulators, which share theirs).
+/// [`EmuClock::new`]`(config.time_scale)`, except on in-process emulators, which share theirs).
 pub fn open_hardware_bench(
     preset: &BenchPreset,
     robot: RobotDescription,

@@ -273,7 +273,9 @@ fn calibrate_on_hardware(
 ) -> Result<(Session, CalibrationReport), CliError> {
     let robot = preset.robot_description()?;
     let laser_name = config.laser.as_ref().map_or(String::new(), |l| format!("{:?} laser", l.family));
-    let (mut bench, laser) = open_hardware_bench(preset, robot, config, EmuClock::new(1.0))
+    // Real hardware runs in real time; emulators may run faster (the file's `time_scale`).
+    let clock = EmuClock::new(config.time_scale);
+    let (mut bench, laser) = open_hardware_bench(preset, robot, config, clock)
         .map_err(|problem| CliError::Failed { what: "the hardware bench", problem })?;
     match &laser {
         Some(l) => tracing::info!(laser = %l.idn, wavelength_nm = l.wavelength_nm, "laser connected"),

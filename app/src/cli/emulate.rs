@@ -1,11 +1,11 @@
-//! `photorobot emulate pi|smaract|laser|all [--port N] [--family keysight|santec]`: serve a
+//! `photorobot emulate pi|smaract|laser|all [--port N] [--family keysight|santec] [--time-scale S]`: serve a
 //! stage-controller or tunable-laser protocol emulator (or all of them as one optical bench) on
 //! loopback. Owns only argument parsing and printing; the emulators are
 //! `photorobot_core::hardware::emulator`.
 
 use super::common::CliError;
 use photorobot_core::bench::BenchPreset;
-use photorobot_core::hardware::controller_bench::LaserFamily;
+use photorobot_core::hardware::controller_bench::{LaserFamily, MAX_TIME_SCALE};
 use photorobot_core::hardware::emulator::laser::run_laser_emulator;
 use photorobot_core::hardware::emulator::optical_bench::run_optical_bench;
 use photorobot_core::hardware::emulator::{run_emulator, EmulatorKind};
@@ -49,6 +49,30 @@ pub struct EmulateArgs {
     /// The virtual-bench preset whose optics the photodiode sees (`all`).
     #[arg(long, default_value = "table2-ideal")]
     pub bench: String,
+    /// Emulated seconds per real second (1: real time). A bench on these emulators names the same
+    /// `time_scale` in its hardware bench file.
+    #[arg(long, value_name = "S", default_value_t = 1.0, value_parser = time_scale)]
+    pub time_scale: f64,
+}
+
+/// A clock scale in (0, MAX_TIME_SCALE], or a message clap shows after the flag's name.
+fn time_scale(text: &str) -> Result<f64, String> {
+    let v: f64 =
+        text.trim().parse().map_err(|_| format!("expected a number (emulated s per real s), found `{text}`"))?;
+    if v.is_finite() && v > 0.0 && v <= MAX_TIME_SCALE {
+        Ok(v)
+    } else {
+        Err(format!("expected emulated seconds per real second in (0, {MAX_TIME_SCALE}], found {v}"))
+    }
+}
+
+/// How the clock runs, for the ready line.
+fn pace(scale: f64) -> String {
+    if scale == 1.0 {
+        "real time".into()
+    } else {
+        format!("{scale}× real time")
+    }
 }
 
 fn family(k: LaserKind) -> LaserFamily {
@@ -76,8 +100,8 @@ fn serve(a: &EmulateArgs, out: &mut dyn Write, stop: &AtomicBool) -> Result<(), 
         EmulatedController::Smaract => EmulatorKind::SmarAct,
         EmulatedController::Laser => {
             let f = family(a.family);
-            run_laser_emulator(f, a.port, stop, &mut |addr| {
-                say(format!("{f:?} laser (SCPI) emulator listening on {addr}, real time; Ctrl-C to stop"))
+            run_laser_emulator(f, a.port, a.time_scale, stop, &mut |addr| {
+                say(format!("{f:?} laser (SCPI) emulator listening on {addr}, {}; Ctrl-C to stop", pace(a.time_scale)))
             })?;
             return ready_error.map_or(Ok(()), |e| Err(e.into()));
         }
@@ -90,20 +114,21 @@ fn serve(a: &EmulateArgs, out: &mut dyn Write, stop: &AtomicBool) -> Result<(), 
             }
             let preset = BenchPreset::resolve(&a.bench)?;
             let f = family(a.family);
-            run_optical_bench(&preset, f, stop, &mut |addresses| {
+            run_optical_bench(&preset, f, a.time_scale, stop, &mut |addresses| {
                 let list: Vec<String> = addresses.iter().map(|(n, at)| format!("{n} at {at}")).collect();
-                say(format!("optical bench `{}` emulated: {}; real time; Ctrl-C to stop", preset.name, list.join(", ")))
+                let (name, pace) = (&preset.name, pace(a.time_scale));
+                say(format!("optical bench `{name}` emulated: {}; {pace}; Ctrl-C to stop", list.join(", ")))
             })
             .map_err(|problem| CliError::Failed { what: "emulate all", problem })?;
             return ready_error.map_or(Ok(()), |e| Err(e.into()));
         }
     };
-    run_emulator(kind, a.port, stop, &mut |addr| {
+    run_emulator(kind, a.port, a.time_scale, stop, &mut |addr| {
         let name = match kind {
             EmulatorKind::Pi => "PI E-712 (GCS 2)",
             EmulatorKind::SmarAct => "SmarAct MCS (ASCII)",
         };
-        say(format!("{name} emulator listening on {addr}, real time; Ctrl-C to stop"))
+        say(format!("{name} emulator listening on {addr}, {}; Ctrl-C to stop", pace(a.time_scale)))
     })?;
     ready_error.map_or(Ok(()), |e| Err(e.into()))
 }
@@ -124,8 +149,8 @@ mod tests {
 
     #[test]
     fn emulate_laser_serves_the_santec_command_set() {
-        let a = args(&["photorobot", "emulate", "laser", "--family", "santec", "--port", "0"]);
-        assert_eq!((a.controller, a.family), (EmulatedController::Laser, LaserKind::Santec));
+        let a = args(&["photorobot", "emulate", "laser", "--family", "santec", "--port", "0", "--time-scale", "4"]);
+        assert_eq!((a.controller, a.family, a.time_scale), (EmulatedController::Laser, LaserKind::Santec, 4.0));
         let stop = AtomicBool::new(false);
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::scope(|s| {
@@ -136,6 +161,7 @@ mod tests {
             });
             let line = rx.recv_timeout(std::time::Duration::from_secs(5)).unwrap();
             assert!(line.starts_with("Santec laser (SCPI) emulator listening on 127.0.0.1:"), "{line}");
+            assert!(line.contains(", 4× real time;"), "{line}");
             let addr = line.split_whitespace().find(|w| w.starts_with("127.0.0.1:")).unwrap().trim_end_matches(',');
             let stream = std::net::TcpStream::connect(addr).unwrap();
             stream.set_read_timeout(Some(std::time::Duration::from_secs(2))).unwrap();
@@ -148,6 +174,8 @@ mod tests {
         });
         let e = serve(&args(&["photorobot", "emulate", "all", "--port", "1"]), &mut Vec::new(), &stop).unwrap_err();
         assert!(e.to_string().contains("give no --port"), "{e}");
+        let e = super::super::Cli::try_parse_from(["photorobot", "emulate", "all", "--time-scale", "0"]).unwrap_err();
+        assert!(e.to_string().contains("expected emulated seconds per real second in (0, 1000], found 0"), "{e}");
     }
 
     /// A writer that sends the first line written to a channel.

@@ -138,7 +138,15 @@ pub struct HardwareConfig {
     /// The tunable laser, if the software drives one (default: none).
     #[serde(default)]
     pub laser: Option<LaserConfig>,
+    /// Bench seconds per real second: 1 for real hardware (the default); emulators served with
+    /// `photorobot emulate --time-scale S` run S times faster, and a bench on them must run its
+    /// clock at the same S.
+    #[serde(default = "one")]
+    pub time_scale: f64,
 }
+
+/// The fastest emulated clock a hardware file may name (bench seconds per real second).
+pub const MAX_TIME_SCALE: f64 = 1000.0;
 
 const EXPECTED: &str =
     "a HardwareConfig(name, controllers: [...], joints: [...], photodiode: (...)) as in assets/benches/femto-hardware.ron";
@@ -171,6 +179,12 @@ impl HardwareConfig {
             if !(v.is_finite() && v > 0.0) {
                 return Err(bad(name, format!("expected a positive number of seconds, found {v}")));
             }
+        }
+        if !(c.time_scale.is_finite() && c.time_scale > 0.0 && c.time_scale <= MAX_TIME_SCALE) {
+            return Err(bad(
+                "time_scale",
+                format!("expected bench seconds per real second in (0, {MAX_TIME_SCALE}], found {}", c.time_scale),
+            ));
         }
         for (i, j) in c.joints.iter().enumerate() {
             if j.sign != 1.0 && j.sign != -1.0 {
@@ -223,6 +237,7 @@ mod tests {
             assert!(c.controllers.iter().any(|k| k.name == d.controller), "{}", l.name);
         }
         assert_eq!(c.photodiode.wavelength_input.as_deref(), Some("6"));
+        assert_eq!(c.time_scale, 1.0, "real hardware runs in real time");
     }
 
     #[test]
@@ -260,6 +275,7 @@ mod tests {
                 "field `photodiode.controller`",
             ),
             ("period", "sample_period_s: 0.0005", "sample_period_s: -1.0", "field `sample_period_s`"),
+            ("time scale", "timeout_margin_s: 10.0,", "timeout_margin_s: 10.0, time_scale: 0.0,", "field `time_scale`"),
         ];
         for (what, from, to, want) in cases {
             assert!(FEMTO_HARDWARE_RON.contains(from), "{what}");

@@ -26,7 +26,7 @@ use run::Stop;
 use std::sync::Arc;
 
 pub use config::{ControllerConfig, ControllerKind, HardwareConfig, JointConfig, PhotodiodeConfig, FEMTO_HARDWARE_RON};
-pub use config::{LaserConfig, LaserFamily};
+pub use config::{LaserConfig, LaserFamily, MAX_TIME_SCALE};
 pub use laser::{FixedLaser, LambdaLog, Laser};
 
 /// Where a joint is driven.

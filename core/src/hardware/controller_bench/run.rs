@@ -233,6 +233,9 @@ impl ControllerBench {
         self.clock.now_s()
     }
 
+    /// Wait one polling period (real time, whatever the clock's scale: on a faster emulated
+    /// clock, polls as often in bench time load the host, and a poll's latency, not their
+    /// cadence, bounds the interpolation of the polled joints).
     pub(super) fn sleep_poll(&self) {
         std::thread::sleep(Duration::from_secs_f64(self.config.poll_period_s));
     }

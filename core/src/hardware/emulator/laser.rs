@@ -446,17 +446,18 @@ pub fn default_port(family: LaserFamily) -> u16 {
     }
 }
 
-/// Serve a laser emulator of `family` on 127.0.0.1:`port` (the family's default for `None`) in
-/// real time, resting at 1550 nm, until `stop` is set. `on_ready` gets the address once listening.
+/// Serve a laser emulator of `family` on 127.0.0.1:`port` (the family's default for `None`) on a
+/// clock `time_scale` times faster than real time, resting at 1550 nm, until `stop` is set. `on_ready` gets the address once listening.
 pub fn run_laser_emulator(
     family: LaserFamily,
     port: Option<u16>,
+    time_scale: f64,
     stop: &AtomicBool,
     on_ready: &mut dyn FnMut(SocketAddr),
 ) -> std::io::Result<()> {
     let emu = LaserEmulator::start_on(
         port.unwrap_or(default_port(family)),
-        EmuLaser::new(EmuClock::new(1.0), 1550.0),
+        EmuLaser::new(EmuClock::new(time_scale), 1550.0),
         LaserEmulatorConfig::new(family),
     )?;
     on_ready(emu.addr());

@@ -1,4 +1,5 @@
-//! A whole emulated bench on loopback: a PI E-712 and a SmarAct MCS emulator on one real-time clock,
+//! A whole emulated bench on loopback: a PI E-712 and a SmarAct MCS emulator on one clock (real time
+//! or scaled),
 //! an emulated laser, and a photodiode that sees a virtual bench's optics at the emulated axes'
 //! positions. What the app's "Start local emulators" serves, so the drivers can be tried without
 //! hardware. Owns the emulators for as long as it lives (dropping it closes their ports).
@@ -47,7 +48,7 @@ pub struct LocalEmulators {
 
 impl LocalEmulators {
     /// Start both emulators on 127.0.0.1 (at `pi_port` and `mcs_port`, or any free port where that
-    /// one is taken, e.g. by `photorobot emulate`), in real time, wired as `robot`'s `drive` fields and
+    /// one is taken, e.g. by `photorobot emulate`), on a clock at `config.time_scale` (1: real time), wired as `robot`'s `drive` fields and
     /// `config`'s joint zeros say, the photodiode (and the wavelength monitor) fed by `preset`'s optics
     /// with its detector noise (`seed`).
     pub fn start(
@@ -88,7 +89,7 @@ impl LocalEmulators {
         if wires.len() != 6 {
             return Err(format!("expected a six-joint robot, found {}", wires.len()));
         }
-        let clock = EmuClock::new(1.0);
+        let clock = EmuClock::new(config.time_scale);
         let pi = start_or_any("PI E-712", pi_port, |p| PiEmulator::start_on(p, clock.clone(), pi_config.clone()))?;
         let mcs =
             start_or_any("SmarAct MCS", mcs_port, |p| SmarActEmulator::start_on(p, clock.clone(), mcs_config.clone()))?;

@@ -406,16 +406,18 @@ impl EmulatorKind {
     }
 }
 
-/// Serve an emulator of `kind` on 127.0.0.1:`port` (the default port for `None`) in real time, with
+/// Serve an emulator of `kind` on 127.0.0.1:`port` (the default port for `None`) on a clock
+/// `time_scale` times faster than real time (1: real time), with
 /// the femto-6dof bench's axes, until `stop` is set. `on_ready` gets the address once listening.
 /// The PI emulator's photodiode input reads a slow test signal (a sine of its first axis).
 pub fn run_emulator(
     kind: EmulatorKind,
     port: Option<u16>,
+    time_scale: f64,
     stop: &AtomicBool,
     on_ready: &mut dyn FnMut(SocketAddr),
 ) -> std::io::Result<()> {
-    let clock = EmuClock::new(1.0);
+    let clock = EmuClock::new(time_scale);
     let port = port.unwrap_or(kind.default_port());
     match kind {
         EmulatorKind::Pi => {

@@ -19,10 +19,11 @@ pub struct OpticalBenchEmulators {
 
 impl OpticalBenchEmulators {
     /// Start the stage emulators on the controllers' default ports and the laser of `family` on its
-    /// default port (any free port where one is taken), the photodiode fed by `preset`'s optics.
-    pub fn start(preset: &BenchPreset, family: LaserFamily, seed: u64) -> Result<Self, String> {
+    /// default port (any free port where one is taken), the photodiode fed by `preset`'s optics, on
+    /// a clock `time_scale` times faster than real time.
+    pub fn start(preset: &BenchPreset, family: LaserFamily, seed: u64, time_scale: f64) -> Result<Self, String> {
         let robot = preset.robot_description().map_err(|e| e.to_string())?;
-        let config = HardwareConfig::femto();
+        let config = HardwareConfig { time_scale, ..HardwareConfig::femto() };
         let stages = LocalEmulators::start(
             preset,
             seed,
@@ -51,14 +52,16 @@ impl OpticalBenchEmulators {
 /// (name, host:port) of each emulator.
 pub type Addresses = [(String, String)];
 
-/// Serve a whole optical bench until `stop` is set; `on_ready` gets every emulator's address.
+/// Serve a whole optical bench on a clock `time_scale` times faster than real time until `stop`
+/// is set; `on_ready` gets every emulator's address.
 pub fn run_optical_bench(
     preset: &BenchPreset,
     family: LaserFamily,
+    time_scale: f64,
     stop: &AtomicBool,
     on_ready: &mut dyn FnMut(&Addresses),
 ) -> Result<(), String> {
-    let emus = OpticalBenchEmulators::start(preset, family, 1)?;
+    let emus = OpticalBenchEmulators::start(preset, family, 1, time_scale)?;
     on_ready(&emus.addresses(family));
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(std::time::Duration::from_millis(50));
