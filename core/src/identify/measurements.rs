@@ -3,7 +3,7 @@
 
 use crate::identify::{parabola_top, AmplitudeNeighbours, Observation, ObservationKind, VERTEX_WINDOW_HALF_FRINGE};
 use crate::measure::extrema::{detect_extrema, Extremum, ExtremumKind, HysteresisConfig};
-use crate::measure::{self, AnalyseOptions, MeasureError, Measurement};
+use crate::measure::{self, AnalyseOptions, MeasureError, Measurement, SweepSeed};
 use crate::model::effects::update_approach;
 use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
@@ -75,7 +75,7 @@ pub fn observations_from_trace(
     options: &ExtractOptions,
     group: usize,
 ) -> Result<Vec<Observation>, MeasureError> {
-    traced(trace, model, options, group, &AnalyseOptions::default()).map(|t| t.observations)
+    traced(trace, model, options, group, &AnalyseOptions::default(), None).map(|t| t.observations)
 }
 
 /// The fringe phase a motion's tracking gives at its two ends, for the gap change across a
@@ -146,13 +146,18 @@ fn traced(
     options: &ExtractOptions,
     group: usize,
     analyse: &AnalyseOptions,
+    seed: Option<&SweepSeed>,
 ) -> Result<Traced, MeasureError> {
     let label = trace.meta.label.clone();
     let wavelength_nm = trace.wavelength_nm.first().copied().unwrap_or(1560.0);
     let mut out = Vec::new();
     let mut free_start = false;
     let mut ends = None;
-    match measure::analyse_with(trace, model, analyse)? {
+    let measured = match seed {
+        Some(seed) if crate::trace::is_sweep(trace) => measure::analyse_sweep(trace, model, Some(seed)),
+        _ => measure::analyse_with(trace, model, analyse),
+    };
+    match measured? {
         Measurement::Sweep(s) => {
             out.push(Observation {
                 label,
@@ -435,14 +440,46 @@ pub fn observations_from_traces_with(
     options: &ExtractOptions,
     free_start: &(dyn Fn(&Trace) -> bool + Sync),
 ) -> Extracted {
+    extract(earlier, traces, &[], model, options, free_start)
+}
+
+/// The extrinsics-free part of the analysis of every sweep among `traces`, in parallel (`None`
+/// for a motion, or a sweep whose fit fails: its analysis then reports why).
+pub fn sweep_seeds(traces: &[Trace], model: &PhaseModel) -> Vec<Option<SweepSeed>> {
+    use rayon::prelude::*;
+    traces.par_iter().map(|t| crate::trace::is_sweep(t).then(|| measure::sweep_seed(t, model).ok()).flatten()).collect()
+}
+
+/// [`observations_from_traces`] reusing each sweep's seed (`seeds[k]` for `traces[k]`, from
+/// [`sweep_seeds`]): the same observations, without fitting a sweep's two-beam model again for
+/// every model it is analysed with.
+pub fn observations_from_seeded(
+    traces: &[Trace],
+    seeds: &[Option<SweepSeed>],
+    model: &PhaseModel,
+    options: &ExtractOptions,
+) -> Extracted {
+    extract(&[], traces, seeds, model, options, &|_| false)
+}
+
+/// [`observations_from_traces_with`], the sweeps' seeds taken from `seeds` where given.
+fn extract(
+    earlier: &[Trace],
+    traces: &[Trace],
+    seeds: &[Option<SweepSeed>],
+    model: &PhaseModel,
+    options: &ExtractOptions,
+    free_start: &(dyn Fn(&Trace) -> bool + Sync),
+) -> Extracted {
     use rayon::prelude::*;
     // Traces are independent: analyse them in parallel, then number the amplitude groups in
     // trace order.
     let results: Vec<Result<Traced, MeasureError>> = traces
         .par_iter()
-        .map(|t| {
+        .enumerate()
+        .map(|(k, t)| {
             let analyse = AnalyseOptions { free_start: free_start(t), shaped: options.shaped, ..Default::default() };
-            traced(t, model, options, 0, &analyse)
+            traced(t, model, options, 0, &analyse, seeds.get(k).and_then(Option::as_ref))
         })
         .collect();
     let mut out = Extracted::default();
