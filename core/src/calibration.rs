@@ -19,8 +19,8 @@ use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::phase::PhaseModel;
 use crate::plan::Plan;
 use crate::trace::Trace;
-use crate::validate::forecast::{forecast, ValidationForecast};
 use crate::validate::before_after::{run_before_and_after, BeforeAndAfter};
+use crate::validate::forecast::{forecast, ValidationForecast};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
 

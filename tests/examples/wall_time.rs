@@ -70,11 +70,8 @@ fn main() {
     let (s, s2) = (dir.path().join("s"), dir.path().join("s2"));
     let (s_str, s2_str) = (s.to_str().unwrap(), s2.to_str().unwrap());
     let traces = s.join("traces");
-    let calibrate = run(
-        &bin,
-        &["calibrate", "--bench", "table2-ideal", "--seed", &seed, "--mode", "joint", "--out", s_str],
-        &[0],
-    );
+    let calibrate =
+        run(&bin, &["calibrate", "--bench", "table2-ideal", "--seed", &seed, "--mode", "joint", "--out", s_str], &[0]);
     let from_traces = run(
         &bin,
         &["calibrate", "--bench", "table2-ideal", "--traces", traces.to_str().unwrap(), "--out", s2_str],

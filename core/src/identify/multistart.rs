@@ -9,7 +9,9 @@
 //! χ² tie are reported, not silently dropped.
 
 use crate::identify::joint::{self, JointEstimate, JointOptions};
-use crate::identify::measurements::{observations_from_seeded, observations_from_traces, sweep_seeds, ExtractOptions, Extracted};
+use crate::identify::measurements::{
+    observations_from_seeded, observations_from_traces, sweep_seeds, ExtractOptions, Extracted,
+};
 use crate::identify::start::{same_branch, start_branches, travels};
 use crate::identify::verdict::{BranchSummary, TIE_DELTA_CHI2};
 use crate::identify::{paper, Observation, ObservationKind};

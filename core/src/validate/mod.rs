@@ -498,7 +498,8 @@ impl RecordedValidation {
         // (12.3 and 9.4 nm with the estimated profile); the circle 0.1 nm, the optical axis 0.0 nm
         // (test `validation_rotations_track_their_gap_within_a_nanometre`). A trace the model's
         // shape cannot be tracked on falls back to the estimated profile (`analyse_with`).
-        let options = measure::AnalyseOptions { free_phase_after: Some(dither_end), shaped: true, ..Default::default() };
+        let options =
+            measure::AnalyseOptions { free_phase_after: Some(dither_end), shaped: true, ..Default::default() };
         let Measurement::Motion(m) = measure::analyse_with(analysed, analysis, &options)
             .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?
         else {
@@ -511,12 +512,14 @@ impl RecordedValidation {
         let tilt_term = |i: usize| {
             let qd = analysed.joints_display(i);
             let q = desc.q_from_display(&qd);
-            let l = analysis.extrinsics.cavity(&analysis.chain.end_effector(&q)).map(|c| c.length_um.abs()).unwrap_or(0.0);
+            let l =
+                analysis.extrinsics.cavity(&analysis.chain.end_effector(&q)).map(|c| c.length_um.abs()).unwrap_or(0.0);
             analysis.phase_gap_nm(&fp, &qd) - l * 1e3
         };
         let t0 = tilt_term(dither_end);
         let d0 = m.track.dl_nm[dither_end];
-        let variation: Vec<f64> = (dither_end..trace.len()).map(|i| m.track.dl_nm[i] - d0 - (tilt_term(i) - t0)).collect();
+        let variation: Vec<f64> =
+            (dither_end..trace.len()).map(|i| m.track.dl_nm[i] - d0 - (tilt_term(i) - t0)).collect();
         let (lo, hi) = variation.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
         Ok(ValidationFigure {
             motion,
