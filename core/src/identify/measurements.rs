@@ -570,6 +570,36 @@ mod tests {
         (run.traces.remove(0), model, fp)
     }
 
+    /// A sweep analysed with a seed fitted under another model of the same bench (other
+    /// extrinsics, the same optics and air) gives exactly the observation of a fresh analysis:
+    /// the seed does not depend on the extrinsics, the refinement that does runs again.
+    #[test]
+    fn a_seeded_sweep_gives_the_same_observation_as_a_fresh_analysis() {
+        use crate::bench::{run_plan, RunControl, VirtualBench};
+        use crate::model::extrinsics::Extrinsics;
+        use crate::plan::{Plan, Segment};
+        let preset = crate::bench::BenchPreset::resolve("table2-ideal").unwrap();
+        let mut bench = VirtualBench::new(&preset, Some(3)).unwrap();
+        let sweep = Segment::Sweep { from_nm: 1555.0, to_nm: 1565.0, rate_nm_per_s: 5.0, label: "sweep".into() };
+        let plan = Plan { name: "sweep".into(), description: String::new(), segments: vec![sweep] };
+        let cancel = std::sync::atomic::AtomicBool::new(false);
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        let run = run_plan(&mut bench, &plan, &mut control);
+        run.outcome.unwrap();
+        let nominal = PhaseModel::of_preset(&preset, Extrinsics::nominal_design()).unwrap();
+        let table2 = PhaseModel::of_preset(&preset, Extrinsics::table2()).unwrap();
+        let seeds = sweep_seeds(&run.traces, &nominal);
+        assert!(seeds.iter().all(Option::is_some), "every sweep seeded");
+        let options = ExtractOptions::default();
+        let fresh = observations_from_traces(&run.traces, &table2, &options).observations;
+        let seeded = observations_from_seeded(&run.traces, &seeds, &table2, &options).observations;
+        assert_eq!(fresh.len(), 1);
+        assert_eq!(fresh, seeded);
+        // The refinement does depend on the model: the nominal one reads another gap.
+        let nominal_obs = observations_from_seeded(&run.traces, &seeds, &nominal, &options).observations;
+        assert_ne!(nominal_obs[0].value(), fresh[0].value());
+    }
+
     /// The fringe amplitudes of a trace.
     fn amplitudes_of(trace: &crate::trace::Trace, model: &PhaseModel, neighbours: bool) -> Vec<Observation> {
         let options = ExtractOptions { amplitude_neighbours: neighbours, ..ExtractOptions::default() };
