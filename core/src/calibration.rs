@@ -8,7 +8,6 @@
 
 use crate::bench::{run_plan, Bench, RunControl};
 use crate::identify::joint::analyse_estimate;
-use crate::identify::multistart::model_with;
 pub use crate::identify::multistart::{identify, Identification, Mode};
 use crate::identify::observability::IdentifiabilityReport;
 use crate::identify::signs::{translation_signs, TranslationSign};
@@ -20,8 +19,8 @@ use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::phase::PhaseModel;
 use crate::plan::Plan;
 use crate::trace::Trace;
+use crate::validate::before_after::{run_before_and_after, BeforeAndAfter};
 use crate::validate::forecast::{forecast, ValidationForecast};
-use crate::validate::{run_validation, ValidationMotion};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
 
@@ -430,24 +429,19 @@ fn withhold_undetermined(rows: &mut [ParameterRow], fit: &FitCheck) {
 }
 
 /// The validation motions planned with the nominal extrinsics (before) and with `identified`
-/// (after), run on the bench and measured with the identified model.
+/// (after), run on the bench and measured with the identified model
+/// ([`run_before_and_after`], what the GUI's validation runs).
 pub fn validation_rows(bench: &mut dyn Bench, nominal: &PhaseModel, identified: &Extrinsics) -> Vec<ValidationRow> {
-    let after_model = model_with(nominal, *identified);
-    ValidationMotion::ALL
-        .iter()
-        .map(|&m| {
-            let before = run_validation(bench, &after_model, &nominal.extrinsics, m, [0.0; 6]);
-            let after = run_validation(bench, &after_model, identified, m, [0.0; 6]);
-            let note = crate::validate::pair_note(&before, &after);
-            ValidationRow {
-                motion: m.name().to_string(),
-                before_nm: before.as_ref().ok().map(|f| f.peak_to_peak_nm),
-                after_nm: after.as_ref().ok().map(|f| f.peak_to_peak_nm),
-                paper_nm: m.paper_after_nm(),
-                note,
-                before_curve_nm: before.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
-                after_curve_nm: after.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
-            }
+    run_before_and_after(bench, nominal, identified)
+        .into_iter()
+        .map(|BeforeAndAfter { motion: m, before, after }| ValidationRow {
+            motion: m.name().to_string(),
+            before_nm: before.as_ref().ok().map(|f| f.peak_to_peak_nm),
+            after_nm: after.as_ref().ok().map(|f| f.peak_to_peak_nm),
+            paper_nm: m.paper_after_nm(),
+            note: crate::validate::pair_note(&before, &after),
+            before_curve_nm: before.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
+            after_curve_nm: after.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
         })
         .collect()
 }

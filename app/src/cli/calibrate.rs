@@ -10,7 +10,7 @@
 //! is written atomically. `--resume` continues a measurement a crash interrupted. The folder is locked
 //! while calibrate runs: a second photorobot writing into it is refused.
 
-use super::common::{json_text, load_plan, CliError};
+use super::common::{json_text, load_plan, timed, CliError};
 use super::progress::{Progress, INTERRUPT};
 use crate::hardware_bench::open_hardware_bench;
 use photorobot_core::bench::{Bench, BenchPreset, RunControl, VirtualBench};
@@ -156,7 +156,7 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         },
     };
     a.lab.apply(&mut session.lab);
-    let json = write_session(a, &mut session, &report)?;
+    let json = timed("write_session", || write_session(a, &mut session, &report))?;
     tracing::info!(session = %a.out.display(), converged = report.converged, "session written");
     if a.json {
         writeln!(out, "{json}")?;
@@ -205,7 +205,7 @@ fn calibrate_from_traces(
     mode: Mode,
 ) -> Result<(Session, CalibrationReport), CliError> {
     let mapping = a.mapping.as_deref().map(ColumnMapping::load).transpose()?;
-    let traces = read_folder(dir, mapping.as_ref())?;
+    let traces = timed("read_traces", || read_folder(dir, mapping.as_ref()))?;
     if std::fs::canonicalize(dir).ok() == std::fs::canonicalize(a.out.join("traces")).ok() {
         return Err(CliError::Argument {
             argument: "--out",
@@ -223,13 +223,13 @@ fn calibrate_from_traces(
         Some(m) => format!("traces imported from {} with the column mapping {}", dir.display(), m.display()),
         None => format!("traces imported from {}", dir.display()),
     };
-    for t in &traces {
-        session.add_trace(&a.out, t, None, true)?;
-    }
+    timed("copy_traces", || session.add_traces(&a.out, &traces))?;
     let duration_s = traces.iter().map(span_s).sum();
     let name = session.bench.name.clone();
-    let mut report = report_from_traces(traces, duration_s, name, nominal, mode).map_err(calibration_failed)?;
-    report.validation = predicted_validation_rows(preset, nominal, &report.extrinsics).map_err(calibration_failed)?;
+    let mut report = timed("identify", || report_from_traces(traces, duration_s, name, nominal, mode))
+        .map_err(calibration_failed)?;
+    report.validation = timed("validate", || predicted_validation_rows(preset, nominal, &report.extrinsics))
+        .map_err(calibration_failed)?;
     report.validation_predicted = true;
     Ok((session, report))
 }
@@ -305,7 +305,9 @@ fn measure_identify_validate(
     let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
     let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
     let mut writer = SessionWriter::new(&a.out, session);
-    let recorded = record_with(bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))?;
+    let recorded = timed("measure", || {
+        record_with(bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))
+    })?;
     let session = writer.into_session();
     if let Err(e) = recorded.outcome {
         progress.borrow_mut().finish();
@@ -317,10 +319,10 @@ fn measure_identify_validate(
     }
     tracing::info!(bench_time_s = recorded.duration_s, "measurement done");
     progress.borrow_mut().stage("identifying");
-    let traces = session.load_traces(&a.out)?;
+    let traces = timed("read_traces", || session.load_traces(&a.out))?;
     let name = session.bench.name.clone();
-    let mut report =
-        report_from_traces(traces, recorded.duration_s, name, nominal, mode).map_err(calibration_failed)?;
+    let mut report = timed("identify", || report_from_traces(traces, recorded.duration_s, name, nominal, mode))
+        .map_err(calibration_failed)?;
     tracing::info!(
         converged = report.converged,
         residual_rms_sigma = report.residual_rms_sigma,
@@ -329,7 +331,7 @@ fn measure_identify_validate(
     );
     report.plan_durations = durations;
     progress.borrow_mut().stage("validating");
-    report.validation = validation_rows(bench, nominal, &report.extrinsics);
+    report.validation = timed("validate", || validation_rows(bench, nominal, &report.extrinsics));
     tracing::info!(motions = report.validation.len(), "validation done");
     progress.borrow_mut().finish();
     Ok((session, report))

@@ -136,3 +136,12 @@ pub fn load_plan(name_or_path: &str) -> Result<Plan, CliError> {
         path => Plan::load(std::path::Path::new(path))?,
     })
 }
+
+/// Run one stage of a command, logging its wall time at info level (`-v` on stderr, and the
+/// session log): `stage done stage=<name> elapsed_s=<seconds>`.
+pub fn timed<T>(stage: &str, f: impl FnOnce() -> T) -> T {
+    let t0 = std::time::Instant::now();
+    let out = f();
+    tracing::info!(stage = %stage, elapsed_s = t0.elapsed().as_secs_f64(), "stage done");
+    out
+}

@@ -9,7 +9,7 @@
 //! writes them as a plan file (`discriminating-motions.ron` in the session folder) to record on
 //! the bench and add to the session's traces.
 
-use super::common::{json_text, CliError};
+use super::common::{json_text, timed, CliError};
 use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
 use photorobot_core::diagnose::motions::{BenchRunner, MotionRunner};
 use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
@@ -83,7 +83,7 @@ fn read_traces(session: &Path) -> Result<Vec<Trace>, CliError> {
 
 /// Run the workflow and print it.
 pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let traces = read_traces(&a.session)?;
+    let traces = timed("read_traces", || read_traces(&a.session))?;
     let extrinsics = Extrinsics::load(&a.session.join("extrinsics.ron"))?;
     let named = traces[0].meta.bench.trim().trim_start_matches("virtual bench ").to_string();
     let preset = chosen_preset(a, &named)?;
@@ -91,8 +91,8 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
         Some(_) => CliError::Argument { argument: "--bench", problem },
         None => invalid(&a.session.join("traces"), "# bench", format!("the model of bench `{named}`: {problem}")),
     })?;
-    let (mut d, skipped) =
-        Diagnosis::from_traces(&base, &traces, extrinsics).map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
+    let (mut d, skipped) = timed("analyse_traces", || Diagnosis::from_traces(&base, &traces, extrinsics))
+        .map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
     let mut bench = preset.as_ref().map(|p| resumed_bench(p, a.seed, &d)).transpose()?;
     let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, 0.0));
     if !a.json {
@@ -105,12 +105,14 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
             None => writeln!(out, "no bench: discriminating motions are proposed, not run")?,
         }
     }
-    run_steps(&mut d, runner.as_mut(), a.json, out)?;
+    timed("diagnose_steps", || run_steps(&mut d, runner.as_mut(), a.json, out))?;
     let result =
         d.result().cloned().ok_or_else(|| CliError::Failed { what: "diagnosis", problem: "no result".into() })?;
     drop(runner);
     let effects = d.state().map(|s| s.library_effects()).unwrap_or_default();
-    let validation = validate_added_effects(bench.as_mut(), &base, &extrinsics, &result, &effects, a.json, out)?;
+    let validation = timed("validate", || {
+        validate_added_effects(bench.as_mut(), &base, &extrinsics, &result, &effects, a.json, out)
+    })?;
     save_record(&a.session, &result, &effects, &validation)?;
     let proposed = save_proposed_plan(&d, &a.session)?;
     if a.json {

@@ -3,7 +3,7 @@
 
 use crate::identify::{parabola_top, AmplitudeNeighbours, Observation, ObservationKind, VERTEX_WINDOW_HALF_FRINGE};
 use crate::measure::extrema::{detect_extrema, Extremum, ExtremumKind, HysteresisConfig};
-use crate::measure::{self, AnalyseOptions, MeasureError, Measurement};
+use crate::measure::{self, AnalyseOptions, MeasureError, Measurement, SweepSeed};
 use crate::model::effects::update_approach;
 use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
@@ -75,7 +75,7 @@ pub fn observations_from_trace(
     options: &ExtractOptions,
     group: usize,
 ) -> Result<Vec<Observation>, MeasureError> {
-    traced(trace, model, options, group, &AnalyseOptions::default()).map(|t| t.observations)
+    traced(trace, model, options, group, &AnalyseOptions::default(), None).map(|t| t.observations)
 }
 
 /// The fringe phase a motion's tracking gives at its two ends, for the gap change across a
@@ -146,13 +146,18 @@ fn traced(
     options: &ExtractOptions,
     group: usize,
     analyse: &AnalyseOptions,
+    seed: Option<&SweepSeed>,
 ) -> Result<Traced, MeasureError> {
     let label = trace.meta.label.clone();
     let wavelength_nm = trace.wavelength_nm.first().copied().unwrap_or(1560.0);
     let mut out = Vec::new();
     let mut free_start = false;
     let mut ends = None;
-    match measure::analyse_with(trace, model, analyse)? {
+    let measured = match seed {
+        Some(seed) if crate::trace::is_sweep(trace) => measure::analyse_sweep(trace, model, Some(seed)),
+        _ => measure::analyse_with(trace, model, analyse),
+    };
+    match measured? {
         Measurement::Sweep(s) => {
             out.push(Observation {
                 label,
@@ -435,14 +440,46 @@ pub fn observations_from_traces_with(
     options: &ExtractOptions,
     free_start: &(dyn Fn(&Trace) -> bool + Sync),
 ) -> Extracted {
+    extract(earlier, traces, &[], model, options, free_start)
+}
+
+/// The extrinsics-free part of the analysis of every sweep among `traces`, in parallel (`None`
+/// for a motion, or a sweep whose fit fails: its analysis then reports why).
+pub fn sweep_seeds(traces: &[Trace], model: &PhaseModel) -> Vec<Option<SweepSeed>> {
+    use rayon::prelude::*;
+    traces.par_iter().map(|t| crate::trace::is_sweep(t).then(|| measure::sweep_seed(t, model).ok()).flatten()).collect()
+}
+
+/// [`observations_from_traces`] reusing each sweep's seed (`seeds[k]` for `traces[k]`, from
+/// [`sweep_seeds`]): the same observations, without fitting a sweep's two-beam model again for
+/// every model it is analysed with.
+pub fn observations_from_seeded(
+    traces: &[Trace],
+    seeds: &[Option<SweepSeed>],
+    model: &PhaseModel,
+    options: &ExtractOptions,
+) -> Extracted {
+    extract(&[], traces, seeds, model, options, &|_| false)
+}
+
+/// [`observations_from_traces_with`], the sweeps' seeds taken from `seeds` where given.
+fn extract(
+    earlier: &[Trace],
+    traces: &[Trace],
+    seeds: &[Option<SweepSeed>],
+    model: &PhaseModel,
+    options: &ExtractOptions,
+    free_start: &(dyn Fn(&Trace) -> bool + Sync),
+) -> Extracted {
     use rayon::prelude::*;
     // Traces are independent: analyse them in parallel, then number the amplitude groups in
     // trace order.
     let results: Vec<Result<Traced, MeasureError>> = traces
         .par_iter()
-        .map(|t| {
+        .enumerate()
+        .map(|(k, t)| {
             let analyse = AnalyseOptions { free_start: free_start(t), shaped: options.shaped, ..Default::default() };
-            traced(t, model, options, 0, &analyse)
+            traced(t, model, options, 0, &analyse, seeds.get(k).and_then(Option::as_ref))
         })
         .collect();
     let mut out = Extracted::default();
@@ -531,6 +568,36 @@ mod tests {
         let model = PhaseModel::of_preset(preset, preset.truth).unwrap();
         let fp = crate::model::optics::FabryPerot::new(&model.optics, preset.laser.wavelength_nm, model.n_air).unwrap();
         (run.traces.remove(0), model, fp)
+    }
+
+    /// A sweep analysed with a seed fitted under another model of the same bench (other
+    /// extrinsics, the same optics and air) gives exactly the observation of a fresh analysis:
+    /// the seed does not depend on the extrinsics, the refinement that does runs again.
+    #[test]
+    fn a_seeded_sweep_gives_the_same_observation_as_a_fresh_analysis() {
+        use crate::bench::{run_plan, RunControl, VirtualBench};
+        use crate::model::extrinsics::Extrinsics;
+        use crate::plan::{Plan, Segment};
+        let preset = crate::bench::BenchPreset::resolve("table2-ideal").unwrap();
+        let mut bench = VirtualBench::new(&preset, Some(3)).unwrap();
+        let sweep = Segment::Sweep { from_nm: 1555.0, to_nm: 1565.0, rate_nm_per_s: 5.0, label: "sweep".into() };
+        let plan = Plan { name: "sweep".into(), description: String::new(), segments: vec![sweep] };
+        let cancel = std::sync::atomic::AtomicBool::new(false);
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        let run = run_plan(&mut bench, &plan, &mut control);
+        run.outcome.unwrap();
+        let nominal = PhaseModel::of_preset(&preset, Extrinsics::nominal_design()).unwrap();
+        let table2 = PhaseModel::of_preset(&preset, Extrinsics::table2()).unwrap();
+        let seeds = sweep_seeds(&run.traces, &nominal);
+        assert!(seeds.iter().all(Option::is_some), "every sweep seeded");
+        let options = ExtractOptions::default();
+        let fresh = observations_from_traces(&run.traces, &table2, &options).observations;
+        let seeded = observations_from_seeded(&run.traces, &seeds, &table2, &options).observations;
+        assert_eq!(fresh.len(), 1);
+        assert_eq!(fresh, seeded);
+        // The refinement does depend on the model: the nominal one reads another gap.
+        let nominal_obs = observations_from_seeded(&run.traces, &seeds, &nominal, &options).observations;
+        assert_ne!(nominal_obs[0].value(), fresh[0].value());
     }
 
     /// The fringe amplitudes of a trace.

@@ -9,7 +9,9 @@
 //! χ² tie are reported, not silently dropped.
 
 use crate::identify::joint::{self, JointEstimate, JointOptions};
-use crate::identify::measurements::{observations_from_traces, ExtractOptions, Extracted};
+use crate::identify::measurements::{
+    observations_from_seeded, observations_from_traces, sweep_seeds, ExtractOptions, Extracted,
+};
 use crate::identify::start::{same_branch, start_branches, travels};
 use crate::identify::verdict::{BranchSummary, TIE_DELTA_CHI2};
 use crate::identify::{paper, Observation, ObservationKind};
@@ -185,7 +187,9 @@ pub(crate) fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
 pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Identification, String> {
     use rayon::prelude::*;
     let (sweeps, motions): (Vec<Trace>, Vec<Trace>) = traces.iter().cloned().partition(crate::trace::is_sweep);
-    let swept = observations_from_traces(&sweeps, nominal, &extract_options());
+    // A sweep's two-beam fit does not depend on the extrinsics: fitted once, reused by every pass.
+    let seeds = sweep_seeds(&sweeps, nominal);
+    let swept = observations_from_seeded(&sweeps, &seeds, nominal, &extract_options());
     if motions.is_empty() && swept.observations.is_empty() {
         return Err("no trace could be analysed: nothing to identify from".into());
     }
@@ -215,7 +219,7 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
                     return (name, first);
                 }
                 let e = first.estimate.extrinsics;
-                let swept = observations_from_traces(&sweeps, &model_with(nominal, e), &extract_options());
+                let swept = observations_from_seeded(&sweeps, &seeds, &model_with(nominal, e), &extract_options());
                 // Outlier traces downweighted in every branch, so that one trace its model
                 // tracked badly does not decide between branches.
                 (name, downweight_outliers(nominal, one_pass(mode, nominal, &swept, &motions, e, FINAL_PASS)))

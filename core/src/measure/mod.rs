@@ -159,13 +159,7 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         return Err(MeasureError::Trace { label, problem: "no samples".into() });
     }
     if crate::trace::is_sweep(trace) {
-        let cfg = SweepConfig { n_air: model.n_air, gouy_waist_nm: Some(model.optics.mode_field_radius_um * 1e3) };
-        let fit = sweep::fit_gap(&trace.wavelength_nm, &trace.irradiance, &cfg)
-            .map_err(|source| MeasureError::Sweep { label: label.clone(), source })?;
-        let peak_fsr = sweep::peak_fsr_gap(&trace.wavelength_nm, &trace.irradiance, model.n_air).ok();
-        let gap = refine_gap_full_model(&trace.wavelength_nm, &trace.irradiance, trace.joints_display(0), model, &fit)
-            .map_err(|problem| MeasureError::Trace { label: label.clone(), problem })?;
-        return Ok(Measurement::Sweep(SweepMeasurement { gap, fit, peak_fsr }));
+        return analyse_sweep(trace, model, None);
     }
     let wavelength_nm = trace.wavelength_nm[0];
     let hint =
@@ -236,6 +230,52 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         shaped,
         shaped_fallback,
     }))
+}
+
+/// The part of a sweep's analysis that does not depend on the extrinsics: the two-beam fit
+/// with its FFT seed, and the paper's reflection-peak gap. They read only the air index and the
+/// fiber's mode field, which every model of one bench shares, so an identifier that analyses the
+/// same sweeps with several extrinsics computes them once ([`sweep_seed`], [`analyse_sweep`]).
+#[derive(Debug, Clone)]
+pub struct SweepSeed {
+    cfg: SweepConfig,
+    fit: SweepFit,
+    peak_fsr: Option<GapEstimate>,
+}
+
+/// The sweep fit's configuration for a model: its air index and the fiber's mode field (Gouy).
+fn sweep_config(model: &PhaseModel) -> SweepConfig {
+    SweepConfig { n_air: model.n_air, gouy_waist_nm: Some(model.optics.mode_field_radius_um * 1e3) }
+}
+
+/// The extrinsics-free part of the analysis of sweep `trace` under `model` ([`SweepSeed`]).
+pub fn sweep_seed(trace: &Trace, model: &PhaseModel) -> Result<SweepSeed, MeasureError> {
+    let label = || trace.meta.label.clone();
+    if trace.is_empty() {
+        return Err(MeasureError::Trace { label: label(), problem: "no samples".into() });
+    }
+    let cfg = sweep_config(model);
+    let fit = sweep::fit_gap(&trace.wavelength_nm, &trace.irradiance, &cfg)
+        .map_err(|source| MeasureError::Sweep { label: label(), source })?;
+    let peak_fsr = sweep::peak_fsr_gap(&trace.wavelength_nm, &trace.irradiance, model.n_air).ok();
+    Ok(SweepSeed { cfg, fit, peak_fsr })
+}
+
+/// Analyse sweep `trace` with `model`: the two-beam fit ([`sweep_seed`], reused from `seed` when
+/// it was made with the same air index and mode field), refined with the model's full optics at
+/// the tilt its extrinsics give in the sweep's pose.
+pub fn analyse_sweep(trace: &Trace, model: &PhaseModel, seed: Option<&SweepSeed>) -> Result<Measurement, MeasureError> {
+    let fresh;
+    let seed = match seed {
+        Some(s) if s.cfg == sweep_config(model) => s,
+        _ => {
+            fresh = sweep_seed(trace, model)?;
+            &fresh
+        }
+    };
+    let gap = refine_gap_full_model(&trace.wavelength_nm, &trace.irradiance, trace.joints_display(0), model, &seed.fit)
+        .map_err(|problem| MeasureError::Trace { label: trace.meta.label.clone(), problem })?;
+    Ok(Measurement::Sweep(SweepMeasurement { gap, fit: seed.fit.clone(), peak_fsr: seed.peak_fsr }))
 }
 
 /// Refine a two-beam sweep fit with the full multi-beam model of the bench's optics.

@@ -154,6 +154,19 @@ impl Session {
         Ok(files::save_ron(&path, self)?)
     }
 
+    /// [`Session::add_trace`] for each of `traces` in order (complete, no plan step), their CSV
+    /// text formatted in parallel: the same files and references as one call per trace.
+    pub fn add_traces(&mut self, dir: &Path, traces: &[Trace]) -> Result<(), SessionError> {
+        use rayon::prelude::*;
+        // A trace that cannot be written is named by the folder (its file name comes later).
+        let origin = dir.join(TRACES_DIR);
+        let bytes: Vec<Result<Vec<u8>, _>> = traces.par_iter().map(|t| t.to_csv_bytes(&origin)).collect();
+        for (trace, bytes) in traces.iter().zip(bytes) {
+            self.add_trace_bytes(dir, trace, bytes?, None, true)?;
+        }
+        Ok(())
+    }
+
     /// Write a trace into the session folder (a new `traces/NNN.csv`, atomically) and reference it.
     pub fn add_trace(
         &mut self,
@@ -167,9 +180,25 @@ impl Session {
             .map(|n| format!("{TRACES_DIR}/{n:03}.csv"))
             .find(|f| !dir.join(f).exists() && self.traces.iter().all(|r| &r.file != f))
             .expect("a free name");
+        let bytes = trace.to_csv_bytes(&dir.join(&file))?;
+        self.add_trace_bytes(dir, trace, bytes, step, complete)
+    }
+
+    /// [`Session::add_trace`] with the trace's CSV text already formatted.
+    fn add_trace_bytes(
+        &mut self,
+        dir: &Path,
+        trace: &Trace,
+        bytes: Vec<u8>,
+        step: Option<(usize, usize)>,
+        complete: bool,
+    ) -> Result<&TraceRef, SessionError> {
+        let file = (self.traces.len()..)
+            .map(|n| format!("{TRACES_DIR}/{n:03}.csv"))
+            .find(|f| !dir.join(f).exists() && self.traces.iter().all(|r| &r.file != f))
+            .expect("a free name");
         let path = dir.join(&file);
         create_dir(&dir.join(TRACES_DIR))?;
-        let bytes = trace.to_csv_bytes(&path)?;
         files::write_atomic(&path, &bytes)?;
         self.traces.push(TraceRef {
             file,
@@ -228,10 +257,16 @@ impl Session {
 
     /// Read every complete trace (those an identification uses), in order.
     pub fn load_traces(&self, dir: &Path) -> Result<Vec<Trace>, SessionError> {
+        use rayon::prelude::*;
         self.traces
             .iter()
             .filter(|reference| reference.complete)
+            .collect::<Vec<_>>()
+            .par_iter()
             .map(|reference| self.load_trace(dir, reference))
+            .collect::<Vec<_>>()
+            // In order: the first failing trace is the one reported.
+            .into_iter()
             .collect()
     }
 }

@@ -355,14 +355,17 @@ pub fn csv_files(dir: &Path) -> Result<Vec<PathBuf>, FileError> {
 
 /// Read every trace of a folder: in our format without a mapping, through the mapping otherwise.
 pub fn read_folder(dir: &Path, mapping: Option<&ColumnMapping>) -> Result<Vec<Trace>, TraceError> {
+    use rayon::prelude::*;
     let options = ReadOptions::default();
-    csv_files(dir)?
-        .iter()
+    // Read in parallel; the first failing file (in name order) is the one reported.
+    let read: Vec<Result<Trace, TraceError>> = csv_files(dir)?
+        .par_iter()
         .map(|p| match mapping {
             Some(m) => import_file(p, m, &options),
             None => Trace::read_csv_with(p, &options),
         })
-        .collect()
+        .collect();
+    read.into_iter().collect()
 }
 
 #[cfg(test)]

@@ -417,6 +417,32 @@ pub fn run_validation_planned(
     start: [f64; 6],
     compensation: &Compensation,
 ) -> Result<ValidationFigure, ValidationError> {
+    record_validation(bench, planning, planned_with, motion, start, compensation)?.measure(analysis)
+}
+
+/// A validation motion recorded on a bench, not yet measured ([`RecordedValidation::measure`]):
+/// the bench runs one motion after another, the fringe analyses of several can then run at once.
+#[derive(Debug, Clone)]
+pub struct RecordedValidation {
+    motion: ValidationMotion,
+    /// The recorded trace (all waypoints joined).
+    trace: Trace,
+    /// The trace with the stages' modelled real joints, for stages with play.
+    real: Option<Trace>,
+    /// The first sample of the motion proper (after the envelope dither).
+    dither_end: usize,
+}
+
+/// The bench half of [`run_validation_planned`]: plan with `planned_with` through the IGM of
+/// `planning`, compensate what `compensation` says, and run on the bench from `start`.
+pub fn record_validation(
+    bench: &mut dyn Bench,
+    planning: &PhaseModel,
+    planned_with: &Extrinsics,
+    motion: ValidationMotion,
+    start: [f64; 6],
+    compensation: &Compensation,
+) -> Result<RecordedValidation, ValidationError> {
     let count = motion.waypoint_count();
     let play = &compensation.play;
     let mut w = waypoints(planning, planned_with, motion, start, count)?;
@@ -441,60 +467,72 @@ pub fn run_validation_planned(
     let trace =
         join(&run.traces).ok_or(ValidationError::Run { motion: motion.name(), problem: "nothing recorded".into() })?;
     let real = if play.iter().any(|w| *w != 0.0) { Some(modelled_real_joints(&trace, play, state)) } else { None };
-    let analysed = real.as_ref().unwrap_or(&trace);
     let dither_end = {
         let dither = join(&run.traces.iter().filter(|t| t.meta.label == ENVELOPE_DITHER).cloned().collect::<Vec<_>>());
         dither.map_or(0, |d| d.len())
     };
-    // A motion whose model gap moves less than two fringes after the dither (the circle, the
-    // rotation about the optical axis) is tracked with the phase free of the hint in time: its
-    // own fringes do not pin the phase, and the default walk pulls it toward the plan
-    // ([`measure::AnalyseOptions::free_phase_after`]). The rotations about X_f and Z_f, whose
-    // gap moves by 3-6 fringes, track closer to the truth with the default: on the hidden-pivot
-    // diagnosis's model (`validation_truth` example, tracked with the data's harmonic profile)
-    // 12.3 and 9.4 nm at worst, 14.4 and 11.5 nm free; the circle 4.1 nm default, 0.5 nm free;
-    // the optical axis 1.3 and 0.8 nm. With the model's fringe shape (below) the circle still
-    // needs it: 4.2 nm off the truth with the default walk, 0.1 nm free.
-    //
-    // Every validation motion is tracked with the analysis model's fringe shape: that model is
-    // a fitted one (the calibrated or the diagnosed model), which is what the shaped tracker
-    // needs, and the rotations' tilt changes the fringe's contrast about fivefold, which the
-    // harmonic profile estimated from the data follows late. On the `validation_truth`
-    // example the rotations about X_f and Z_f tracked 0.2 and 0.3 nm off the truth at worst
-    // (12.3 and 9.4 nm with the estimated profile); the circle 0.1 nm, the optical axis 0.0 nm
-    // (test `validation_rotations_track_their_gap_within_a_nanometre`). A trace the model's
-    // shape cannot be tracked on falls back to the estimated profile (`analyse_with`).
-    let options = measure::AnalyseOptions { free_phase_after: Some(dither_end), shaped: true, ..Default::default() };
-    let Measurement::Motion(m) = measure::analyse_with(analysed, analysis, &options)
-        .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?
-    else {
-        return Err(ValidationError::Run { motion: motion.name(), problem: "not a motion trace".into() });
-    };
-    // Tilt correction: the model's phase-equivalent gap minus the geometric |L| (nm).
-    let fp = crate::model::optics::FabryPerot::new(&analysis.optics, m.wavelength_nm, analysis.n_air)
-        .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?;
-    let desc = analysis.chain.description();
-    let tilt_term = |i: usize| {
-        let qd = analysed.joints_display(i);
-        let q = desc.q_from_display(&qd);
-        let l = analysis.extrinsics.cavity(&analysis.chain.end_effector(&q)).map(|c| c.length_um.abs()).unwrap_or(0.0);
-        analysis.phase_gap_nm(&fp, &qd) - l * 1e3
-    };
-    let t0 = tilt_term(dither_end);
-    let d0 = m.track.dl_nm[dither_end];
-    let variation: Vec<f64> = (dither_end..trace.len()).map(|i| m.track.dl_nm[i] - d0 - (tilt_term(i) - t0)).collect();
-    let (lo, hi) = variation.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-    Ok(ValidationFigure {
-        motion,
-        peak_to_peak_nm: hi - lo,
-        trace,
-        variation_nm: variation,
-        motion_start: dither_end,
-        tracked_dl_nm: m.track.dl_nm,
-        tracked_sigma_nm: m.track.sigma_dl_nm,
-        tracked_with_model_shape: m.shaped,
-        shape_fallback: m.shaped_fallback,
-    })
+    Ok(RecordedValidation { motion, trace, real, dither_end })
+}
+
+impl RecordedValidation {
+    /// The analysis half of [`run_validation_planned`]: the figure of merit measured with
+    /// `analysis` (the best model available: it sets the motion hint and the tilt correction).
+    pub fn measure(self, analysis: &PhaseModel) -> Result<ValidationFigure, ValidationError> {
+        let RecordedValidation { motion, trace, real, dither_end } = self;
+        let analysed = real.as_ref().unwrap_or(&trace);
+        // A motion whose model gap moves less than two fringes after the dither (the circle, the
+        // rotation about the optical axis) is tracked with the phase free of the hint in time: its
+        // own fringes do not pin the phase, and the default walk pulls it toward the plan
+        // ([`measure::AnalyseOptions::free_phase_after`]). The rotations about X_f and Z_f, whose
+        // gap moves by 3-6 fringes, track closer to the truth with the default: on the hidden-pivot
+        // diagnosis's model (`validation_truth` example, tracked with the data's harmonic profile)
+        // 12.3 and 9.4 nm at worst, 14.4 and 11.5 nm free; the circle 4.1 nm default, 0.5 nm free;
+        // the optical axis 1.3 and 0.8 nm. With the model's fringe shape (below) the circle still
+        // needs it: 4.2 nm off the truth with the default walk, 0.1 nm free.
+        //
+        // Every validation motion is tracked with the analysis model's fringe shape: that model is
+        // a fitted one (the calibrated or the diagnosed model), which is what the shaped tracker
+        // needs, and the rotations' tilt changes the fringe's contrast about fivefold, which the
+        // harmonic profile estimated from the data follows late. On the `validation_truth`
+        // example the rotations about X_f and Z_f tracked 0.2 and 0.3 nm off the truth at worst
+        // (12.3 and 9.4 nm with the estimated profile); the circle 0.1 nm, the optical axis 0.0 nm
+        // (test `validation_rotations_track_their_gap_within_a_nanometre`). A trace the model's
+        // shape cannot be tracked on falls back to the estimated profile (`analyse_with`).
+        let options =
+            measure::AnalyseOptions { free_phase_after: Some(dither_end), shaped: true, ..Default::default() };
+        let Measurement::Motion(m) = measure::analyse_with(analysed, analysis, &options)
+            .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?
+        else {
+            return Err(ValidationError::Run { motion: motion.name(), problem: "not a motion trace".into() });
+        };
+        // Tilt correction: the model's phase-equivalent gap minus the geometric |L| (nm).
+        let fp = crate::model::optics::FabryPerot::new(&analysis.optics, m.wavelength_nm, analysis.n_air)
+            .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?;
+        let desc = analysis.chain.description();
+        let tilt_term = |i: usize| {
+            let qd = analysed.joints_display(i);
+            let q = desc.q_from_display(&qd);
+            let l =
+                analysis.extrinsics.cavity(&analysis.chain.end_effector(&q)).map(|c| c.length_um.abs()).unwrap_or(0.0);
+            analysis.phase_gap_nm(&fp, &qd) - l * 1e3
+        };
+        let t0 = tilt_term(dither_end);
+        let d0 = m.track.dl_nm[dither_end];
+        let variation: Vec<f64> =
+            (dither_end..trace.len()).map(|i| m.track.dl_nm[i] - d0 - (tilt_term(i) - t0)).collect();
+        let (lo, hi) = variation.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        Ok(ValidationFigure {
+            motion,
+            peak_to_peak_nm: hi - lo,
+            trace,
+            variation_nm: variation,
+            motion_start: dither_end,
+            tracked_dl_nm: m.track.dl_nm,
+            tracked_sigma_nm: m.track.sigma_dl_nm,
+            tracked_with_model_shape: m.shaped,
+            shape_fallback: m.shaped_fallback,
+        })
+    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,94 @@
+//! Wall time of the user's chain on a fixed seed: `calibrate` on the virtual bench, `calibrate
+//! --traces` on the traces it recorded, and `diagnose` on its session, each run as the release
+//! `photorobot` binary with `-v`. Prints each command's wall time, each stage's time as the
+//! command logs it (`stage done stage=<name> elapsed_s=<s>`), and the chain's time over the time
+//! it takes just to read the session's CSV traces.
+//!
+//!     cargo build --release -p photorobot
+//!     cargo run --release -p photorobot-e2e --example wall_time -- [SEED] [--bin PATH]
+//!
+//! SEED defaults to 7 (bench table2-ideal, joint mode); PATH to target/release/photorobot.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+/// One command's run: its wall time (s) and the stages it logged (name, s).
+struct Timed {
+    wall_s: f64,
+    stages: Vec<(String, f64)>,
+}
+
+/// Run `bin` with `args` (and `-v`), failing loudly on a non-zero exit except for `ok_codes`.
+fn run(bin: &Path, args: &[&str], ok_codes: &[i32]) -> Timed {
+    let t0 = Instant::now();
+    let out = Command::new(bin).arg("-v").args(args).output().unwrap_or_else(|e| panic!("cannot run {bin:?}: {e}"));
+    let wall_s = t0.elapsed().as_secs_f64();
+    let code = out.status.code().unwrap_or(-1);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(ok_codes.contains(&code), "photorobot {} exited with {code}:\n{stderr}", args.join(" "));
+    Timed { wall_s, stages: stages(&stderr) }
+}
+
+/// The `stage done` events of a command's log.
+fn stages(log: &str) -> Vec<(String, f64)> {
+    let field = |line: &str, key: &str| -> Option<String> {
+        let at = line.find(&format!("{key}="))? + key.len() + 1;
+        Some(line[at..].split_whitespace().next()?.to_string())
+    };
+    log.lines()
+        .filter(|l| l.contains("stage done"))
+        .filter_map(|l| Some((field(l, "stage")?, field(l, "elapsed_s")?.parse().ok()?)))
+        .collect()
+}
+
+fn print(name: &str, t: &Timed) {
+    println!("{name:<28} {:>8.2} s wall", t.wall_s);
+    for (stage, s) in &t.stages {
+        println!("    {stage:<24} {s:>8.2} s");
+    }
+}
+
+/// Time to read every CSV trace of `dir` (s), once, in parallel as the commands do.
+fn read_csvs_s(dir: &Path) -> (f64, usize) {
+    let t0 = Instant::now();
+    let traces = photorobot_core::trace::import::read_folder(dir, None).expect("the session's traces");
+    (t0.elapsed().as_secs_f64(), traces.iter().map(|t| t.len()).sum())
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let seed = args.iter().find_map(|a| a.parse::<u64>().ok()).unwrap_or(7).to_string();
+    let bin = args
+        .iter()
+        .position(|a| a == "--bin")
+        .and_then(|i| args.get(i + 1))
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/release/photorobot"));
+    assert!(bin.is_file(), "{bin:?} not found: cargo build --release -p photorobot first");
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let (s, s2) = (dir.path().join("s"), dir.path().join("s2"));
+    let (s_str, s2_str) = (s.to_str().unwrap(), s2.to_str().unwrap());
+    let traces = s.join("traces");
+    let calibrate =
+        run(&bin, &["calibrate", "--bench", "table2-ideal", "--seed", &seed, "--mode", "joint", "--out", s_str], &[0]);
+    let from_traces = run(
+        &bin,
+        &["calibrate", "--bench", "table2-ideal", "--traces", traces.to_str().unwrap(), "--out", s2_str],
+        &[0],
+    );
+    let diagnose = run(&bin, &["diagnose", s_str], &[0]);
+    let (read_s, samples) = read_csvs_s(&traces);
+    println!("seed {seed}: {samples} samples in {} traces", std::fs::read_dir(&traces).unwrap().count());
+    print("calibrate (virtual bench)", &calibrate);
+    print("calibrate --traces", &from_traces);
+    print("diagnose", &diagnose);
+    let chain = calibrate.wall_s + from_traces.wall_s + diagnose.wall_s;
+    println!("reading the CSV traces alone: {read_s:.2} s");
+    println!("chain {chain:.2} s = {:.1} × the time to read the CSVs", chain / read_s);
+    println!(
+        "calibrate --traces {:.2} s = {:.1} × the time to read the CSVs",
+        from_traces.wall_s,
+        from_traces.wall_s / read_s
+    );
+}
