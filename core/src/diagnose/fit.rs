@@ -110,8 +110,12 @@ impl Predictor {
         } else {
             &self.fps
         };
+        // Observations are independent (an amplitude's prediction costs a few hundred of a gap
+        // change's): spread them over threads.
+        use rayon::prelude::*;
         Ok(obs
-            .iter()
+            .par_iter()
+            .with_min_len(16)
             .map(|o| {
                 let gain = match o.kind {
                     ObservationKind::FringeAmplitude { group, .. } => gains.get(group).copied().unwrap_or(1.0),
