@@ -110,8 +110,12 @@ impl Predictor {
         } else {
             &self.fps
         };
+        // Observations are independent (an amplitude's prediction costs a few hundred of a gap
+        // change's): spread them over threads.
+        use rayon::prelude::*;
         Ok(obs
-            .iter()
+            .par_iter()
+            .with_min_len(16)
             .map(|o| {
                 let gain = match o.kind {
                     ObservationKind::FringeAmplitude { group, .. } => gains.get(group).copied().unwrap_or(1.0),
@@ -232,6 +236,10 @@ pub fn rms(v: &DVector<f64>) -> f64 {
     }
 }
 
+/// The whitened Jacobian at `x`. Extrinsic and effect columns by central differences (1e-4
+/// mrad or µm, 1e-2 of an effect's step), spread over threads; the gain columns in closed
+/// form: a prediction is linear in its group's gain, so its derivative is the prediction
+/// divided by the gain (what a central difference gives, without two predictions per gain).
 fn jacobian(
     p: &Predictor,
     layout: &Layout,
@@ -239,23 +247,37 @@ fn jacobian(
     x: &DVector<f64>,
     obs: &[Observation],
 ) -> Result<DMatrix<f64>, EffectError> {
+    use rayon::prelude::*;
+    let n_differenced = layout.free.len() + layout.effects;
+    let columns: Vec<DVector<f64>> = (0..n_differenced)
+        .into_par_iter()
+        .map(|c| {
+            let h = if c < layout.free.len() { 1e-4 } else { 1e-2 };
+            let (mut a, mut b) = (x.clone(), x.clone());
+            a[c] += h;
+            b[c] -= h;
+            // Residuals are measured − predicted: the prediction's derivative is minus theirs.
+            let ra = p.whitened_residuals(&layout.unpack(template, &a), obs)?;
+            let rb = p.whitened_residuals(&layout.unpack(template, &b), obs)?;
+            Ok((rb - ra) / (2.0 * h))
+        })
+        .collect::<Result<_, EffectError>>()?;
     let mut j = DMatrix::zeros(obs.len(), x.len());
-    for c in 0..x.len() {
-        // Steps: 1e-4 mrad or µm, 1e-2 of an effect's step, 1e-6 of a gain.
-        let h = if c < layout.free.len() {
-            1e-4
-        } else if c < layout.free.len() + layout.effects {
-            1e-2
-        } else {
-            1e-6 * x[c].abs().max(1e-9)
-        };
-        let (mut a, mut b) = (x.clone(), x.clone());
-        a[c] += h;
-        b[c] -= h;
-        // Residuals are measured − predicted: the prediction's derivative is minus theirs.
-        let ra = p.whitened_residuals(&layout.unpack(template, &a), obs)?;
-        let rb = p.whitened_residuals(&layout.unpack(template, &b), obs)?;
-        j.set_column(c, &((rb - ra) / (2.0 * h)));
+    for (c, col) in columns.iter().enumerate() {
+        j.set_column(c, col);
+    }
+    if layout.gains > 0 {
+        let state = layout.unpack(template, x);
+        let predicted = p.predict(&state.extrinsics, &state.library_effects(), &state.gains, obs)?;
+        for (i, (o, pi)) in obs.iter().zip(&predicted).enumerate() {
+            if let ObservationKind::FringeAmplitude { group, .. } = o.kind {
+                let gain = state.gains[group];
+                // A prediction the beam misses has a constant residual: no derivative.
+                if pi.is_finite() && gain != 0.0 {
+                    j[(i, n_differenced + group)] = pi / gain / o.sigma;
+                }
+            }
+        }
     }
     Ok(j)
 }

@@ -564,8 +564,9 @@ impl MotionRunner for BenchRunner<'_> {
     }
 
     fn reanalyse(&self, analysis: &PhaseModel) -> Option<Vec<Observation>> {
-        // Shaped, as the diagnosis re-analyses its session ([`crate::diagnose::settings::REANALYSE_OPTIONS`]).
-        Some(self.extract(0, analysis, &ExtractOptions { shaped: true, ..self.options }))
+        // Shaped, and the sweeps kept from their first extraction, as the diagnosis re-analyses
+        // its session ([`crate::diagnose::settings::REANALYSE_OPTIONS`]).
+        Some(self.extract(0, analysis, &ExtractOptions { shaped: true, sweeps: false, ..self.options }))
     }
 }
 

@@ -21,6 +21,7 @@ pub const EXTRACT_OPTIONS: ExtractOptions = ExtractOptions {
     gap_across_pauses: true,
     shaped: false,
     max_amplitudes_per_trace: None,
+    sweeps: true,
 };
 /// How the diagnosis analyses the traces again once an effect is named ([`EXTRACT_OPTIONS`],
 /// tracked with the model's fringe shape). The first extraction estimates the fringe's shape
@@ -29,7 +30,7 @@ pub const EXTRACT_OPTIONS: ExtractOptions = ExtractOptions {
 /// refitted and the named effects are in the model, optical ones included, so the model's shape
 /// is the better one: with the data-estimated shape a hidden q4 pivot offset drags a spurious
 /// joint scale error along with it (see docs/diagnosis.md).
-pub const REANALYSE_OPTIONS: ExtractOptions = ExtractOptions { shaped: true, ..EXTRACT_OPTIONS };
+pub const REANALYSE_OPTIONS: ExtractOptions = ExtractOptions { shaped: true, sweeps: false, ..EXTRACT_OPTIONS };
 /// Label prefix of the discriminating motions ([`motions::pool`]).
 pub const DISCRIMINATING_PREFIX: &str = "D ";
 /// At most this many discriminating motions per design: room for a reversal of each prismatic

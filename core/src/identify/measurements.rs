@@ -45,6 +45,10 @@ pub struct ExtractOptions {
     /// rotation about the beam at a lateral offset runs through hundreds of fringes at an
     /// almost constant tilt: its amplitudes add little and cost the fit a power model each.
     pub max_amplitudes_per_trace: Option<usize>,
+    /// Analyse sweep traces into absolute gaps. `false` passes them over (no observation; the
+    /// stages' approach directions still follow them): for a caller that keeps an earlier
+    /// extraction of the sweeps, whose analysis is the costliest part of a session's.
+    pub sweeps: bool,
 }
 
 /// Shortest pause between two motions at the same pose that gives a gap change across it (s):
@@ -63,6 +67,7 @@ impl Default for ExtractOptions {
             gap_across_pauses: false,
             shaped: false,
             max_amplitudes_per_trace: None,
+            sweeps: true,
         }
     }
 }
@@ -478,6 +483,10 @@ fn extract(
         .par_iter()
         .enumerate()
         .map(|(k, t)| {
+            if !options.sweeps && crate::trace::is_sweep(t) {
+                // What an analysed sweep gives besides its absolute gap: no phase at its ends.
+                return Ok(Traced { observations: Vec::new(), free_start: false, ends: None });
+            }
             let analyse = AnalyseOptions { free_start: free_start(t), shaped: options.shaped, ..Default::default() };
             traced(t, model, options, 0, &analyse, seeds.get(k).and_then(Option::as_ref))
         })

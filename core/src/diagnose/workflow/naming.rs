@@ -168,14 +168,15 @@ impl Diagnosis {
         if self.session_traces.is_empty() && again.is_none() {
             return Ok(());
         }
-        let first_gaps: Vec<Observation> = self
-            .observations
-            .iter()
-            .filter(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. }))
-            .cloned()
-            .collect();
+        // Absolute gaps keep their first extraction (the sweeps are not analysed again): the
+        // full-model refinement of a sweep takes the tilt from the model, and the fiber's
+        // direction is poorly determined by gap changes (it enters them at second order near
+        // alignment): re-extracted with the fitted extrinsics the sweeps moved by 0.2 µm (10σ)
+        // and a joint scale error absorbed it.
+        let (first_gaps, moves): (Vec<Observation>, Vec<Observation>) =
+            self.observations.drain(..).partition(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. }));
         let (recorded, designed): (Vec<Observation>, Vec<Observation>) =
-            self.observations.drain(..).partition(|o| !o.label.starts_with(DISCRIMINATING_PREFIX));
+            moves.into_iter().partition(|o| !o.label.starts_with(DISCRIMINATING_PREFIX));
         let mut obs = if self.session_traces.is_empty() {
             recorded
         } else {
@@ -184,15 +185,7 @@ impl Diagnosis {
         };
         obs.extend(again.unwrap_or(designed));
         obs.retain(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0);
-        // Absolute gaps keep their first extraction: the full-model refinement of a sweep takes
-        // the tilt from the model, and the fiber's direction is poorly determined by gap changes
-        // (it enters them at second order near alignment): re-extracted with the fitted
-        // extrinsics the sweeps moved by 0.2 µm (10σ) and a joint scale error absorbed it.
-        for o in obs.iter_mut().filter(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. })) {
-            if let Some(first) = first_gaps.iter().find(|p| p.label == o.label) {
-                *o = first.clone();
-            }
-        }
+        obs.extend(first_gaps);
         self.predictor.extend(&obs).map_err(DiagnoseError::Model)?;
         self.held_out = held_out_mask(&obs);
         self.observations = obs;
