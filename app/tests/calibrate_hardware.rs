@@ -39,8 +39,13 @@ fn emulated_bench(preset: &BenchPreset, seed: u64, config: HardwareConfig, dir: 
     EmulatedBench { _stages: stages, _laser: laser, file }
 }
 
+/// The two calibrations run one after the other: each runs emulators and the binary against the
+/// clock, and two at once on a 2-core machine would time their polls out of step.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_file() {
+    let _one_at_a_time = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
     let dir = tempfile::tempdir().unwrap();
     let bench = emulated_bench(&preset, 5, HardwareConfig::femto(), dir.path());
@@ -76,16 +81,18 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
     assert!(traces[1].wavelength_nm.iter().all(|w| (w - preset.laser.wavelength_nm).abs() < 1e-6));
 }
 
-/// Emulated seconds per real second of the calibration below: the SmarAct positions are polled,
-/// so a poll's one-way latency becomes a timing error that grows with the scale (measured on a
-/// loaded 2-core host at 4×, every parameter lands within 3σ of the truth, as at 1×).
-const TIME_SCALE: f64 = 4.0;
+/// Emulated seconds per real second of the calibration below. The SmarAct positions are polled,
+/// so a poll's one-way latency becomes a timing error that grows with the scale: at 4× on a loaded
+/// 2-core host the short designed plan came out ambiguous once (two branches tied), so the suite
+/// runs it in real time, where every parameter lands within 3σ.
+const TIME_SCALE: f64 = 1.0;
 
 /// The experiment design's plan (`--plan optimised`: 26.5 s of bench time) through TCP on the
-/// emulated optical bench at 4× real time: the calibration converges, fits, and every parameter
+/// emulated optical bench: the calibration converges, fits, and every parameter
 /// it reports as determined lies within 3σ of the preset's hidden truth.
 #[test]
-fn a_designed_plan_on_fast_emulators_lands_within_3_sigma_of_the_truth() {
+fn a_designed_plan_through_tcp_lands_within_3_sigma_of_the_truth() {
+    let _one_at_a_time = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
     let dir = tempfile::tempdir().unwrap();
     let config = HardwareConfig { time_scale: TIME_SCALE, ..HardwareConfig::femto() };
