@@ -45,6 +45,17 @@ fn stop_and_wait(h: &mut Harness<'_, Workbench>, label: &str, motion: Motion, wi
 #[test]
 fn stop_ends_a_validation_run_and_the_motions_say_cancelled() {
     let mut h = harness(workbench(Settings::default()));
+    // The virtual bench records the validation motions in a few milliseconds; a real one takes
+    // seconds, which is when a technician presses Stop.
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    let bench = PanicsAt {
+        inner: VirtualBench::new(&preset, Some(1)).unwrap(),
+        at: 0,
+        count: 0,
+        delay: Duration::from_millis(50),
+    };
+    let nominal = h.state().state.worker.nominal.clone();
+    h.state_mut().state.worker = Worker::start(Box::new(bench), nominal, Pace::Unpaced, Box::new(|| {}));
     open(&mut h, Tab::Validation);
     let identified = h.state().state.extrinsics;
     h.state_mut().state.worker.send(Command::Validate { identified });
@@ -183,11 +194,13 @@ fn f5_and_redo_on_a_stopped_step_ask_and_keep_keeps_its_traces() {
     stop_and_wait(&mut h, "Stop (Esc)", Motion::Step, Duration::from_secs(60));
 }
 
-/// A bench that panics in its `at`-th segment (from 1), as a driver bug would.
+/// A bench that panics in its `at`-th segment (from 1), as a driver bug would, and takes at least
+/// `delay` per segment, as a real bench does.
 struct PanicsAt {
     inner: VirtualBench,
     at: usize,
     count: usize,
+    delay: Duration,
 }
 
 impl Bench for PanicsAt {
@@ -220,6 +233,7 @@ impl Bench for PanicsAt {
     ) -> Result<Option<Trace>, BenchError> {
         self.count += 1;
         assert!(self.count != self.at, "injected driver fault in segment {}", self.count);
+        std::thread::sleep(self.delay);
         self.inner.run_segment(segment, meta, control)
     }
     fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
@@ -234,7 +248,7 @@ fn a_worker_panic_is_shown_and_the_traces_recorded_before_it_are_kept() {
     h.state_mut().state.session.dir = Some(dir.path().join("session"));
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
     let at = 8;
-    let bench = PanicsAt { inner: VirtualBench::new(&preset, Some(1)).unwrap(), at, count: 0 };
+    let bench = PanicsAt { inner: VirtualBench::new(&preset, Some(1)).unwrap(), at, count: 0, delay: Duration::ZERO };
     let nominal = h.state().state.worker.nominal.clone();
     h.state_mut().state.worker = Worker::start(Box::new(bench), nominal, Pace::Unpaced, Box::new(|| {}));
     open(&mut h, Tab::Wizard);
