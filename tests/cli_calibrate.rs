@@ -137,3 +137,49 @@ fn paper_mode_on_the_strategies_traces_determines_the_lamella_angles_and_flags_t
     let split = ["Z_et", "y_wf"].iter().filter(|n| parameter(&paper, n)["determined"] == false).count();
     assert!(split >= 1, "the split of the gap between Z_et and y_wf is flagged");
 }
+
+/// A bench without a tunable laser (here `--no-sweeps` on the virtual bench): the plans run
+/// without their sweeps, the report names what that costs (computed by the identifier's own
+/// analyses), and every parameter it still reports as determined lies within 3σ of the truth.
+#[test]
+fn without_sweeps_the_calibration_runs_names_its_cost_and_stays_honest() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut out = Vec::new();
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--seed", "7", "--no-sweeps", "--out"];
+    let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
+    argv.push(dir.path().display().to_string());
+    // An ambiguous fit is reported (exit 1) and written all the same: the report is what counts.
+    let outcome = run(argv, &mut out);
+    let text = String::from_utf8_lossy(&out);
+    eprintln!("{text}\n{outcome:?}");
+    let doc: Value = serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    let session = photorobot_core::session::Session::load(dir.path()).unwrap();
+    assert!(session.plans.iter().all(|p| p.sweeps() == 0), "the session's plans are the ones run");
+    let traces = session.load_traces(dir.path()).unwrap();
+    assert!(!traces.is_empty() && traces.iter().all(|t| !photorobot_core::trace::is_sweep(t)));
+    // The cost is named: the translations the sweeps would have signed, and what is lost.
+    let cost = &doc["sweep_cost"];
+    assert_eq!(cost["predicted"], false);
+    assert!(!cost["signed_by_sweeps"].as_array().unwrap().is_empty(), "{cost}");
+    let lost = cost["undetermined"].as_array().unwrap().len()
+        + cost["unseen"].as_array().unwrap().len()
+        + cost["sign_open"].as_array().unwrap().len()
+        + cost["unsigned"].as_array().unwrap().len();
+    assert!(lost > 0, "leaving the sweeps out costs something: {cost}");
+    if matches!(outcome, Ok(Outcome::Done)) {
+        assert!(text.contains("no wavelength sweeps (no tunable laser, or --no-sweeps): what that costs"), "{text}");
+    }
+    for p in cost["undetermined"].as_array().unwrap() {
+        let name = p["name"].as_str().unwrap();
+        assert_eq!(parameter(&doc, name)["determined"], false, "{name} is reported lost and not determined");
+    }
+    let truth = Extrinsics::table2().to_array();
+    for (i, (name, _)) in photorobot_core::model::extrinsics::PARAMETER_NAMES.iter().enumerate() {
+        let p = parameter(&doc, name);
+        if p["determined"] == true {
+            let sigma = p["sigma"].as_f64().unwrap();
+            let err = p["value"].as_f64().unwrap() - truth[i];
+            assert!(err.abs() <= 3.0 * sigma, "{name}: error {err} beyond 3σ = {}", 3.0 * sigma);
+        }
+    }
+}

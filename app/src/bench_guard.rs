@@ -67,6 +67,9 @@ impl Bench for GuardedBench {
     fn clock_s(&self) -> f64 {
         self.inner.clock_s()
     }
+    fn tunable_laser(&self) -> bool {
+        self.inner.tunable_laser()
+    }
 
     /// Run the segment with the shared stop flag in place of the caller's (a stop already
     /// requested refuses it at once), keeping its trace when keeping is on.

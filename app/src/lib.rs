@@ -13,5 +13,6 @@ pub mod motion;
 pub mod session_io;
 pub mod settings;
 pub mod state;
+pub mod sweep_forecast;
 pub mod views;
 pub mod worker;

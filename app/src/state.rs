@@ -342,6 +342,8 @@ pub struct AppState {
     pub worker_failure: Option<String>,
     /// Every status and error message, with its time (the message panel).
     pub messages: crate::messages::Messages,
+    /// What leaving the sweeps out costs, forecast for a bench without a tunable laser.
+    pub sweep_forecast: crate::sweep_forecast::SweepForecast,
 }
 
 impl AppState {
@@ -369,6 +371,7 @@ impl AppState {
             hardware_status: None,
             worker_failure: None,
             messages: Default::default(),
+            sweep_forecast: Default::default(),
         }
     }
 
@@ -395,7 +398,9 @@ impl AppState {
         self.live.counter = LiveCounter::default();
         self.wizard.running = Some(RunningStep { step: i, label: step.plan.name.clone(), fraction: 0.0 });
         self.worker.send(Command::SetPace(self.settings.pace()));
-        self.worker.send(Command::Run { job: i, plan: step.plan.clone() });
+        // A bench without a tunable laser runs the step's motions without its sweeps.
+        let plan = if self.worker.tunable_laser { step.plan.clone() } else { step.plan.without_sweeps() };
+        self.worker.send(Command::Run { job: i, plan });
         self.session.recording_starts(&self.worker.bench_identification);
     }
 
@@ -411,6 +416,22 @@ impl AppState {
             .iter()
             .filter(|s| self.settings.joint_mode || !s.joint_only)
             .all(|s| s.state == StepState::Done)
+    }
+
+    /// The plans of the steps the chosen identifier uses.
+    pub fn identifier_plans(&self) -> Vec<Plan> {
+        self.wizard.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).map(|s| s.plan.clone()).collect()
+    }
+
+    /// On a bench without a tunable laser: what leaving the sweeps out costs, forecast for the
+    /// chosen identifier's plans (`None` while it computes, or on a bench with a tunable laser).
+    pub fn sweep_cost_forecast(&mut self) -> Option<&Result<photorobot_core::identify::sweep_cost::SweepCost, String>> {
+        if self.worker.tunable_laser {
+            return None;
+        }
+        let plans = self.identifier_plans();
+        let (bench, preset, joint) = (&self.worker.bench_name, &self.settings.preset, self.settings.joint_mode);
+        self.sweep_forecast.get(bench, preset, joint, || plans)
     }
 
     /// Identify from the recorded steps.

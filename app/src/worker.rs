@@ -214,6 +214,8 @@ pub struct Worker {
     pub bench_identification: Vec<(String, String)>,
     /// The software's model before calibration.
     pub nominal: PhaseModel,
+    /// The bench has a tunable laser: plans may sweep (else the wizard leaves the sweeps out).
+    pub tunable_laser: bool,
 }
 
 /// Why a run ended early when the technician stopped it.
@@ -253,6 +255,7 @@ impl Worker {
         let live = Arc::new(AtomicBool::new(false));
         let bench_name = bench.name();
         let bench_identification = bench.identification();
+        let tunable_laser = bench.tunable_laser();
         let kept = KeptTraces::default();
         let bench = Box::new(GuardedBench::new(bench, cancel.clone(), kept.clone()));
         let mut state = Thread {
@@ -271,7 +274,17 @@ impl Worker {
             .name("bench worker".into())
             .spawn(move || state.supervise(rx))
             .expect("the OS starts a thread");
-        Self { commands, events, cancel, live, handle: Some(handle), bench_name, bench_identification, nominal }
+        Self {
+            commands,
+            events,
+            cancel,
+            live,
+            handle: Some(handle),
+            bench_name,
+            bench_identification,
+            nominal,
+            tunable_laser,
+        }
     }
 
     /// Send a command (ignored once the thread is gone).

@@ -162,7 +162,7 @@ fn disconnect_to_the_virtual_bench(h: &mut Kittest) {
     let family = h.state().state.settings.connection.laser.family;
     h.state_mut().state.settings.connection.laser.family = LaserFamily::None;
     h.run_steps(2);
-    h.get_by_label_contains("plans with sweeps are refused on this bench");
+    h.get_by_label_contains("the wizard and calibrate leave the plans' sweeps out");
     assert_eq!(h.query_all_by_label("Identify").count(), 3);
     h.state_mut().state.settings.connection.laser.family = family;
     h.run_steps(2);

@@ -259,6 +259,45 @@ fn off_pivot_preset(dir: &std::path::Path) -> String {
     path.display().to_string()
 }
 
+/// The technician sees before step 1 that the bench has no tunable laser and what skipping the
+/// sweeps costs (forecast on a pilot run of the plans); the step runs without its sweeps.
+#[test]
+fn wizard_says_before_step_1_what_a_bench_without_a_tunable_laser_costs() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/benches/table2-ideal.ron"))
+        .unwrap()
+        .replace("name: \"table2-ideal\"", "name: \"fixed-laser\"")
+        .replace(
+            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0)",
+            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0, tunable: false)",
+        );
+    assert!(text.contains("tunable: false"));
+    let preset = dir.path().join("fixed-laser.ron");
+    std::fs::write(&preset, text).unwrap();
+    let settings = Settings { preset: preset.display().to_string(), ..Settings::default() };
+    let mut h = harness(workbench(settings, ScriptedDialogs::default()));
+    open(&mut h, Tab::Wizard);
+    h.get_by_label("No tunable laser on this bench");
+    let sweeps: usize = h.state().state.identifier_plans().iter().map(|p| p.sweeps()).sum();
+    assert!(sweeps > 0);
+    h.get_by_label_contains(&format!("leave their {sweeps} wavelength sweeps out"));
+    wait_until(&mut h, "the sweep-cost forecast", Duration::from_secs(600), |w| w.state.sweep_forecast.ready());
+    h.run_steps(3);
+    let cost = h.state_mut().state.sweep_cost_forecast().cloned().unwrap().unwrap();
+    assert!(!cost.is_free(), "{cost:?}");
+    for sentence in cost.sentences() {
+        h.get_by_label(&format!("• {sentence}"));
+    }
+    assert!(!cost.signed_by_sweeps.is_empty(), "strategy 1 signs its translations with sweeps: {cost:?}");
+    screenshot(&mut h, "wizard-no-tunable-laser");
+    // Step 1 runs its translations without the sweeps.
+    h.get_by_label("Run step 1 (F5)").click();
+    wait_until(&mut h, "strategy 1", Duration::from_secs(300), |w| w.state.wizard.steps[0].state == StepState::Done);
+    let step = &h.state().state.wizard.steps[0];
+    assert!(step.traces.iter().all(|t| !photorobot_core::trace::is_sweep(t)));
+    assert_eq!(step.traces.len(), step.plan.recorded_moves());
+}
+
 /// Identify on a bench the model cannot fit: the Results view shows an error, the residual
 /// against its threshold and the worst traces, and no table of numbers.
 #[test]

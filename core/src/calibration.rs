@@ -124,6 +124,10 @@ pub struct CalibrationReport {
     /// The sign of each translation's gap change and the sources that fix it.
     #[serde(default)]
     pub translation_signs: Vec<TranslationSign>,
+    /// What leaving the wavelength sweeps out cost (a bench without a tunable laser, or
+    /// `calibrate --no-sweeps`); `None` when the plans ran with their sweeps.
+    #[serde(default)]
+    pub sweep_cost: Option<crate::identify::sweep_cost::SweepCost>,
     /// The identified extrinsics.
     pub extrinsics: Extrinsics,
     /// The recorded traces.
@@ -291,6 +295,7 @@ pub fn report_from_traces(
         warnings,
         fit: Some(fit),
         translation_signs: signs,
+        sweep_cost: None,
         extrinsics: est.extrinsics,
         traces,
     })

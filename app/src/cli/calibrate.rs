@@ -21,9 +21,11 @@ use photorobot_core::files::{save_ron, write_atomic};
 use photorobot_core::hardware::emulator::EmuClock;
 use photorobot_core::hardware::HardwareConfig;
 use photorobot_core::identify::signs::{SignSource, TranslationSign};
+use photorobot_core::identify::sweep_cost::{self, Evidence, SweepCost};
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
+use photorobot_core::plan::Plan;
 use photorobot_core::session::{
     self as lab, find_recovery, recording::record_with, BenchInfo, ControllerIdentity, FolderLock, LabRecord, Session,
     SessionWriter, AUTOSAVE_FILE,
@@ -76,6 +78,10 @@ pub struct CalibrateArgs {
     /// `--plan optimised` runs the experiment design's plan (`photorobot design`).
     #[arg(long = "plan", value_name = "PLAN", conflicts_with_all = ["traces", "resume"])]
     pub plans: Vec<String>,
+    /// Leave the plans' wavelength sweeps out, as on a bench without a tunable laser (a bench
+    /// without one does so by itself); the report says what that costs.
+    #[arg(long, conflicts_with = "traces")]
+    pub no_sweeps: bool,
     /// Continue the measurement autosaved in --out (after a crash) instead of starting anew.
     #[arg(long)]
     pub resume: bool,
@@ -279,7 +285,7 @@ fn calibrate_on_hardware(
         .map_err(|problem| CliError::Failed { what: "the hardware bench", problem })?;
     match &laser {
         Some(l) => tracing::info!(laser = %l.idn, wavelength_nm = l.wavelength_nm, "laser connected"),
-        None => tracing::warn!("no tunable laser: plans with sweeps are refused on this bench"),
+        None => tracing::warn!("no tunable laser: the plans run without their wavelength sweeps"),
     }
     // The lab record names the laser beside the controllers.
     let extra: Vec<(String, String)> = laser.map(|l| (laser_name, l.idn)).into_iter().collect();
@@ -330,6 +336,14 @@ fn measure_identify_validate(
         report.termination
     );
     report.plan_durations = durations;
+    if session.plans.iter().all(|p| p.sweeps() == 0) && skips_sweeps(a, &*bench) {
+        progress.borrow_mut().stage("assessing what the missing sweeps cost");
+        let cost = sweep_cost(a, preset, mode, &session, &report)?;
+        for s in cost.sentences() {
+            tracing::warn!("no sweeps: {s}");
+        }
+        report.sweep_cost = Some(cost);
+    }
     progress.borrow_mut().stage("validating");
     report.validation = timed("validate", || validation_rows(bench, nominal, &report.extrinsics));
     tracing::info!(motions = report.validation.len(), "validation done");
@@ -372,6 +386,9 @@ pub fn resume_command(a: &CalibrateArgs) -> String {
     }
     if a.model != "table2-ideal" {
         cmd += &format!(" --model {}", shell_quote(&a.model));
+    }
+    if a.no_sweeps {
+        cmd += " --no-sweeps";
     }
     cmd += &format!(" --out {} --resume", shell_quote(&a.out.display().to_string()));
     if a.json {
@@ -423,12 +440,44 @@ fn new_session(
         .chain(extra.iter().cloned())
         .map(|(name, identification)| ControllerIdentity { name, identification })
         .collect();
-    s.plans = if a.plans.is_empty() {
-        plans(mode)
-    } else {
-        a.plans.iter().map(|p| load_plan(p)).collect::<Result<_, _>>()?
-    };
+    s.plans = requested_plans(a, mode)?;
+    if skips_sweeps(a, bench) {
+        s.plans = s.plans.iter().map(Plan::without_sweeps).collect();
+    }
     Ok(s)
+}
+
+/// The plans `--plan` names, or the mode's.
+fn requested_plans(a: &CalibrateArgs, mode: Mode) -> Result<Vec<Plan>, CliError> {
+    if a.plans.is_empty() {
+        Ok(plans(mode))
+    } else {
+        a.plans.iter().map(|p| load_plan(p)).collect()
+    }
+}
+
+/// The sweeps are left out: asked for, or the bench has no tunable laser.
+fn skips_sweeps(a: &CalibrateArgs, bench: &dyn Bench) -> bool {
+    a.no_sweeps || !bench.tunable_laser()
+}
+
+/// What leaving the sweeps out cost this measurement: its analysis against a pilot run of the
+/// plans with their sweeps (those requested; on --resume the mode's when the session measured
+/// them, else the session's own).
+fn sweep_cost(
+    a: &CalibrateArgs,
+    preset: &BenchPreset,
+    mode: Mode,
+    session: &Session,
+    report: &CalibrationReport,
+) -> Result<SweepCost, CliError> {
+    let mut with = if a.resume { plans(mode) } else { requested_plans(a, mode)? };
+    let names = |p: &[Plan]| p.iter().map(|p| p.name.clone()).collect::<Vec<_>>();
+    if names(&with) != names(&session.plans) {
+        with = session.plans.clone();
+    }
+    let measured = Evidence { identifiability: &report.identifiability, signs: &report.translation_signs };
+    sweep_cost::measured(preset, &with, measured, report.fit.as_ref()).map_err(calibration_failed)
 }
 
 /// Write the session with its calibration, the identified extrinsics and the report; the
@@ -571,6 +620,12 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
         }
     }
     print_signs(&r.translation_signs, out)?;
+    if let Some(cost) = &r.sweep_cost {
+        writeln!(out, "\nno wavelength sweeps (no tunable laser, or --no-sweeps): what that costs")?;
+        for s in cost.sentences() {
+            writeln!(out, "  {s}")?;
+        }
+    }
     for w in &r.warnings {
         writeln!(out, "warning: {w}")?;
     }

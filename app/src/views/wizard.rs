@@ -17,6 +17,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
             ui.radio_value(&mut s.settings.joint_mode, true, "joint (every parameter, with σ)");
             ui.radio_value(&mut s.settings.joint_mode, false, "paper (steps A, B, C)");
         });
+        no_tunable_laser(ui, s);
         ui.separator();
         ui.label(RichText::new("0. Pre-alignment").size(18.0).strong());
         let q: Option<SignalQuality> = s.live.quality;
@@ -59,6 +60,39 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
     });
 }
 
+/// Before step 1, on a bench without a tunable laser: the steps skip their sweeps, and what the
+/// identifier loses by it (forecast on a pilot run of the plans).
+fn no_tunable_laser(ui: &mut egui::Ui, s: &mut AppState) {
+    if s.worker.tunable_laser {
+        return;
+    }
+    let sweeps: usize = s.identifier_plans().iter().map(|p| p.sweeps()).sum();
+    ui.separator();
+    let warn = ui.visuals().warn_fg_color;
+    ui.label(RichText::new("No tunable laser on this bench").size(18.0).strong().color(warn));
+    ui.label(format!(
+        "The laser cannot sweep its wavelength: the steps below run their motions and leave their {sweeps} \
+         wavelength sweeps out. What that costs the identification:"
+    ));
+    match s.sweep_cost_forecast() {
+        None => {
+            ui.horizontal(|ui| {
+                ui.spinner();
+                ui.label("forecasting what the missing sweeps cost (a pilot run of the plans)…");
+            });
+            ui.ctx().request_repaint_after(std::time::Duration::from_millis(200));
+        }
+        Some(Ok(cost)) => {
+            for sentence in cost.sentences() {
+                ui.label(format!("• {sentence}"));
+            }
+        }
+        Some(Err(e)) => {
+            ui.colored_label(ui.visuals().error_fg_color, format!("the forecast failed: {e}"));
+        }
+    }
+}
+
 fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
     let idle = s.busy.is_none() && s.wizard.running.is_none();
     let st = &s.wizard.steps[i];
@@ -74,8 +108,9 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
         .plan
         .duration_s(s.chain.description(), [0.0; 6], &photorobot_core::plan::MotionLimits::default())
         .map_or("?".into(), |d| format!("{:.1} min", d / 60.0));
+    let sweeps = if s.worker.tunable_laser { format!("{sweeps} sweeps") } else { format!("{sweeps} sweeps left out") };
     egui::CollapsingHeader::new(format!(
-        "planned motions: {} segments, {moves} recorded moves, {sweeps} sweeps, about {duration} of bench time",
+        "planned motions: {} segments, {moves} recorded moves, {sweeps}, about {duration} of bench time",
         st.plan.segments.len()
     ))
     .id_salt(("plan", i))

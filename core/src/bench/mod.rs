@@ -145,6 +145,12 @@ pub trait Bench: Send {
     }
     /// Bench time since the start of the session (s).
     fn clock_s(&self) -> f64;
+    /// The bench has a tunable laser the software drives: plans may sweep the wavelength. A
+    /// bench without one refuses sweeps, and calibrations skip them
+    /// ([`crate::plan::Plan::without_sweeps`]).
+    fn tunable_laser(&self) -> bool {
+        true
+    }
     /// Run one segment; return its trace when the segment records.
     fn run_segment(
         &mut self,

@@ -35,6 +35,14 @@ pub struct Laser {
     /// Relative intensity noise, as a fraction of the power (rms per sample).
     #[serde(default)]
     pub rin_rel: f64,
+    /// The laser sweeps its wavelength (a tunable laser; the default). `false`: it stays at
+    /// `wavelength_nm`, the bench refuses sweeps and calibrations skip them.
+    #[serde(default = "tunable_by_default")]
+    pub tunable: bool,
+}
+
+fn tunable_by_default() -> bool {
+    true
 }
 
 /// The photodiode and its acquisition.

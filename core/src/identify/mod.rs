@@ -13,6 +13,7 @@ pub mod observability;
 pub mod paper;
 pub mod signs;
 pub mod start;
+pub mod sweep_cost;
 pub mod verdict;
 
 use crate::model::effects::Effect;

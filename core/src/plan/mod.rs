@@ -327,6 +327,19 @@ impl Plan {
     pub fn recorded_moves(&self) -> usize {
         self.segments.iter().filter(|s| s.is_move() && s.is_recorded()).count()
     }
+
+    /// Number of wavelength sweeps.
+    pub fn sweeps(&self) -> usize {
+        self.segments.iter().filter(|s| matches!(s, Segment::Sweep { .. })).count()
+    }
+
+    /// The plan for a bench without a tunable laser: the same motions with every wavelength
+    /// sweep left out (the moves that set a sweep up still run; they record nothing).
+    pub fn without_sweeps(&self) -> Plan {
+        let mut p = self.clone();
+        p.segments.retain(|s| !matches!(s, Segment::Sweep { .. }));
+        p
+    }
 }
 
 #[cfg(test)]

@@ -459,3 +459,15 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_plan_without_sweeps_keeps_every_motion_in_order() {
+    let p = Plan::joint_extras();
+    assert!(p.sweeps() > 0);
+    let q = p.without_sweeps();
+    assert_eq!(q.sweeps(), 0);
+    assert_eq!(q.segments.len(), p.segments.len() - p.sweeps());
+    let motions: Vec<&Segment> = p.segments.iter().filter(|s| !matches!(s, Segment::Sweep { .. })).collect();
+    assert_eq!(q.segments.iter().collect::<Vec<_>>(), motions);
+    assert_eq!(q.recorded_moves(), p.recorded_moves());
+}

@@ -110,7 +110,7 @@ fn laser_identification(ui: &mut egui::Ui, p: &ConnectionPanel, c: &ConnectionSe
     if c.laser.family == LaserFamily::None {
         ui.add(
             egui::Label::new(RichText::new(
-                "The laser stays at the preset's wavelength: plans with sweeps are refused on this bench.",
+                "The laser stays at the preset's wavelength: the wizard and calibrate leave the plans' sweeps out.",
             ))
             .wrap(),
         );

@@ -54,6 +54,8 @@ pub struct VirtualBench {
     exact: bool,
     /// Where each stage sits in its play (hidden reversal errors).
     play: effects::Backlash,
+    /// The preset's laser sweeps (`laser.tunable`).
+    tunable: bool,
 }
 
 impl VirtualBench {
@@ -80,6 +82,7 @@ impl VirtualBench {
             wavelength_nm: preset.laser.wavelength_nm,
             exact: false,
             play: effects::Backlash::default(),
+            tunable: preset.laser.tunable,
         })
     }
 
@@ -321,12 +324,22 @@ impl Bench for VirtualBench {
         self.clock_s
     }
 
+    fn tunable_laser(&self) -> bool {
+        self.tunable
+    }
+
     fn run_segment(
         &mut self,
         segment: &TimedSegment,
         meta: TraceMeta,
         control: &mut RunControl<'_>,
     ) -> Result<Option<Trace>, BenchError> {
+        if !self.tunable && matches!(segment.motion, TimedMotion::Sweep { .. }) {
+            return Err(BenchError::Config(format!(
+                "bench {}: its laser is not tunable (laser.tunable: false): the sweep `{}` cannot run",
+                self.name, meta.label
+            )));
+        }
         let dt = self.truth.sample_period_s;
         let duration = segment.duration_s;
         let n = (duration / dt).floor() as usize + 1;

@@ -37,6 +37,10 @@ pub trait Laser: Send {
     fn reconnect(&mut self) -> Result<(), HwError> {
         Ok(())
     }
+    /// The laser sweeps its wavelength (true for every driven laser).
+    fn tunable(&self) -> bool {
+        true
+    }
 }
 
 /// The wavelengths a laser logged during a continuous sweep: one point per trigger, every `step_nm`
@@ -100,6 +104,9 @@ impl Laser for FixedLaser {
     }
     fn start_sweep(&mut self, _from_nm: f64, _to_nm: f64, _rate_nm_per_s: f64) -> Result<(), HwError> {
         Err(self.refuse())
+    }
+    fn tunable(&self) -> bool {
+        false
     }
 }
 

@@ -327,6 +327,10 @@ impl Bench for ControllerBench {
         self.clock.now_s()
     }
 
+    fn tunable_laser(&self) -> bool {
+        self.laser.tunable()
+    }
+
     fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
         Some(self.axis_status())
     }
