@@ -485,7 +485,10 @@ fn sweep_cost(
 fn write_session(a: &CalibrateArgs, session: &mut Session, report: &CalibrationReport) -> Result<String, CliError> {
     session.calibration = Some(CalibrationReport { traces: Vec::new(), ..report.clone() });
     session.save(&a.out)?;
-    save_ron(&a.out.join("extrinsics.ron"), &report.extrinsics)?;
+    // Extrinsics beyond ±90° feed no inverse model: kept in the session's record only.
+    if report.extrinsics.validate().is_ok() {
+        save_ron(&a.out.join("extrinsics.ron"), &report.extrinsics)?;
+    }
     let json = json_text(report)?;
     write_atomic(&a.out.join("report.json"), json.as_bytes())?;
     Ok(json)
@@ -497,6 +500,13 @@ fn calibration_verdict(a: &CalibrateArgs, report: &CalibrationReport) -> Result<
         Some(fit) if fit.verdict != Verdict::Fits => {
             Err(CliError::NotACalibration { session: a.out.clone(), problem: fit.summary.clone() })
         }
+        _ if report.extrinsics.validate().is_err() => Err(CliError::NotACalibration {
+            session: a.out.clone(),
+            problem: format!(
+                "the fit ended outside the extrinsics' range: {}",
+                report.extrinsics.validate().err().map(|e| e.to_string()).unwrap_or_default()
+            ),
+        }),
         _ if !report.converged => Err(CliError::NotACalibration {
             session: a.out.clone(),
             problem: format!("the solver did not converge ({})", report.termination),

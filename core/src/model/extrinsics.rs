@@ -114,14 +114,21 @@ impl Extrinsics {
 
     /// Every value finite; angles within ±90°.
     pub fn validate(&self) -> Result<(), FieldError> {
+        self.validate_within(90.0)
+    }
+
+    /// Every value finite; angles within ±`max_deg`. A fit's record allows ±180° (its angles
+    /// wrapped, [`Extrinsics::with_angles_wrapped`]): a fit that ended beyond ±90° along an
+    /// angle its data do not see is kept as it ended, and is no calibration.
+    pub fn validate_within(&self, max_deg: f64) -> Result<(), FieldError> {
         let a = self.to_array();
         for (i, (name, unit)) in PARAMETER_NAMES.iter().enumerate() {
             let field = format!("{}_{}", name.to_lowercase(), if *unit == "°" { "deg" } else { "um" });
             if !a[i].is_finite() {
                 return Err(FieldError::new(field, format!("expected a finite number, found {}", a[i])));
             }
-            if *unit == "°" && a[i].abs() > 90.0 {
-                return Err(FieldError::new(field, format!("expected an angle within ±90°, found {}°", a[i])));
+            if *unit == "°" && a[i].abs() > max_deg {
+                return Err(FieldError::new(field, format!("expected an angle within ±{max_deg}°, found {}°", a[i])));
             }
         }
         Ok(())
@@ -153,6 +160,19 @@ impl Extrinsics {
             y_wf_um: a[6],
             z_wf_um: a[7],
         }
+    }
+
+    /// The same extrinsics with every angle brought into (-180°, 180°]: a rotation by a full
+    /// turn more is the same rotation, and a solver free along an angle the data do not see can
+    /// end whole turns away (-349.4° for 10.6°).
+    pub fn with_angles_wrapped(&self) -> Self {
+        let mut a = self.to_array();
+        for (v, (_, unit)) in a.iter_mut().zip(PARAMETER_NAMES.iter()) {
+            if *unit == "°" && v.is_finite() {
+                *v = 180.0 - (180.0 - *v).rem_euclid(360.0);
+            }
+        }
+        Self::from_array(a)
     }
 
     /// Rotation of the fiber frame in the world.
@@ -381,6 +401,28 @@ mod tests {
             let brute = brute_force_length(&e, &wte);
             prop_assert!((c.length_um - brute).abs() < 1e-6, "{} vs {}", c.length_um, brute);
             prop_assert!(c.reflection_point_tool_um.z.abs() < 1e-9);
+        }
+    }
+
+    proptest! {
+        /// Wrapped angles lie in (-180°, 180°] and give the same frames: the rotations of the
+        /// fiber and the lamella agree to rounding, whatever whole turns the input carried.
+        #[test]
+        fn wrapped_angles_are_the_same_rotations(
+            a in prop::array::uniform8(-1.0e3f64..1.0e3),
+        ) {
+            let e = Extrinsics::from_array(a);
+            let w = e.with_angles_wrapped();
+            for (i, (_, unit)) in PARAMETER_NAMES.iter().enumerate() {
+                let v = w.to_array()[i];
+                if *unit == "°" {
+                    prop_assert!(v > -180.0 && v <= 180.0, "{v}");
+                } else {
+                    prop_assert_eq!(v, a[i]);
+                }
+            }
+            prop_assert!(e.fiber_rotation().angle_to(&w.fiber_rotation()) < 1e-9);
+            prop_assert!(e.ee_to_tool().rotation.angle_to(&w.ee_to_tool().rotation) < 1e-9);
         }
     }
 }

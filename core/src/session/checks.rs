@@ -107,7 +107,7 @@ impl Session {
             }
             calibration
                 .extrinsics
-                .validate()
+                .validate_within(180.0)
                 .map_err(|e| FieldError::new(format!("calibration.extrinsics.{}", e.field), e.problem))?;
         }
         if let Some(diagnosis) = &self.diagnosis {
