@@ -100,6 +100,9 @@ impl Bench for GuardedBench {
     fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
         self.inner.hardware_status()
     }
+    fn laser_status(&mut self) -> Option<photorobot_core::bench::LaserStatus> {
+        self.inner.laser_status()
+    }
     fn reconnect(&mut self) -> Result<(), BenchError> {
         self.inner.reconnect()
     }

@@ -338,6 +338,8 @@ pub struct AppState {
     pub session: SessionFile,
     /// The stage controllers' view of every joint axis (a bench on controllers), and when it came.
     pub hardware_status: Option<(std::time::Instant, Vec<photorobot_core::bench::AxisStatus>)>,
+    /// The tunable laser as it last reported itself (a bench on controllers), and when.
+    pub laser_status: Option<(std::time::Instant, photorobot_core::bench::LaserStatus)>,
     /// The message of a panic the worker caught, until the technician closes it.
     pub worker_failure: Option<String>,
     /// Every status and error message, with its time (the message panel).
@@ -369,6 +371,7 @@ impl AppState {
             dialogs,
             session: SessionFile::default(),
             hardware_status: None,
+            laser_status: None,
             worker_failure: None,
             messages: Default::default(),
             sweep_forecast: Default::default(),
@@ -721,6 +724,7 @@ impl AppState {
                 self.analyses.insert(index, result);
             }
             Event::HardwareStatus(axes) => self.hardware_status = Some((std::time::Instant::now(), axes)),
+            Event::LaserStatus(laser) => self.laser_status = Some((std::time::Instant::now(), laser)),
             Event::WorkerPanicked(message) => {
                 self.status = format!("the bench worker failed: {message}");
                 self.worker_failure = Some(message);

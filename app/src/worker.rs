@@ -193,6 +193,8 @@ pub enum Event {
     Busy(Option<String>),
     /// The stage controllers' view of every joint axis (a bench on controllers only).
     HardwareStatus(Vec<photorobot_core::bench::AxisStatus>),
+    /// The tunable laser as it reports itself (a bench on controllers with a driven laser).
+    LaserStatus(photorobot_core::bench::LaserStatus),
     /// A command panicked in the worker (the message): the worker caught it and serves the next
     /// command; a plan it interrupted was reported first with the traces recorded before.
     WorkerPanicked(String),
@@ -420,6 +422,9 @@ impl Thread {
                 Command::HardwareStatus => {
                     if let Some(status) = self.bench.hardware_status() {
                         self.send(Event::HardwareStatus(status));
+                    }
+                    if let Some(status) = self.bench.laser_status() {
+                        self.send(Event::LaserStatus(status));
                     }
                 }
                 Command::Run { job, plan } => {

@@ -111,6 +111,18 @@ fn connect_and_read_the_status(h: &mut Kittest) {
     let id = h.state().connection.laser_identity.clone();
     assert!(id.as_ref().is_some_and(|r| r.as_ref().is_ok_and(|id| id.idn.contains("8164B"))), "{id:?}");
     h.get_by_label("Keysight Technologies,8164B (emulated),MY00000000,V5.25(72637)");
+    // While connected the laser is read with the axes: its wavelength and sweep state, read again
+    // at every status poll.
+    wait_until(h, "the laser status", Duration::from_secs(20), |w| w.state.laser_status.is_some());
+    let (first, status) = h.state().state.laser_status.clone().unwrap();
+    assert_eq!((status.sweeping, status.error.as_deref()), (Some(false), None), "{status:?}");
+    let nominal_nm =
+        photorobot_core::bench::BenchPreset::resolve(&h.state().state.settings.preset).unwrap().laser.wavelength_nm;
+    assert!(status.wavelength_nm.is_some_and(|w| (w - nominal_nm).abs() < 1e-6), "{status:?}");
+    h.get_by_label(&format!("{}: {nominal_nm:.4} nm, not sweeping", status.name));
+    wait_until(h, "a second laser read", Duration::from_secs(20), |w| {
+        w.state.laser_status.as_ref().is_some_and(|(at, _)| *at > first)
+    });
 }
 
 /// A jog through the drivers (Robot tab); the status table follows on the Connection tab.

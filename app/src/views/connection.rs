@@ -677,6 +677,27 @@ fn status(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel) {
             ui.end_row();
         }
     });
+    if let Some((at, laser)) = &s.laser_status {
+        laser_status(ui, laser, at.elapsed().as_secs_f64());
+    }
+}
+
+/// The laser's line under the axis table: wavelength and sweep state as last read, or its error.
+fn laser_status(ui: &mut egui::Ui, l: &photorobot_core::bench::LaserStatus, age_s: f64) {
+    let wavelength = l.wavelength_nm.map_or("wavelength ?".into(), |w| format!("{w:.4} nm"));
+    let sweep = match l.sweeping {
+        Some(true) => "sweeping",
+        Some(false) => "not sweeping",
+        None => "sweep state ?",
+    };
+    ui.horizontal(|ui| {
+        ui.label(RichText::new("laser").strong());
+        ui.label(format!("{}: {wavelength}, {sweep}", l.name));
+        ui.label(format!("(read {age_s:.1} s ago)"));
+        if let Some(e) = &l.error {
+            ui.add(egui::Label::new(RichText::new(e).color(BAD)).truncate()).on_hover_text(e);
+        }
+    });
 }
 
 fn axis_row(ui: &mut egui::Ui, a: &AxisStatus) {

@@ -106,6 +106,19 @@ pub struct AxisStatus {
     pub error: Option<String>,
 }
 
+/// The tunable laser as it reports itself now (the connection panel's status).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LaserStatus {
+    /// The laser ("Keysight laser").
+    pub name: String,
+    /// Its wavelength (nm), `None` when the query failed.
+    pub wavelength_nm: Option<f64>,
+    /// A sweep runs, `None` when the query failed.
+    pub sweeping: Option<bool>,
+    /// The failed query, if one failed.
+    pub error: Option<String>,
+}
+
 /// Callbacks and the cancel flag for a running segment.
 pub struct RunControl<'a> {
     /// Set to request a stop; the bench checks it often (every 50 ms of bench time at most).
@@ -161,6 +174,11 @@ pub trait Bench: Send {
     /// The stage controllers' view of every joint axis, for a bench on controllers (`None` for a
     /// simulated bench).
     fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
+        None
+    }
+    /// The tunable laser of a bench on controllers, read now (`None` for a simulated bench or
+    /// one whose laser the software does not drive).
+    fn laser_status(&mut self) -> Option<LaserStatus> {
         None
     }
     /// Open the links to the stage controllers again after a fault (nothing to do on a simulated bench).

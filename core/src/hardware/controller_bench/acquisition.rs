@@ -18,10 +18,21 @@ pub(super) struct Acquisition {
     pub(super) recorded_joints: Vec<usize>,
     pub(super) columns: Vec<Vec<f64>>,
     pub(super) inputs: Vec<Vec<f64>>,
-    /// Polls of the other joints: (bench time, display values of every joint).
-    pub(super) polls: Vec<(f64, [f64; 6])>,
+    /// Polls of the other joints: per joint the bench time its position was asked for and its
+    /// display value.
+    pub(super) polls: Vec<Poll>,
     pub(super) emitted: usize,
     pub(super) trace: Trace,
+}
+
+/// One poll of the joints not on the recorder: each read in its own exchange, so each has its
+/// own time (a joint read third in a poll is read two exchanges after the first).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Poll {
+    /// Bench time each joint's position was asked for (s; unused for the recorder's joints).
+    pub(super) t_s: [f64; 6],
+    /// Display value of each joint (µm, °).
+    pub(super) q: [f64; 6],
 }
 
 impl ControllerBench {
@@ -62,18 +73,23 @@ impl ControllerBench {
             return Ok(());
         }
         let t_before = self.bench_now();
-        let mut q = [0.0; 6];
+        let mut poll = Poll { t_s: [t_before; 6], q: [0.0; 6] };
+        let mut sent = t_before;
         for &j in &polled {
             let m = self.joints[j];
             let p = self.controllers[m.controller].positions(&[m.axis])?;
-            q[j] = (p[0] - m.zero) * m.sign;
+            // Stamped when its request was sent, as the recorder's trigger is: the one-way
+            // latency of both cancels. Each joint its own stamp: the third is asked two
+            // exchanges after the first.
+            poll.t_s[j] = sent;
+            poll.q[j] = (p[0] - m.zero) * m.sign;
+            sent = self.bench_now();
         }
-        let t_after = self.bench_now();
-        // A poll whose exchange took long (the host was busy) may have been read late: drop it,
-        // unless it is the first or `keep` (at rest, where the time does not matter).
-        let rtt_real_s = (t_after - t_before) / self.clock.scale();
+        // A poll whose exchanges took long (the host was busy) may have been read late: drop
+        // it, unless it is the first or `keep` (at rest, where the time does not matter).
+        let rtt_real_s = (sent - t_before) / self.clock.scale();
         if keep || rtt_real_s <= MAX_POLL_RTT_S || acq.polls.is_empty() {
-            acq.polls.push((t_before, q));
+            acq.polls.push(poll);
         }
         Ok(())
     }
@@ -101,7 +117,9 @@ impl ControllerBench {
 
     /// Turn recorded samples into trace rows, up to the last poll (or all of them with `all`).
     pub(super) fn emit(&self, acq: &mut Acquisition, seg: &TimedSegment, all: bool) {
-        let last_poll = acq.polls.last().map(|p| p.0);
+        // Samples up to the earliest reading of the last poll: every polled joint is known there.
+        let polled: Vec<usize> = (0..6).filter(|j| !acq.recorded_joints.contains(j)).collect();
+        let last_poll = acq.polls.last().map(|p| polled.iter().map(|&j| p.t_s[j]).fold(f64::INFINITY, f64::min));
         let wavelength_recorded = self.config.photodiode.wavelength_input.is_some();
         let mw = self.config.photodiode.mw_per_unit;
         while acq.emitted < acq.read {
@@ -112,21 +130,8 @@ impl ControllerBench {
             }
             let mut q = seg.to_display;
             // Polled joints: linear interpolation between polls (clamped at the ends).
-            if acq.recorded_joints.len() < 6 {
-                let i = acq.polls.partition_point(|p| p.0 <= t);
-                let value = |j: usize| -> f64 {
-                    match (i.checked_sub(1).and_then(|a| acq.polls.get(a)), acq.polls.get(i)) {
-                        (Some(a), Some(b)) if b.0 > a.0 => a.1[j] + (b.1[j] - a.1[j]) * (t - a.0) / (b.0 - a.0),
-                        (Some(a), _) => a.1[j],
-                        (None, Some(b)) => b.1[j],
-                        (None, None) => seg.from_display[j],
-                    }
-                };
-                for (j, qj) in q.iter_mut().enumerate() {
-                    if !acq.recorded_joints.contains(&j) {
-                        *qj = value(j);
-                    }
-                }
+            for &j in &polled {
+                q[j] = interpolate(&acq.polls, j, t).unwrap_or(seg.from_display[j]);
             }
             for (c, &j) in acq.recorded_joints.iter().enumerate() {
                 let m = self.joints[j];
@@ -216,5 +221,19 @@ mod tests {
         trim_to_sweep(&mut t);
         assert_eq!(t.wavelength_nm, [1550.0, 1550.5, 1551.0, 1551.5, 1552.0]);
         assert_eq!(t.irradiance, [2.0, 3.0, 4.0, 5.0, 6.0]);
+    }
+}
+
+/// Joint `j` at bench time `t` (s): linear between the polls that bracket it, clamped at the ends;
+/// `None` without a poll.
+fn interpolate(polls: &[Poll], j: usize, t: f64) -> Option<f64> {
+    let i = polls.partition_point(|p| p.t_s[j] <= t);
+    match (i.checked_sub(1).and_then(|a| polls.get(a)), polls.get(i)) {
+        (Some(a), Some(b)) if b.t_s[j] > a.t_s[j] => {
+            Some(a.q[j] + (b.q[j] - a.q[j]) * (t - a.t_s[j]) / (b.t_s[j] - a.t_s[j]))
+        }
+        (Some(a), _) => Some(a.q[j]),
+        (None, Some(b)) => Some(b.q[j]),
+        (None, None) => None,
     }
 }

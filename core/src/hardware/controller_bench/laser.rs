@@ -37,6 +37,10 @@ pub trait Laser: Send {
     fn reconnect(&mut self) -> Result<(), HwError> {
         Ok(())
     }
+    /// The wavelength the laser reports now (nm), `None` for a laser without a query.
+    fn wavelength_now_nm(&mut self) -> Result<Option<f64>, HwError> {
+        Ok(None)
+    }
     /// The laser sweeps its wavelength (true for every driven laser).
     fn tunable(&self) -> bool {
         true

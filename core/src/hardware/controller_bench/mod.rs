@@ -16,7 +16,7 @@ mod sweep;
 
 use super::clock::EmuClock;
 use super::{HwError, PiGcs, SmarActMcs, StageController};
-use crate::bench::{AxisStatus, AxisUnit, Bench, BenchError, RunControl};
+use crate::bench::{AxisStatus, AxisUnit, Bench, BenchError, LaserStatus, RunControl};
 use crate::model::air::AmbientConditions;
 use crate::model::robot::{JointType, LinkDescription, RobotDescription};
 use crate::plan::{MotionLimits, TimedMotion, TimedSegment};
@@ -333,6 +333,19 @@ impl Bench for ControllerBench {
 
     fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
         Some(self.axis_status())
+    }
+
+    fn laser_status(&mut self) -> Option<LaserStatus> {
+        if !self.laser.tunable() {
+            return None;
+        }
+        let mut error = None;
+        let wavelength_nm = self.laser.wavelength_now_nm().unwrap_or_else(|e| {
+            error = Some(e.to_string());
+            None
+        });
+        let sweeping = self.laser.sweep_running().map_err(|e| error = Some(e.to_string())).ok();
+        Some(LaserStatus { name: self.laser.name(), wavelength_nm, sweeping, error })
     }
 
     fn reconnect(&mut self) -> Result<(), BenchError> {

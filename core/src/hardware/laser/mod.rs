@@ -185,6 +185,10 @@ impl Laser for ScpiLaser {
         self.nominal_nm
     }
 
+    fn wavelength_now_nm(&mut self) -> Result<Option<f64>, HwError> {
+        self.wavelength_nm().map(Some)
+    }
+
     fn name(&self) -> String {
         self.name.clone()
     }
