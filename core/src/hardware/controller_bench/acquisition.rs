@@ -208,6 +208,20 @@ pub(super) fn trim_to_sweep(t: &mut Trace) {
     }
 }
 
+/// Joint `j` at bench time `t` (s): linear between the polls that bracket it, clamped at the ends;
+/// `None` without a poll.
+fn interpolate(polls: &[Poll], j: usize, t: f64) -> Option<f64> {
+    let i = polls.partition_point(|p| p.t_s[j] <= t);
+    match (i.checked_sub(1).and_then(|a| polls.get(a)), polls.get(i)) {
+        (Some(a), Some(b)) if b.t_s[j] > a.t_s[j] => {
+            Some(a.q[j] + (b.q[j] - a.q[j]) * (t - a.t_s[j]) / (b.t_s[j] - a.t_s[j]))
+        }
+        (Some(a), _) => Some(a.q[j]),
+        (None, Some(b)) => Some(b.q[j]),
+        (None, None) => None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -222,18 +236,27 @@ mod tests {
         assert_eq!(t.wavelength_nm, [1550.0, 1550.5, 1551.0, 1551.5, 1552.0]);
         assert_eq!(t.irradiance, [2.0, 3.0, 4.0, 5.0, 6.0]);
     }
-}
 
-/// Joint `j` at bench time `t` (s): linear between the polls that bracket it, clamped at the ends;
-/// `None` without a poll.
-fn interpolate(polls: &[Poll], j: usize, t: f64) -> Option<f64> {
-    let i = polls.partition_point(|p| p.t_s[j] <= t);
-    match (i.checked_sub(1).and_then(|a| polls.get(a)), polls.get(i)) {
-        (Some(a), Some(b)) if b.t_s[j] > a.t_s[j] => {
-            Some(a.q[j] + (b.q[j] - a.q[j]) * (t - a.t_s[j]) / (b.t_s[j] - a.t_s[j]))
+    /// Each joint is interpolated on its own stamps: two joints moving at constant speed, read
+    /// 0.4 ms apart in every poll, come back exactly at any time between polls (a common stamp
+    /// would put the second 0.4 ms of motion off).
+    #[test]
+    fn each_polled_joint_is_interpolated_on_its_own_stamps() {
+        let speed = [0.0, 0.0, 0.0, 2.0, -3.0, 0.0];
+        let polls: Vec<Poll> = (0..5)
+            .map(|k| {
+                let t0 = k as f64 * 1e-3;
+                let t_s = [t0, t0, t0, t0, t0 + 4e-4, t0 + 8e-4];
+                Poll { t_s, q: std::array::from_fn(|j| speed[j] * t_s[j]) }
+            })
+            .collect();
+        for t in [5e-4, 1.25e-3, 3.9e-3] {
+            for j in [3, 4] {
+                let q = interpolate(&polls, j, t).unwrap();
+                assert!((q - speed[j] * t).abs() < 1e-12, "q{} at {t}: {q}", j + 1);
+            }
         }
-        (Some(a), _) => Some(a.q[j]),
-        (None, Some(b)) => Some(b.q[j]),
-        (None, None) => None,
+        assert_eq!(interpolate(&polls, 4, -1.0), Some(polls[0].q[4]), "clamped before the first poll");
+        assert_eq!(interpolate(&[], 4, 0.0), None);
     }
 }
