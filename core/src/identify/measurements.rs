@@ -270,15 +270,21 @@ fn amplitudes(
     // Three extrema in a row (max, min, max or min, max, min): the middle one against the mean
     // of its neighbours. The fringe's mean level moves with the tilt too; between two extrema
     // that change entered the half peak-to-peak, with a sign that alternates along the scan.
+    // An extremum whose window the trace's end cuts short has no value, and its triple is no
+    // observation (seen: the last amplitude of a tilt scan 6.5σ off, or not, depending on where
+    // within a fringe the stage stopped).
     ext.windows(3)
         .filter(|w| half_fringe_apart(&w[0], &w[1]) && half_fringe_apart(&w[1], &w[2]))
-        .map(|w| {
+        .filter_map(|w| {
             let mid = w[1].index;
             let e = [0, 1, 2].map(|k| vertex_value(v, dl_nm, &w[k], half_fringe_nm));
+            if e.iter().any(|t| !t.0.is_finite()) {
+                return None;
+            }
             let windows_display = e.iter().all(|t| t.2.is_some()).then(|| {
                 Box::new(e.map(|t| t.2.map_or([[0.0; 6]; 2], |(lo, hi)| [lo, hi].map(|i| trace.joints_display(i)))))
             });
-            Observation {
+            Some(Observation {
                 label: trace.meta.label.clone(),
                 kind: ObservationKind::FringeAmplitude {
                     at_display: joints_at(trace, e[1].1),
@@ -297,7 +303,7 @@ fn amplitudes(
                 wavelength_nm,
                 time_s: [trace.t_s[mid]; 2],
                 approach: Default::default(),
-            }
+            })
         })
         .collect()
 }
@@ -311,7 +317,8 @@ fn amplitudes(
 /// not absorb it. Returns the value, where it is (a fractional sample index: the vertex, not
 /// the extreme sample, whose place jitters with the noise along a flat top) and the window's
 /// first and last sample. Falls back to the raw sample (and no window) with fewer than five
-/// samples in the window or a parabola curving the wrong way.
+/// samples in the window or a parabola curving the wrong way; NaN when the trace's first or
+/// last sample lies in the window (cut short by the end, where the stages rest).
 fn vertex_value(v: &[f64], dl_nm: &[f64], e: &Extremum, half_fringe_nm: f64) -> (f64, f64, Option<(usize, usize)>) {
     let raw = (e.value, e.index as f64, None);
     let n = v.len().min(dl_nm.len());
@@ -333,6 +340,11 @@ fn vertex_value(v: &[f64], dl_nm: &[f64], e: &Extremum, half_fringe_nm: f64) -> 
         }
         while hi + 1 < n && inside(hi + 1) {
             hi += 1;
+        }
+        // Cut short by the trace's end (the stages rest there, the gap stops inside the
+        // window): a one-sided parabola is biased, and so is the raw sample. No value.
+        if lo == 0 || hi + 1 == n {
+            return (f64::NAN, e.index as f64, None);
         }
         if hi - lo + 1 < 5 {
             return raw;
@@ -663,6 +675,36 @@ mod tests {
         // Between two extrema the level moves by 2.5 % of the amplitude: the half peak-to-peak
         // of a pair was off by 1.25 %.
         assert!(worst < 1e-3, "worst relative amplitude error {worst:.2e}");
+    }
+
+    /// A scan that starts and stops just beside a fringe maximum, the stages resting before and
+    /// after:
+    /// the first and last extrema's windows are cut short by the trace's ends, so their triples
+    /// give no amplitude; every other amplitude is the truth's (a one-sided parabola read the
+    /// rest's flat tail and put the last amplitude several σ off).
+    #[test]
+    fn extrema_cut_short_by_the_trace_ends_give_no_amplitude() {
+        let (wavelength_nm, half_fringe_nm) = (1560.0, 390.0);
+        let (rest, moving) = (4_000usize, 20_000usize);
+        let amplitude = 1e-2;
+        let mut trace = Trace::new(TraceMeta { label: "tilt scan q4 at q = 0".into(), ..TraceMeta::default() });
+        let mut dl = Vec::new();
+        for k in 0..rest + moving + rest {
+            let f = (k.saturating_sub(rest) as f64 / moving as f64).min(1.0);
+            // From a tenth of a half fringe before the first maximum to one past the last.
+            let d = half_fringe_nm * (-0.1 + 20.2 * f);
+            let q4 = -4.0 + 8.0 * f;
+            let power = 2e-2 + amplitude * (std::f64::consts::PI * d / half_fringe_nm).cos();
+            trace.push_sample(k as f64 * 1e-4, [0.0, 0.0, 0.0, q4, 0.0, 0.0], wavelength_nm, power);
+            dl.push(d);
+        }
+        let obs = amplitudes(&trace, &dl, half_fringe_nm, 0, wavelength_nm, true);
+        // 21 extrema from the first maximum to the last, 19 triples, the two at the ends dropped.
+        assert_eq!(obs.len(), 17, "{} amplitudes", obs.len());
+        for o in &obs {
+            let ObservationKind::FringeAmplitude { amplitude_mw, .. } = o.kind else { unreachable!() };
+            assert!((amplitude_mw / amplitude - 1.0).abs() < 1e-3, "{amplitude_mw} vs {amplitude}");
+        }
     }
 
     /// The model predicts what the extraction measures. On a virtual-bench tilt scan (truth

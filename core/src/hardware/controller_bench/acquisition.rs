@@ -23,6 +23,23 @@ pub(super) struct Acquisition {
     pub(super) polls: Vec<Poll>,
     pub(super) emitted: usize,
     pub(super) trace: Trace,
+    /// How well the polls were timed (for the log).
+    pub(super) timing: PollTiming,
+}
+
+/// How well a recording's polls were timed, logged at its end: long exchanges mean a busy host,
+/// and a polled joint's position error of its speed times the exchange.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct PollTiming {
+    /// Real time of the recorder's trigger exchange (s).
+    pub(super) trigger_rtt_s: f64,
+    /// Polls kept and dropped.
+    pub(super) kept: usize,
+    pub(super) dropped: usize,
+    /// Longest exchange of a kept poll (s, real time).
+    pub(super) worst_kept_rtt_s: f64,
+    /// Longest bench time between two kept polls (s).
+    pub(super) longest_gap_s: f64,
 }
 
 /// One poll of the joints not on the recorder: each read in its own exchange, so each has its
@@ -64,6 +81,7 @@ impl ControllerBench {
             polls: vec![],
             emitted: 0,
             trace: Trace::new(meta.clone()),
+            timing: PollTiming::default(),
         })
     }
 
@@ -89,7 +107,15 @@ impl ControllerBench {
         // it, unless it is the first or `keep` (at rest, where the time does not matter).
         let rtt_real_s = (sent - t_before) / self.clock.scale();
         if keep || rtt_real_s <= MAX_POLL_RTT_S || acq.polls.is_empty() {
+            let timing = &mut acq.timing;
+            timing.kept += 1;
+            timing.worst_kept_rtt_s = timing.worst_kept_rtt_s.max(rtt_real_s);
+            if let Some(last) = acq.polls.last() {
+                timing.longest_gap_s = timing.longest_gap_s.max(t_before - last.t_s[polled[0]]);
+            }
             acq.polls.push(poll);
+        } else {
+            acq.timing.dropped += 1;
         }
         Ok(())
     }
@@ -172,6 +198,16 @@ impl ControllerBench {
         }
         self.read_recorder(a, Some(end))?;
         self.emit(a, seg, true);
+        let t = a.timing;
+        tracing::debug!(
+            label = %a.trace.meta.label,
+            trigger_ms = t.trigger_rtt_s * 1e3,
+            polls_kept = t.kept,
+            polls_dropped = t.dropped,
+            worst_kept_poll_ms = t.worst_kept_rtt_s * 1e3,
+            longest_gap_ms = t.longest_gap_s * 1e3,
+            "recording timed"
+        );
         Ok(())
     }
 }

@@ -47,9 +47,10 @@ impl ControllerBench {
             }
         }
         let t_start = self.bench_now();
-        let t_trigger = self.start_motion(seg)?;
+        let (t_trigger, trigger_rtt_s) = self.start_motion(seg)?;
         if let Some(a) = acq.as_mut() {
             a.t_trigger_s = t_trigger;
+            a.timing.trigger_rtt_s = trigger_rtt_s;
         }
         let mut t_sweep = None;
         if let Some((from_nm, to_nm, rate)) = sweep_rate(seg) {
@@ -190,13 +191,15 @@ impl ControllerBench {
 
     /// Start the segment's motion: the recorder's controller first (its move command triggers the
     /// recorder, even when it does not move), then the others. Returns the bench time at which the
-    /// recorder started: when the move command was sent. The polls of the other axes are stamped
+    /// recorder started (when the move command was sent) and the real duration of that exchange
+    /// (s). The polls of the other axes are stamped
     /// when their request is sent too, so the one-way latency to the controllers cancels; stamping
     /// at the reply would add whatever delay the host takes to read it (measured: under load,
     /// stamps at the middle of the exchange put q4/q5 several nm of dL off).
-    fn start_motion(&mut self, seg: &TimedSegment) -> Result<f64, HwError> {
+    fn start_motion(&mut self, seg: &TimedSegment) -> Result<(f64, f64), HwError> {
         let n = self.controllers.len();
         let mut t_trigger = self.bench_now();
+        let mut trigger_rtt_s = 0.0;
         let order = std::iter::once(self.recorder_controller).chain((0..n).filter(|&c| c != self.recorder_controller));
         for c in order {
             let targets: Vec<(usize, f64)> = (0..6)
@@ -211,11 +214,12 @@ impl ControllerBench {
                 }
                 t_trigger = self.bench_now();
                 self.controllers[c].move_absolute(&targets)?;
+                trigger_rtt_s = (self.bench_now() - t_trigger) / self.clock.scale();
             } else {
                 self.controllers[c].move_absolute(&targets)?;
             }
         }
-        Ok(t_trigger)
+        Ok((t_trigger, trigger_rtt_s))
     }
 
     fn all_on_target(&mut self) -> Result<bool, HwError> {
