@@ -232,7 +232,10 @@ pub fn report_from_traces(
     let id = identify(&traces, nominal, mode)?;
     let report = analyse_estimate(&id.estimate);
     let fit = fit_check(&id, &report);
-    let mut parameters = parameter_rows(&id.estimate.extrinsics, &report);
+    // Reported with their angles wrapped to ±180° (the same rotations): an angle the data do not
+    // see can end whole turns away. The identification itself runs on the solver's values.
+    let extrinsics = id.estimate.extrinsics.with_angles_wrapped();
+    let mut parameters = parameter_rows(&extrinsics, &report);
     widen_to_jackknife(&mut parameters, &id);
     withhold_undetermined(&mut parameters, &fit);
     let (est, obs) = (&id.estimate, &id.observations);
@@ -296,7 +299,7 @@ pub fn report_from_traces(
         fit: Some(fit),
         translation_signs: signs,
         sweep_cost: None,
-        extrinsics: est.extrinsics,
+        extrinsics,
         traces,
     })
 }

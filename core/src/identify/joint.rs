@@ -248,7 +248,6 @@ fn run(
     let r = problem.residuals_at(&problem.x);
     let finite = r.iter().all(|v| v.is_finite());
     let (extrinsics, gains) = problem.unpack(&problem.x);
-    let extrinsics = extrinsics.with_angles_wrapped();
     let weighted_jacobian = problem.jacobian_at(&problem.x);
     let mut column_names: Vec<String> = problem.free.iter().map(|&i| PARAMETER_NAMES[i].0.to_string()).collect();
     let mut column_parameter: Vec<Option<usize>> = problem.free.iter().map(|&i| Some(i)).collect();
