@@ -246,27 +246,42 @@ fn windowed_top(
     let tilt_um: [f64; K] =
         std::array::from_fn(|k| (fp.fundamental_phase_rad(g_c, path[k].1) - phase_c) * period / std::f64::consts::TAU);
     let gap = |k: usize, shift_um: f64| g_c + shift_um + run * xs[k] * half_width_um - tilt_um[k];
-    // Start from the fixed-tilt fringe's extreme nearest the centre, then move the fringe
-    // until the parabola's top is at the centre.
-    let mut shift_um = (0..32)
-        .map(|k| {
-            let shift_um = (k as f64 / 32.0 - 0.5) * period;
-            (shift_um, sign * fp.power(gap(K / 2, shift_um), t_c))
-        })
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(0.0, |(shift_um, _)| shift_um);
-    let mut value = f64::NAN;
-    for _ in 0..4 {
-        let ys: [f64; K] = std::array::from_fn(|k| fp.power(gap(k, shift_um), path[k].1));
-        match parabola_top(&xs, &ys) {
-            Some((v, x, curvature)) if sign * curvature < 0.0 => {
-                value = v;
-                shift_um += run * x * half_width_um;
+    // Start at the fundamental's extreme of the wanted kind nearest the centre (its phase runs
+    // with the gap: a maximum where it is a whole number of turns), then move the fringe until
+    // the parabola's top is at the centre. The higher harmonics can move the top off the
+    // fundamental's: should the parabola then curve the wrong way, start from the best of a
+    // scan over one fringe at fixed tilt.
+    let turns = (phase_c / std::f64::consts::TAU) + if max { 0.0 } else { 0.5 };
+    let fundamental_top_um = -(turns - turns.round()) * period;
+    // The parabola's top through the window's points, the fringe moved until that top sits at
+    // the window's centre; `None` when the parabola curves the wrong way.
+    let top = |mut shift_um: f64| -> Option<f64> {
+        let mut value = f64::NAN;
+        for _ in 0..4 {
+            let ys: [f64; K] = std::array::from_fn(|k| fp.power(gap(k, shift_um), path[k].1));
+            let (v, x, _) = parabola_top(&xs, &ys).filter(|t| sign * t.2 < 0.0)?;
+            value = v;
+            let step_um = run * x * half_width_um;
+            shift_um += step_um;
+            // Settled: a top 1 pm off the centre reads the value to 1e-7 of the fringe's.
+            if step_um.abs() < 1e-6 {
+                break;
             }
-            _ => return f64::NAN,
         }
-    }
-    value
+        Some(value)
+    };
+    top(fundamental_top_um)
+        .or_else(|| {
+            let scan = (0..32)
+                .map(|k| {
+                    let shift_um = (k as f64 / 32.0 - 0.5) * period;
+                    (shift_um, sign * fp.power(gap(K / 2, shift_um), t_c))
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .map_or(0.0, |(shift_um, _)| shift_um);
+            top(scan)
+        })
+        .unwrap_or(f64::NAN)
 }
 
 /// `K` points evenly spread over [−1, 1].

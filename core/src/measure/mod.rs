@@ -15,11 +15,12 @@ pub mod signal;
 pub mod sweep;
 pub mod track;
 
+pub use self::sweep::full_model::refine_gap_full_model;
+
 use self::extrema::{CountDirection, FringeCount, HysteresisConfig};
 use self::signal::FringeError;
 use self::sweep::{GapEstimate, SweepConfig, SweepFit};
 use self::track::{PhaseTrack, TrackConfig};
-use crate::model::optics::FabryPerot;
 use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
 use thiserror::Error;
@@ -276,131 +277,4 @@ pub fn analyse_sweep(trace: &Trace, model: &PhaseModel, seed: Option<&SweepSeed>
     let gap = refine_gap_full_model(&trace.wavelength_nm, &trace.irradiance, trace.joints_display(0), model, &seed.fit)
         .map_err(|problem| MeasureError::Trace { label: trace.meta.label.clone(), problem })?;
     Ok(Measurement::Sweep(SweepMeasurement { gap, fit: seed.fit.clone(), peak_fsr: seed.peak_fsr }))
-}
-
-/// Refine a two-beam sweep fit with the full multi-beam model of the bench's optics.
-///
-/// Fitted: the gap g (µm), a reflection-phase offset ψ (rad) applied to the cavity part of the
-/// field, the detector gain and offset: `I(λ) = offset + gain·|r₁ + (E(g, λ) − r₁)·e^{iψ}|²`.
-/// The tilt is the model's at the sweep's joints; the first beam's phase pins
-/// `g·(1 − θ²/2)`, the phase-equivalent (perpendicular) gap that is returned, so an error in the
-/// assumed tilt cancels to first order and only shapes the weak harmonics. With ψ free the
-/// gap comes from the fringe frequency only: an unknown coating phase cannot bias it, and its
-/// uncertainty is honest (frequency Cramér-Rao bound, not the much smaller phase bound).
-pub fn refine_gap_full_model(
-    wavelength_nm: &[f64],
-    irradiance: &[f64],
-    first_joints: [f64; 6],
-    model: &PhaseModel,
-    seed: &SweepFit,
-) -> Result<GapEstimate, String> {
-    use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-    use nalgebra::{storage::Owned, Dyn, OMatrix, OVector, Vector4, U4};
-
-    struct Problem<'a> {
-        fps: Vec<FabryPerot>,
-        y: &'a [f64],
-        r1: f64,
-        tilt: f64,
-        p: Vector4<f64>,
-    }
-    impl Problem<'_> {
-        fn predict(&self, p: &Vector4<f64>) -> Vec<f64> {
-            let (g, psi, gain, off) = (p[0], p[1], p[2], p[3]);
-            let rot = nalgebra::Complex::from_polar(1.0, psi);
-            self.fps
-                .iter()
-                .map(|fp| {
-                    let e = fp.field(g, self.tilt);
-                    let e = (e - self.r1) * rot + self.r1;
-                    off + gain * e.norm_sqr()
-                })
-                .collect()
-        }
-    }
-    impl LeastSquaresProblem<f64, Dyn, U4> for Problem<'_> {
-        type ResidualStorage = Owned<f64, Dyn>;
-        type JacobianStorage = Owned<f64, Dyn, U4>;
-        type ParameterStorage = Owned<f64, U4>;
-        fn set_params(&mut self, x: &Vector4<f64>) {
-            self.p.copy_from(x);
-        }
-        fn params(&self) -> Vector4<f64> {
-            self.p
-        }
-        fn residuals(&self) -> Option<OVector<f64, Dyn>> {
-            let pred = self.predict(&self.p);
-            Some(OVector::<f64, Dyn>::from_iterator(pred.len(), pred.iter().zip(self.y).map(|(a, b)| a - b)))
-        }
-        fn jacobian(&self) -> Option<OMatrix<f64, Dyn, U4>> {
-            let n = self.y.len();
-            let mut j = OMatrix::<f64, Dyn, U4>::zeros(n);
-            let steps = [1e-5, 1e-6, 1e-6 * self.p[2].abs().max(1e-12), 1e-9];
-            for (c, h) in steps.iter().enumerate() {
-                let (mut up, mut dn) = (self.p, self.p);
-                up[c] += h;
-                dn[c] -= h;
-                let (a, b) = (self.predict(&up), self.predict(&dn));
-                for i in 0..n {
-                    j[(i, c)] = (a[i] - b[i]) / (2.0 * h);
-                }
-            }
-            Some(j)
-        }
-    }
-
-    // Decimate long sweeps: the fringe frequency needs far fewer samples than a 10 kHz record has.
-    let stride = (wavelength_nm.len() / 4000).max(1);
-    let wl: Vec<f64> = wavelength_nm.iter().step_by(stride).copied().collect();
-    let y: Vec<f64> = irradiance.iter().step_by(stride).copied().collect();
-    let fps = wl
-        .iter()
-        .map(|&w| FabryPerot::new(&model.optics, w, model.n_air).map_err(|e| e.to_string()))
-        .collect::<Result<Vec<_>, _>>()?;
-    let r1 = fps[0].field(1e9, 0.0).re; // far away, only the fiber face reflects
-    let q0 = model.chain.description().q_from_display(&first_joints);
-    let tilt = model.extrinsics.cavity(&model.chain.end_effector(&q0)).map(|c| c.tilt_rad).unwrap_or(0.0);
-    let g0 = seed.estimate.gap_um / (1.0 - tilt * tilt / 2.0);
-    // Start gain and offset by linear least squares at the seed gap, ψ = 0.
-    let base: Vec<f64> = fps.iter().map(|fp| fp.field(g0, tilt).norm_sqr()).collect();
-    let (gain0, off0) = linear_fit(&base, &y);
-    let mut best: Option<(f64, Vector4<f64>)> = None;
-    // ψ is periodic: start from several values so the fit cannot stall in a poor basin.
-    for k in 0..4 {
-        let psi0 = k as f64 * std::f64::consts::FRAC_PI_2;
-        let problem = Problem { fps: fps.clone(), y: &y, r1, tilt, p: Vector4::new(g0, psi0, gain0, off0) };
-        let (problem, report) = LevenbergMarquardt::new().minimize(problem);
-        if !report.termination.was_successful() {
-            continue;
-        }
-        let cost = report.objective_function;
-        if best.as_ref().is_none_or(|(c, _)| cost < *c) {
-            best = Some((cost, problem.p));
-        }
-    }
-    let (cost, p) = best.ok_or("the full-model sweep fit did not converge")?;
-    let problem = Problem { fps, y: &y, r1, tilt, p };
-    let j = problem.jacobian().ok_or("no Jacobian")?;
-    let n = y.len();
-    let dof = n.saturating_sub(4).max(1) as f64;
-    let variance = 2.0 * cost / dof;
-    let cov = (j.transpose() * &j).try_inverse().ok_or("the sweep does not determine the gap (singular fit)")?;
-    let sigma = (cov[(0, 0)] * variance).sqrt();
-    Ok(GapEstimate {
-        method: sweep::GapMethod::ModelFit,
-        gap_um: p[0] * (1.0 - tilt * tilt / 2.0),
-        sigma_um: sigma,
-        fringes_across_sweep: seed.estimate.fringes_across_sweep,
-        fit_rms: variance.sqrt(),
-    })
-}
-
-/// Least-squares `y ≈ gain·x + offset`.
-fn linear_fit(x: &[f64], y: &[f64]) -> (f64, f64) {
-    let n = x.len() as f64;
-    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
-    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
-    let sxx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
-    let gain = if sxx > 0.0 { sxy / sxx } else { 1.0 };
-    (gain, my - gain * mx)
 }

@@ -114,25 +114,23 @@ impl Trace {
         let mut csv_writer = csv::WriterBuilder::new().terminator(csv::Terminator::Any(b'\n')).from_writer(&mut writer);
         let columns: Vec<&[f64]> = self.columns().map(|(_, v)| v).collect();
         csv_writer.write_record(self.columns().map(|(name, _)| name)).map_err(csv_err)?;
-        let mut text = String::with_capacity(32 * columns.len());
-        let mut ends = Vec::with_capacity(columns.len());
-        for i in 0..self.len() {
-            text.clear();
-            ends.clear();
-            for col in &columns {
-                // `{:?}` is the shortest representation that parses back to the same bits.
-                let _ = write!(text, "{:?}", col[i]);
-                ends.push(text.len());
-            }
-            let fields = ends.iter().scan(0, |start, &end| {
-                let f = &text[*start..end];
-                *start = end;
-                Some(f)
-            });
-            csv_writer.write_record(fields).map_err(csv_err)?;
-        }
         csv_writer.flush().map_err(io_err)?;
         drop(csv_writer);
+        // The rows by hand: numbers need no quoting, and `ryu` writes the shortest text that
+        // parses back to the same bits (as `{:?}` does) several times faster.
+        let mut number = ryu::Buffer::new();
+        let mut row = Vec::with_capacity(32 * columns.len());
+        for i in 0..self.len() {
+            row.clear();
+            for (c, col) in columns.iter().enumerate() {
+                if c > 0 {
+                    row.push(b',');
+                }
+                row.extend_from_slice(number.format(col[i]).as_bytes());
+            }
+            row.push(b'\n');
+            writer.write_all(&row).map_err(io_err)?;
+        }
         writer.flush().map_err(io_err)
     }
 

@@ -24,25 +24,28 @@ struct SweepProblem<'a> {
 }
 
 impl SweepProblem<'_> {
+    /// The residuals, or (`with_jac`) only the Jacobian: the solver asks for them apart.
     fn eval(&self, with_jac: bool) -> Evaluation {
         let n = self.sp.k.len();
         let [a, a1, a2, b, l, psi] = [self.p[0], self.p[1], self.p[2], self.p[3], self.p[4], self.p[5]];
         let g0 = gouy(self.k0, l, self.w0);
-        let mut r = OVector::<f64, Dyn>::zeros(n);
+        let mut r = OVector::<f64, Dyn>::zeros(if with_jac { 0 } else { n });
         let mut j = if with_jac { Some(OMatrix::<f64, Dyn, U6>::zeros(n)) } else { None };
         for (i, (&k, &y)) in self.sp.k.iter().zip(self.sp.y.iter()).enumerate() {
             let x = (k - self.k0) / self.half;
             let (th, dth) = fringe_phase(k, self.k0, l, self.n_air, self.w0, g0);
             let (s, c) = sincos(th + psi);
             let shape = 1.0 + a1 * x + a2 * x * x;
-            r[i] = a * shape + b * c - y;
-            if let Some(j) = j.as_mut() {
-                j[(i, 0)] = shape;
-                j[(i, 1)] = a * x;
-                j[(i, 2)] = a * x * x;
-                j[(i, 3)] = c;
-                j[(i, 4)] = -b * s * dth;
-                j[(i, 5)] = -b * s;
+            match j.as_mut() {
+                Some(j) => {
+                    j[(i, 0)] = shape;
+                    j[(i, 1)] = a * x;
+                    j[(i, 2)] = a * x * x;
+                    j[(i, 3)] = c;
+                    j[(i, 4)] = -b * s * dth;
+                    j[(i, 5)] = -b * s;
+                }
+                None => r[i] = a * shape + b * c - y,
             }
         }
         (r, j)
@@ -117,10 +120,6 @@ pub fn fit_gap(wavelength_nm: &[f64], irradiance: &[f64], cfg: &SweepConfig) -> 
 /// the sweep, ±2.5 fringes around the FFT seed `f_seed`, refined by a parabola (nm).
 fn grid_start(sp: &Spectrum, k0: f64, half: f64, f_seed: f64, l_per_fringe: f64, cfg: &SweepConfig) -> f64 {
     let n = sp.k.len();
-    let step = 0.02;
-    let f_lo = (f_seed - 2.5).max(0.3);
-    let f_hi = f_seed + 2.5;
-    let count = ((f_hi - f_lo) / step).ceil() as usize + 1;
     // The grid only places the start of the fit: every sample is not needed to find the RSS
     // minimum (a few thousand spread over tens of fringes), the fit uses them all.
     let stride = (n / GRID_SAMPLES).max(1);
@@ -128,28 +127,40 @@ fn grid_start(sp: &Spectrum, k0: f64, half: f64, f_seed: f64, l_per_fringe: f64,
         k: sp.k.iter().step_by(stride).copied().collect(),
         y: sp.y.iter().step_by(stride).copied().collect(),
     };
-    let rss: Vec<f64> = (0..count)
-        .map(|i| linear_at(&coarse, k0, half, (f_lo + step * i as f64) * l_per_fringe, cfg.n_air, cfg.gouy_waist_nm).1)
-        .collect();
-    let (bi, _) = rss.iter().enumerate().fold(
-        (0usize, f64::INFINITY),
-        |(bi, bv), (i, &v)| {
-            if v < bv {
-                (i, v)
-            } else {
-                (bi, bv)
-            }
-        },
-    );
-    let mut f_best = f_lo + step * bi as f64;
+    let rss = |f: f64| linear_at(&coarse, k0, half, f * l_per_fringe, cfg.n_air, cfg.gouy_waist_nm).1;
+    // The RSS's main lobe is about a fringe wide: a tenth of a fringe finds it, a fiftieth
+    // around the best tenth places its bottom.
+    let f_lo = (f_seed - 2.5).max(0.3);
+    let f_coarse = grid_minimum(f_lo, f_seed + 2.5, 0.1, &rss);
+    let f_best = grid_minimum((f_coarse - 0.1).max(0.3), f_coarse + 0.1, 0.02, &rss);
+    f_best * l_per_fringe
+}
+
+/// The minimum of `rss` on a grid of `step` over `lo..=hi`, refined by a parabola through the
+/// best point and its neighbours.
+fn grid_minimum(lo: f64, hi: f64, step: f64, rss: &impl Fn(f64) -> f64) -> f64 {
+    let count = ((hi - lo) / step).ceil() as usize + 1;
+    let values: Vec<f64> = (0..count).map(|i| rss(lo + step * i as f64)).collect();
+    let (bi, _) =
+        values.iter().copied().enumerate().fold(
+            (0usize, f64::INFINITY),
+            |(bi, bv), (i, v)| {
+                if v < bv {
+                    (i, v)
+                } else {
+                    (bi, bv)
+                }
+            },
+        );
+    let mut f = lo + step * bi as f64;
     if bi > 0 && bi + 1 < count {
-        let (a, b, c) = (rss[bi - 1], rss[bi], rss[bi + 1]);
+        let (a, b, c) = (values[bi - 1], values[bi], values[bi + 1]);
         let den = a - 2.0 * b + c;
         if den > 0.0 {
-            f_best += step * (0.5 * (a - c) / den).clamp(-0.5, 0.5);
+            f += step * (0.5 * (a - c) / den).clamp(-0.5, 0.5);
         }
     }
-    f_best * l_per_fringe
+    f
 }
 
 /// The fit's gap, its σ from the covariance and the fitted parameters; an error when the
@@ -174,7 +185,7 @@ fn fit_outcome(
     if p.iter().any(|v| !v.is_finite()) {
         return Err(SweepError::FitFailed("non-finite parameters".to_string()));
     }
-    let (r, j) = problem.eval(true);
+    let (r, j) = (problem.eval(false).0, problem.eval(true).1);
     let j = j.ok_or_else(|| SweepError::FitFailed("no Jacobian".to_string()))?;
     let rss = r.norm_squared();
     let dof = (n as f64 - 6.0).max(1.0);

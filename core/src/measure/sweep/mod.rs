@@ -8,6 +8,7 @@
 //! from the fringe frequency across the sweep.
 
 mod fit;
+pub mod full_model;
 mod peak_fsr;
 mod sign;
 #[cfg(test)]
@@ -271,7 +272,7 @@ fn fringe_phase(k: f64, k0: f64, l: f64, n_air: f64, w0: Option<f64>, g0: (f64, 
 }
 
 /// FFT seed: spectrum resampled uniformly in k by linear interpolation, detrended,
-/// Hann-windowed, zero-padded 16×; the peak (above 0.5 fringe) with parabolic
+/// Hann-windowed, zero-padded 4×; the peak (above 0.5 fringe) with parabolic
 /// interpolation. Returns (L in nm, fringes across the sweep).
 fn fft_seed(sp: &Spectrum, n_air: f64) -> Result<(f64, f64), SweepError> {
     let n = sp.k.len();
@@ -294,9 +295,14 @@ fn fft_seed(sp: &Spectrum, n_air: f64) -> Result<(f64, f64), SweepError> {
     let sxx: f64 = (0..n).map(|i| (i as f64 - xm).powi(2)).sum();
     let sxy: f64 = u.iter().enumerate().map(|(i, v)| (i as f64 - xm) * (v - ym)).sum();
     let slope = sxy / sxx;
-    let m = (16 * n).next_power_of_two();
-    let mut planner = RealFftPlanner::<f64>::new();
-    let r2c = planner.plan_fft_forward(m);
+    // Padded 4×: the peak to a quarter fringe before the parabola; the fit's grid searches
+    // ±2.5 fringes around it anyway.
+    let m = (4 * n).next_power_of_two();
+    thread_local! {
+        // Plans cached per length: a session's sweeps share one.
+        static PLANNER: std::cell::RefCell<RealFftPlanner<f64>> = std::cell::RefCell::new(RealFftPlanner::new());
+    }
+    let r2c = PLANNER.with(|p| p.borrow_mut().plan_fft_forward(m));
     let mut input = r2c.make_input_vec();
     for (i, v) in u.iter().enumerate() {
         let w = 0.5 - 0.5 * (TAU * i as f64 / (nf - 1.0)).cos();

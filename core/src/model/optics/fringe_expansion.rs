@@ -86,16 +86,30 @@ impl FabryPerot {
     /// `out` (resized to M + 1): `field(gap, θ) = out.field(exp(-iΦ), exp(iψ))` with (Φ, ψ) from
     /// [`FabryPerot::expansion_phases_rad`].
     pub fn expansion(&self, gap_um: f64, tilt_sq_rad2: f64, out: &mut FringeExpansion) {
+        self.expansion_with(gap_um, tilt_sq_rad2, out, true);
+    }
+
+    /// The coefficients B_m alone (the derivatives' vectors left empty): what the fringe's
+    /// phase and shape need, at a fraction of [`FabryPerot::expansion`]'s cost.
+    pub fn expansion_coefficients(&self, gap_um: f64, tilt_sq_rad2: f64, out: &mut FringeExpansion) {
+        self.expansion_with(gap_um, tilt_sq_rad2, out, false);
+    }
+
+    fn expansion_with(&self, gap_um: f64, tilt_sq_rad2: f64, out: &mut FringeExpansion, derivatives: bool) {
         let n = self.expansion_order() + 1;
         let zero = Complex::new(0.0, 0.0);
-        for v in [&mut out.coefficients, &mut out.d_gap, &mut out.d_tilt_sq, &mut out.d2_tilt_sq, &mut out.d_wavenumber]
-        {
+        let len = if derivatives { n } else { 0 };
+        out.coefficients.clear();
+        out.coefficients.resize(n, zero);
+        for v in [&mut out.d_gap, &mut out.d_tilt_sq, &mut out.d2_tilt_sq, &mut out.d_wavenumber] {
             v.clear();
-            v.resize(n, zero);
+            v.resize(len, zero);
         }
         let (k, t, g) = (self.k_per_um, tilt_sq_rad2, gap_um.abs());
         out.coefficients[0] = Complex::new(self.r1_direct, 0.0);
-        out.d_wavenumber[0] = Complex::new(-self.r1_direct * self.cleave_per_k_sq * k, 0.0);
+        if derivatives {
+            out.d_wavenumber[0] = Complex::new(-self.r1_direct * self.cleave_per_k_sq * k, 0.0);
+        }
         let i = Complex::new(0.0, 1.0);
         let q = (-self.half_kw0_sq * t).exp(); // exp(-ε)
         for cav in std::iter::once(&self.front).chain(self.back.as_ref()) {
@@ -127,14 +141,16 @@ impl FabryPerot {
                 } else {
                     c * (coef * decay) * Complex::new(phase.cos(), phase.sin())
                 };
-                let dln_tilt = i * (a_m * k * cav.extra_reduced_um) - mf * mf * self.half_kw0_sq;
                 out.coefficients[m] += term;
-                out.d_gap[m] += term * dlnc * (mf / self.rayleigh_um);
-                out.d_tilt_sq[m] += term * dln_tilt;
-                out.d2_tilt_sq[m] += term * dln_tilt * dln_tilt;
-                out.d_wavenumber[m] += term
-                    * (-dlnc * (x / k) + i * (extra / k - mf * cav.extra_phase_per_k_um)
-                        - 2.0 * mf * mf * self.half_kw0_sq * t / k);
+                if derivatives {
+                    let dln_tilt = i * (a_m * k * cav.extra_reduced_um) - mf * mf * self.half_kw0_sq;
+                    out.d_gap[m] += term * dlnc * (mf / self.rayleigh_um);
+                    out.d_tilt_sq[m] += term * dln_tilt;
+                    out.d2_tilt_sq[m] += term * dln_tilt * dln_tilt;
+                    out.d_wavenumber[m] += term
+                        * (-dlnc * (x / k) + i * (extra / k - mf * cav.extra_phase_per_k_um)
+                            - 2.0 * mf * mf * self.half_kw0_sq * t / k);
+                }
                 coef *= -self.r1 * cav.r;
                 decay *= decay_step;
                 decay_step *= q * q;

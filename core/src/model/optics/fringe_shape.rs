@@ -43,8 +43,26 @@ impl FabryPerot {
         thread_local! {
             static SCRATCH: std::cell::RefCell<FringeExpansion> = std::cell::RefCell::new(FringeExpansion::default());
         }
-        let pulling = SCRATCH.with(|ex| self.fringe_shape(gap_um, tilt_rad, &mut ex.borrow_mut()).pulling_rad);
+        let pulling = SCRATCH.with(|ex| self.pulling_rad(gap_um, tilt_rad, &mut ex.borrow_mut()));
         self.fringe_phase_rad(gap_um, tilt_rad) + pulling
+    }
+
+    /// [`FringeShape::pulling_rad`] alone: the fundamental G₁ without the harmonics, from the
+    /// expansion's coefficients without their derivatives (the same sums, the same bits).
+    fn pulling_rad(&self, gap_um: f64, tilt_rad: f64, scratch: &mut FringeExpansion) -> f64 {
+        let t = tilt_rad * tilt_rad;
+        self.expansion_coefficients(gap_um, t, scratch);
+        let (phi, psi) = self.expansion_phases_rad(gap_um, t);
+        let (ws, wc) = sin_cos(psi);
+        let w = Complex::new(wc, ws);
+        let mut g1 = Complex::new(0.0, 0.0);
+        let mut prev = g1;
+        for (m, b) in scratch.coefficients.iter().enumerate() {
+            let d = b * w.powi(tilt_phase_order(m) as i32);
+            g1 += d * prev.conj();
+            prev = d;
+        }
+        wrap_pi(phi - g1.arg() - self.fringe_phase_rad(gap_um, tilt_rad))
     }
 
     /// The fringe's shape at gap `gap_um` and tilt `tilt_rad` ([`FringeShape`]); `scratch`
@@ -77,13 +95,17 @@ impl FabryPerot {
                 zero
             }
         };
-        let pulling = phi - a1 - self.fringe_phase_rad(gap_um, tilt_rad);
         FringeShape {
-            pulling_rad: pulling - 2.0 * PI * ((pulling + PI) / (2.0 * PI)).floor(),
+            pulling_rad: wrap_pi(phi - a1 - self.fringe_phase_rad(gap_um, tilt_rad)),
             offset: g0,
             fundamental: 2.0 * g[1].norm(),
             second: rel(2),
             third: rel(3),
         }
     }
+}
+
+/// `a` wrapped to [−π, π).
+fn wrap_pi(a: f64) -> f64 {
+    a - 2.0 * PI * ((a + PI) / (2.0 * PI)).floor()
 }

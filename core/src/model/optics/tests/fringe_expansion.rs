@@ -134,3 +134,29 @@ fn fringe_shape_rebuilds_the_power_over_one_fringe() {
         assert!(worst < 2e-3 * s.fundamental, "misfit {worst:e} of {:e} at {gap} µm, {tilt} rad", s.fundamental);
     }
 }
+
+/// The coefficients-only expansion and the fundamental's phase built on it are the full
+/// expansion's and the fringe shape's, bit for bit.
+#[test]
+fn the_coefficients_alone_and_the_fundamental_phase_are_the_full_computations() {
+    let cases = [
+        OpticalParams::default(),
+        OpticalParams { gouy_scale_error: -0.4, beams: 5, ..OpticalParams::default() },
+        OpticalParams { back_face: Some(BackFace::default()), cleave_angle_deg: 0.3, ..OpticalParams::default() },
+    ];
+    let (mut full, mut alone) = (FringeExpansion::default(), FringeExpansion::default());
+    for params in cases {
+        let fp = bench(&params);
+        for gap in [0.0, 3.0, 54.0, 333.3, -898.83] {
+            for tilt in [0.0, 0.004, -0.0195, 0.07] {
+                fp.expansion(gap, tilt * tilt, &mut full);
+                fp.expansion_coefficients(gap, tilt * tilt, &mut alone);
+                assert_eq!(full.coefficients, alone.coefficients, "{params:?} gap {gap} tilt {tilt}");
+                assert!(alone.d_gap.is_empty() && alone.d_wavenumber.is_empty());
+                let shape = fp.fringe_shape(gap, tilt, &mut full);
+                let phase = fp.fringe_phase_rad(gap, tilt) + shape.pulling_rad;
+                assert_eq!(fp.fundamental_phase_rad(gap, tilt).to_bits(), phase.to_bits(), "gap {gap} tilt {tilt}");
+            }
+        }
+    }
+}

@@ -1,0 +1,150 @@
+//! The sweep's gap refined with the bench's full multi-beam optics, from the two-beam fit.
+
+use crate::measure::sweep::{self, GapEstimate, SweepFit};
+use crate::model::optics::FabryPerot;
+use crate::model::phase::PhaseModel;
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{storage::Owned, Complex, Dyn, Matrix4, OMatrix, OVector, Vector4, U4};
+
+/// The fit: parameters (g µm, ψ rad, gain, offset), the fields per (decimated) sample.
+struct Problem<'a> {
+    fps: Vec<FabryPerot>,
+    y: &'a [f64],
+    r1: f64,
+    tilt: f64,
+    p: Vector4<f64>,
+}
+impl Problem<'_> {
+    /// The cavity part of the field per sample at gap `g`, `E − r₁`.
+    fn cavity(&self, g: f64) -> Vec<Complex<f64>> {
+        self.fps.iter().map(|fp| fp.field(g, self.tilt) - self.r1).collect()
+    }
+    /// `|r₁ + C·e^{iψ}|²` and the field itself, per sample.
+    fn detected(&self, c: Complex<f64>, psi: f64) -> (f64, Complex<f64>) {
+        let f = c * Complex::from_polar(1.0, psi) + self.r1;
+        (f.norm_sqr(), f)
+    }
+    fn predict(&self, p: &Vector4<f64>) -> Vec<f64> {
+        let (psi, gain, off) = (p[1], p[2], p[3]);
+        self.cavity(p[0]).into_iter().map(|c| off + gain * self.detected(c, psi).0).collect()
+    }
+}
+impl LeastSquaresProblem<f64, Dyn, U4> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, U4>;
+    type ParameterStorage = Owned<f64, U4>;
+    fn set_params(&mut self, x: &Vector4<f64>) {
+        self.p.copy_from(x);
+    }
+    fn params(&self) -> Vector4<f64> {
+        self.p
+    }
+    fn residuals(&self) -> Option<OVector<f64, Dyn>> {
+        let pred = self.predict(&self.p);
+        Some(OVector::<f64, Dyn>::from_iterator(pred.len(), pred.iter().zip(self.y).map(|(a, b)| a - b)))
+    }
+    /// ψ, gain and offset in closed form; the gap by central differences (the field's
+    /// derivative along the gap is the multi-beam sum's).
+    fn jacobian(&self) -> Option<OMatrix<f64, Dyn, U4>> {
+        let (g, psi, gain) = (self.p[0], self.p[1], self.p[2]);
+        let h = 1e-5;
+        let (at, up, dn) = (self.cavity(g), self.cavity(g + h), self.cavity(g - h));
+        let rot = Complex::from_polar(1.0, psi);
+        let mut j = OMatrix::<f64, Dyn, U4>::zeros(self.y.len());
+        for (i, c) in at.iter().enumerate() {
+            let (power, f) = self.detected(*c, psi);
+            // d|F|²/dψ = 2·Re(F̄·i·C·e^{iψ}).
+            let d_psi = 2.0 * (f.conj() * Complex::i() * c * rot).re;
+            let d_g = (self.detected(up[i], psi).0 - self.detected(dn[i], psi).0) / (2.0 * h);
+            j[(i, 0)] = gain * d_g;
+            j[(i, 1)] = gain * d_psi;
+            j[(i, 2)] = power;
+            j[(i, 3)] = 1.0;
+        }
+        Some(j)
+    }
+}
+
+/// Refine a two-beam sweep fit with the full multi-beam model of the bench's optics.
+///
+/// Fitted: the gap g (µm), a reflection-phase offset ψ (rad) applied to the cavity part of the
+/// field, the detector gain and offset: `I(λ) = offset + gain·|r₁ + (E(g, λ) − r₁)·e^{iψ}|²`.
+/// The tilt is the model's at the sweep's joints; the first beam's phase pins
+/// `g·(1 − θ²/2)`, the phase-equivalent (perpendicular) gap that is returned, so an error in the
+/// assumed tilt cancels to first order and only shapes the weak harmonics. With ψ free the
+/// gap comes from the fringe frequency only: an unknown coating phase cannot bias it, and its
+/// uncertainty is honest (frequency Cramér-Rao bound, not the much smaller phase bound).
+pub fn refine_gap_full_model(
+    wavelength_nm: &[f64],
+    irradiance: &[f64],
+    first_joints: [f64; 6],
+    model: &PhaseModel,
+    seed: &SweepFit,
+) -> Result<GapEstimate, String> {
+    // Decimate long sweeps: the fringe frequency needs far fewer samples than a 10 kHz record has.
+    let stride = (wavelength_nm.len() / 4000).max(1);
+    let wl: Vec<f64> = wavelength_nm.iter().step_by(stride).copied().collect();
+    let y: Vec<f64> = irradiance.iter().step_by(stride).copied().collect();
+    let fps = wl
+        .iter()
+        .map(|&w| FabryPerot::new(&model.optics, w, model.n_air).map_err(|e| e.to_string()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let r1 = fps[0].field(1e9, 0.0).re; // far away, only the fiber face reflects
+    let q0 = model.chain.description().q_from_display(&first_joints);
+    let tilt = model.extrinsics.cavity(&model.chain.end_effector(&q0)).map(|c| c.tilt_rad).unwrap_or(0.0);
+    let g0 = seed.estimate.gap_um / (1.0 - tilt * tilt / 2.0);
+    let problem = |p| Problem { fps: fps.clone(), y: &y, r1, tilt, p };
+    let solve = |p| {
+        let (problem, report) = LevenbergMarquardt::new().minimize(problem(p));
+        report.termination.was_successful().then_some((report.objective_function, problem.p))
+    };
+    // ψ, gain and offset at the seed gap are the solution of a linear problem: one start there.
+    // Should it fail, ψ is periodic: four starts around the circle.
+    let best = linear_start(&problem(Vector4::zeros()), g0).and_then(solve).or_else(|| {
+        let cavity = problem(Vector4::zeros()).cavity(g0);
+        let base: Vec<f64> = cavity.iter().map(|c| (c + r1).norm_sqr()).collect();
+        let (gain0, off0) = linear_fit(&base, &y);
+        (0..4)
+            .filter_map(|k| solve(Vector4::new(g0, k as f64 * std::f64::consts::FRAC_PI_2, gain0, off0)))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+    });
+    let (cost, p) = best.ok_or("the full-model sweep fit did not converge")?;
+    let problem = Problem { fps, y: &y, r1, tilt, p };
+    let j = problem.jacobian().ok_or("no Jacobian")?;
+    let n = y.len();
+    let dof = n.saturating_sub(4).max(1) as f64;
+    let variance = 2.0 * cost / dof;
+    let cov = (j.transpose() * &j).try_inverse().ok_or("the sweep does not determine the gap (singular fit)")?;
+    let sigma = (cov[(0, 0)] * variance).sqrt();
+    Ok(GapEstimate {
+        method: sweep::GapMethod::ModelFit,
+        gap_um: p[0] * (1.0 - tilt * tilt / 2.0),
+        sigma_um: sigma,
+        fringes_across_sweep: seed.estimate.fringes_across_sweep,
+        fit_rms: variance.sqrt(),
+    })
+}
+
+/// (g, ψ, gain, offset) at gap `g` by linear least squares: with C the cavity field,
+/// `I = offset + gain·(r₁² + |C|²) + a·2r₁·Re C − b·2r₁·Im C`, where (a, b) = gain·(cos ψ, sin ψ).
+fn linear_start(problem: &Problem, g: f64) -> Option<Vector4<f64>> {
+    let (mut ata, mut aty) = (Matrix4::<f64>::zeros(), Vector4::<f64>::zeros());
+    let r1 = problem.r1;
+    for (c, &y) in problem.cavity(g).iter().zip(problem.y) {
+        let row = Vector4::new(1.0, r1 * r1 + c.norm_sqr(), 2.0 * r1 * c.re, -2.0 * r1 * c.im);
+        ata += row * row.transpose();
+        aty += row * y;
+    }
+    let x = ata.cholesky()?.solve(&aty);
+    (x.iter().all(|v| v.is_finite()) && x[1] > 0.0).then(|| Vector4::new(g, x[3].atan2(x[2]), x[1], x[0]))
+}
+
+/// Least-squares `y ≈ gain·x + offset`.
+fn linear_fit(x: &[f64], y: &[f64]) -> (f64, f64) {
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let sxx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
+    let gain = if sxx > 0.0 { sxy / sxx } else { 1.0 };
+    (gain, my - gain * mx)
+}
