@@ -310,11 +310,10 @@ fn measure_identify_validate(
         RefCell::new(Progress::new(session.plans.iter().map(|p| (p.name.clone(), p.segments.len())).collect()));
     let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
     let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
-    let mut writer = SessionWriter::new(&a.out, session);
+    let mut writer = SessionWriter::new(&a.out, session).keeping_traces();
     let recorded = timed("measure", || {
         record_with(bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))
     })?;
-    let session = writer.into_session();
     if let Err(e) = recorded.outcome {
         progress.borrow_mut().finish();
         if INTERRUPT.load(Ordering::SeqCst) {
@@ -325,7 +324,9 @@ fn measure_identify_validate(
     }
     tracing::info!(bench_time_s = recorded.duration_s, "measurement done");
     progress.borrow_mut().stage("identifying");
-    let traces = timed("read_traces", || session.load_traces(&a.out))?;
+    // The traces this run recorded stay in memory; those of an interrupted run are read back.
+    let traces = timed("read_traces", || writer.take_traces())?;
+    let session = writer.into_session();
     let name = session.bench.name.clone();
     let mut report = timed("identify", || report_from_traces(traces, recorded.duration_s, name, nominal, mode))
         .map_err(calibration_failed)?;

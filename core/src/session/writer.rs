@@ -41,6 +41,8 @@ pub struct SessionWriter {
     /// Where to look for the next free trace name.
     next_name: usize,
     storage: Box<dyn Storage>,
+    /// The traces written by this writer, by file, when it keeps them ([`SessionWriter::keeping_traces`]).
+    kept: Option<HashMap<String, Trace>>,
 }
 
 impl std::fmt::Debug for SessionWriter {
@@ -57,7 +59,15 @@ impl SessionWriter {
         for r in &session.traces {
             on_disk.entry((r.crc32, r.bytes)).or_default().push(r.file.clone());
         }
-        Self { dir: dir.to_path_buf(), session, on_disk, seen: HashMap::new(), next_name: 0, storage: Box::new(Disk) }
+        Self {
+            dir: dir.to_path_buf(),
+            session,
+            on_disk,
+            seen: HashMap::new(),
+            next_name: 0,
+            storage: Box::new(Disk),
+            kept: None,
+        }
     }
 
     /// Take the trace files `other` references as on disk too (the `session.ron` or autosave
@@ -75,6 +85,35 @@ impl SessionWriter {
     pub fn with_storage(mut self, storage: Box<dyn Storage>) -> Self {
         self.storage = storage;
         self
+    }
+
+    /// The same writer keeping in memory every trace it writes, so that
+    /// [`SessionWriter::take_traces`] hands them back without reading their files again.
+    pub fn keeping_traces(mut self) -> Self {
+        self.kept = Some(HashMap::new());
+        self
+    }
+
+    /// Every complete trace of the session, in order (as [`Session::load_traces`] reads them):
+    /// those this writer kept moved out of memory, the others read from their files and checked.
+    pub fn take_traces(&mut self) -> Result<Vec<Trace>, SessionError> {
+        let mut kept = self.kept.take().unwrap_or_default();
+        let complete: Vec<&TraceRef> = self.session.traces.iter().filter(|r| r.complete).collect();
+        let mut traces = Vec::with_capacity(complete.len());
+        for (k, reference) in complete.iter().enumerate() {
+            // A file referenced twice is moved out on its last reference.
+            let again = complete[k + 1..].iter().any(|r| r.file == reference.file);
+            let trace = match kept.remove(&reference.file) {
+                Some(t) if again => {
+                    kept.insert(reference.file.clone(), t.clone());
+                    t
+                }
+                Some(t) => t,
+                None => self.session.load_trace(&self.dir, reference)?,
+            };
+            traces.push(trace);
+        }
+        Ok(traces)
     }
 
     /// The session folder.
@@ -180,6 +219,9 @@ impl SessionWriter {
             }
         };
         used.insert(file.clone());
+        if let Some(kept) = self.kept.as_mut() {
+            kept.entry(file.clone()).or_insert_with(|| trace.clone());
+        }
         Ok(TraceRef {
             file,
             label: trace.meta.label.clone(),

@@ -95,7 +95,8 @@ pub fn refine_gap_full_model(
     let g0 = seed.estimate.gap_um / (1.0 - tilt * tilt / 2.0);
     let problem = |p| Problem { fps: fps.clone(), y: &y, r1, tilt, p };
     let solve = |p| {
-        let (problem, report) = LevenbergMarquardt::new().minimize(problem(p));
+        // Converged at 1e-10 relative, as the two-beam fit.
+        let (problem, report) = LevenbergMarquardt::new().with_xtol(1e-10).with_ftol(1e-10).minimize(problem(p));
         report.termination.was_successful().then_some((report.objective_function, problem.p))
     };
     // ψ, gain and offset at the seed gap are the solution of a linear problem: one start there.

@@ -175,3 +175,26 @@ fn taking_the_lock_removes_the_temporaries_of_an_interrupted_save_and_nothing_el
         assert!(f.exists(), "{} kept", f.display());
     }
 }
+
+/// The traces a keeping writer hands back are those its folder holds: kept ones moved out of
+/// memory, one referenced twice given twice, those of an earlier run read from their files,
+/// incomplete ones left out.
+#[test]
+fn kept_traces_are_the_traces_the_folder_holds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (a, b, c) = (trace("a", 30, 0.0), trace("b", 40, 1.0), trace("c: partial", 10, 2.0));
+    let mut earlier = SessionWriter::new(dir, empty_session());
+    earlier.add_trace(&a, Some((0, 0)), true).unwrap();
+    earlier.autosave().unwrap();
+    let recovered = Session::recover(dir).unwrap();
+    let mut w = SessionWriter::new(dir, recovered).keeping_traces();
+    w.add_trace(&b, Some((0, 1)), true).unwrap();
+    w.add_trace(&b, Some((0, 2)), true).unwrap();
+    w.add_trace(&c, Some((0, 3)), false).unwrap();
+    w.autosave().unwrap();
+    let from_disk = Session::recover(dir).unwrap().load_traces(dir).unwrap();
+    let taken = w.take_traces().unwrap();
+    assert_eq!(taken.iter().map(|t| t.meta.label.as_str()).collect::<Vec<_>>(), ["a", "b", "b"]);
+    assert_eq!(taken, from_disk);
+}
