@@ -30,7 +30,7 @@ use photorobot_core::session::{
     self as lab, find_recovery, recording::record_with, BenchInfo, ControllerIdentity, FolderLock, LabRecord, Session,
     SessionWriter, AUTOSAVE_FILE,
 };
-use photorobot_core::trace::import::{read_folder, ColumnMapping};
+use photorobot_core::trace::import::{read_folder_sourced, ColumnMapping};
 use photorobot_core::trace::Trace;
 use std::cell::RefCell;
 use std::io::Write;
@@ -211,7 +211,7 @@ fn calibrate_from_traces(
     mode: Mode,
 ) -> Result<(Session, CalibrationReport), CliError> {
     let mapping = a.mapping.as_deref().map(ColumnMapping::load).transpose()?;
-    let traces = timed("read_traces", || read_folder(dir, mapping.as_ref()))?;
+    let sourced = timed("read_traces", || read_folder_sourced(dir, mapping.as_ref()))?;
     if std::fs::canonicalize(dir).ok() == std::fs::canonicalize(a.out.join("traces")).ok() {
         return Err(CliError::Argument {
             argument: "--out",
@@ -229,7 +229,8 @@ fn calibrate_from_traces(
         Some(m) => format!("traces imported from {} with the column mapping {}", dir.display(), m.display()),
         None => format!("traces imported from {}", dir.display()),
     };
-    timed("copy_traces", || session.add_traces(&a.out, &traces))?;
+    timed("copy_traces", || session.add_sourced_traces(&a.out, &sourced))?;
+    let traces: Vec<Trace> = sourced.into_iter().map(|s| s.trace).collect();
     let duration_s = traces.iter().map(span_s).sum();
     let name = session.bench.name.clone();
     let mut report = timed("identify", || report_from_traces(traces, duration_s, name, nominal, mode))
@@ -497,23 +498,17 @@ fn write_session(a: &CalibrateArgs, session: &mut Session, report: &CalibrationR
 
 /// A fit that fails or a solver that did not converge is not a calibration, though written.
 fn calibration_verdict(a: &CalibrateArgs, report: &CalibrationReport) -> Result<(), CliError> {
-    match &report.fit {
-        Some(fit) if fit.verdict != Verdict::Fits => {
-            Err(CliError::NotACalibration { session: a.out.clone(), problem: fit.summary.clone() })
-        }
-        _ if report.extrinsics.validate().is_err() => Err(CliError::NotACalibration {
-            session: a.out.clone(),
-            problem: format!(
-                "the fit ended outside the extrinsics' range: {}",
-                report.extrinsics.validate().err().map(|e| e.to_string()).unwrap_or_default()
-            ),
-        }),
-        _ if !report.converged => Err(CliError::NotACalibration {
-            session: a.out.clone(),
-            problem: format!("the solver did not converge ({})", report.termination),
-        }),
-        _ => Ok(()),
+    let refused = |problem: String| Err(CliError::NotACalibration { session: a.out.clone(), problem });
+    if let Some(fit) = report.fit.as_ref().filter(|fit| fit.verdict != Verdict::Fits) {
+        return refused(fit.summary.clone());
     }
+    if let Err(e) = report.extrinsics.validate() {
+        return refused(format!("the fit ended outside the extrinsics' range: {e}"));
+    }
+    if !report.converged {
+        return refused(format!("the solver did not converge ({})", report.termination));
+    }
+    Ok(())
 }
 
 /// Duration of a trace (s).

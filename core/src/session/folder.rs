@@ -7,7 +7,7 @@ use super::{
     SESSION_FILE, TRACES_DIR,
 };
 use crate::files::{self, FileError};
-use crate::trace::Trace;
+use crate::trace::{import::Sourced, Trace};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -163,6 +163,23 @@ impl Session {
         let bytes: Vec<Result<Vec<u8>, _>> = traces.par_iter().map(|t| t.to_csv_bytes(&origin)).collect();
         for (trace, bytes) in traces.iter().zip(bytes) {
             self.add_trace_bytes(dir, trace, bytes?, None, true)?;
+        }
+        Ok(())
+    }
+
+    /// [`Session::add_traces`] for traces read from files: a file in our format whose bytes are
+    /// still those it was read from is copied as it is (no formatting, the recording's own
+    /// text kept); any other trace is written as [`Session::add_trace`] writes it.
+    pub fn add_sourced_traces(&mut self, dir: &Path, traces: &[Sourced]) -> Result<(), SessionError> {
+        for s in traces {
+            let unchanged = s.native.and_then(|key| {
+                let bytes = std::fs::read(&s.path).ok()?;
+                (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some(bytes)
+            });
+            match unchanged {
+                Some(bytes) => self.add_trace_bytes(dir, &s.trace, bytes, None, true)?,
+                None => self.add_trace(dir, &s.trace, None, true)?,
+            };
         }
         Ok(())
     }

@@ -178,3 +178,27 @@ proptest! {
         check_any(text.as_bytes());
     }
 }
+
+/// Traces read from files in our format are copied as they are, the recording's own text kept;
+/// a file changed since it was read, and an import through a mapping, are written from the
+/// traces in memory. Either way the session's traces are those that were read.
+#[test]
+fn sourced_traces_are_copied_as_recorded_or_written_when_their_file_changed() {
+    let src = tempfile::tempdir().unwrap();
+    // Text the writer would not produce (a comment, a blank line, CRLF): copied as it is.
+    let own = "# photorobot trace v1\n# label: by hand\nt_s,q1_um,q2_um,q3_um,q4_deg,q5_deg,q6_deg,wavelength_nm,irradiance\r\n\
+               0,0,0,0,0,0,0,1560,0.5\r\n# a comment\n\n0.001,0.1,0,0,0,0,0,1560,0.51\r\n";
+    std::fs::write(src.path().join("a.csv"), own).unwrap();
+    small_trace("changed after reading", 9).write_csv(&src.path().join("b.csv")).unwrap();
+    let read = crate::trace::import::read_folder_sourced(src.path(), None).unwrap();
+    assert!(read.iter().all(|s| s.native.is_some()));
+    small_trace("changed after reading", 12).write_csv(&src.path().join("b.csv")).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let bench = BenchInfo { name: "recorded traces".into(), preset: None, description: None, seed: None };
+    let mut s = Session::new(bench, BenchPreset::resolve("table2-ideal").unwrap().robot_description().unwrap());
+    s.add_sourced_traces(out.path(), &read).unwrap();
+    assert_eq!(std::fs::read_to_string(out.path().join(&s.traces[0].file)).unwrap(), own);
+    let loaded = s.load_traces(out.path()).unwrap();
+    assert_eq!(loaded, read.iter().map(|r| r.trace.clone()).collect::<Vec<_>>());
+    assert_eq!(loaded[1].len(), 9, "the trace that was read, not the file as it is now");
+}

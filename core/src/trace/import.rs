@@ -355,17 +355,48 @@ pub fn csv_files(dir: &Path) -> Result<Vec<PathBuf>, FileError> {
 
 /// Read every trace of a folder: in our format without a mapping, through the mapping otherwise.
 pub fn read_folder(dir: &Path, mapping: Option<&ColumnMapping>) -> Result<Vec<Trace>, TraceError> {
+    Ok(read_folder_sourced(dir, mapping)?.into_iter().map(|s| s.trace).collect())
+}
+
+/// A trace read from a file, with where it came from.
+#[derive(Debug, Clone)]
+pub struct Sourced {
+    /// The trace.
+    pub trace: Trace,
+    /// The file.
+    pub path: PathBuf,
+    /// In our format: the CRC-32 and size of the bytes the trace was read from, so that a copy
+    /// of the file can be checked to hold exactly that trace. `None` for an import through a
+    /// column mapping.
+    pub native: Option<(u32, u64)>,
+}
+
+/// [`read_folder`], each trace with its file ([`Sourced`]).
+pub fn read_folder_sourced(dir: &Path, mapping: Option<&ColumnMapping>) -> Result<Vec<Sourced>, TraceError> {
     use rayon::prelude::*;
     let options = ReadOptions::default();
     // Read in parallel; the first failing file (in name order) is the one reported.
-    let read: Vec<Result<Trace, TraceError>> = csv_files(dir)?
+    let read: Vec<Result<Sourced, TraceError>> = csv_files(dir)?
         .par_iter()
         .map(|p| match mapping {
-            Some(m) => import_file(p, m, &options),
-            None => Trace::read_csv_with(p, &options),
+            Some(m) => Ok(Sourced { trace: import_file(p, m, &options)?, path: p.clone(), native: None }),
+            None => read_native(p, &options),
         })
         .collect();
     read.into_iter().collect()
+}
+
+/// A file in our format, read whole and checksummed.
+fn read_native(path: &Path, options: &ReadOptions) -> Result<Sourced, TraceError> {
+    let mut bytes = Vec::new();
+    open_limited(path, options)?.read_to_end(&mut bytes).map_err(|source| FileError::Io {
+        file: path.to_path_buf(),
+        action: "cannot read",
+        source,
+    })?;
+    let trace = Trace::from_csv_reader_with(&bytes[..], path, options)?;
+    let native = Some((crc32fast::hash(&bytes), bytes.len() as u64));
+    Ok(Sourced { trace, path: path.to_path_buf(), native })
 }
 
 #[cfg(test)]
