@@ -8,7 +8,7 @@ use nalgebra::{storage::Owned, Complex, Dyn, Matrix4, OMatrix, OVector, Vector4,
 
 /// The fit: parameters (g µm, ψ rad, gain, offset), the fields per (decimated) sample.
 struct Problem<'a> {
-    fps: Vec<FabryPerot>,
+    fps: &'a [FabryPerot],
     y: &'a [f64],
     r1: f64,
     tilt: f64,
@@ -93,7 +93,7 @@ pub fn refine_gap_full_model(
     let q0 = model.chain.description().q_from_display(&first_joints);
     let tilt = model.extrinsics.cavity(&model.chain.end_effector(&q0)).map(|c| c.tilt_rad).unwrap_or(0.0);
     let g0 = seed.estimate.gap_um / (1.0 - tilt * tilt / 2.0);
-    let problem = |p| Problem { fps: fps.clone(), y: &y, r1, tilt, p };
+    let problem = |p| Problem { fps: &fps, y: &y, r1, tilt, p };
     let solve = |p| {
         // Converged at 1e-10 relative, as the two-beam fit.
         let (problem, report) = LevenbergMarquardt::new().with_xtol(1e-10).with_ftol(1e-10).minimize(problem(p));
@@ -110,7 +110,7 @@ pub fn refine_gap_full_model(
             .min_by(|a, b| a.0.total_cmp(&b.0))
     });
     let (cost, p) = best.ok_or("the full-model sweep fit did not converge")?;
-    let problem = Problem { fps, y: &y, r1, tilt, p };
+    let problem = problem(p);
     let j = problem.jacobian().ok_or("no Jacobian")?;
     let n = y.len();
     let dof = n.saturating_sub(4).max(1) as f64;
