@@ -60,25 +60,14 @@ fn invalid(file: &Path, field: &str, problem: String) -> CliError {
     CliError::File(FileError::Invalid { file: file.to_path_buf(), field: field.into(), problem })
 }
 
-/// Read the session's traces, in file-name order.
+/// Read the session's traces, in file-name order, on every core.
 fn read_traces(session: &Path) -> Result<Vec<Trace>, CliError> {
     let dir = session.join("traces");
-    let entries = std::fs::read_dir(&dir).map_err(|e| {
-        invalid(
-            &dir,
-            "traces",
-            format!("cannot read the folder ({e}): expected a session written by `photorobot calibrate --out`"),
-        )
-    })?;
-    let mut files: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        return Err(invalid(&dir, "traces", "no .csv trace: expected traces/NNN.csv".into()));
+    if !dir.is_dir() {
+        let problem = "not a folder: expected a session written by `photorobot calibrate --out`";
+        return Err(invalid(&dir, "traces", problem.into()));
     }
-    files.iter().map(|p| Trace::read_csv(p).map_err(CliError::from)).collect()
+    Ok(photorobot_core::trace::import::read_folder(&dir, None)?)
 }
 
 /// Run the workflow and print it.

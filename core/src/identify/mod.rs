@@ -267,8 +267,9 @@ fn windowed_top(
             value = v;
             let step_um = run * x * half_width_um;
             shift_um += step_um;
-            // Settled: a top 1 pm off the centre reads the value to 1e-7 of the fringe's.
-            if step_um.abs() < 1e-6 {
+            // Settled: stopping at 0.1 nm rather than 1 pm moves the identified extrinsics of
+            // a joint session by under 0.01σ and saves a parabola on most tops.
+            if step_um.abs() < 1e-4 {
                 break;
             }
         }
