@@ -7,6 +7,7 @@
 
 use photorobot_core::bench::{run_plan_with, Bench, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::calibration::{report_from_traces, CalibrationReport, Mode};
+use photorobot_core::diagnose::fit::StopCheck;
 use photorobot_core::diagnose::motions::BenchRunner;
 use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
 use photorobot_core::diagnose::{Diagnosis, DiagnosisResult};
@@ -524,6 +525,9 @@ impl Thread {
     /// the result and the library effects of its final model.
     fn diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics) -> Result<(DiagnosisResult, Vec<Effect>), String> {
         let (mut d, skipped) = Diagnosis::from_traces(&self.nominal, traces, extrinsics).map_err(|e| e.to_string())?;
+        // The stop ends the computing too, within one model evaluation.
+        let cancel = self.cancel.clone();
+        d.set_stop(StopCheck::new(move || cancel.load(Ordering::Relaxed)));
         if !skipped.is_empty() {
             let _ = self.tx.send(Event::DiagnosisStep(
                 "0. traces".into(),
@@ -535,13 +539,16 @@ impl Thread {
         let offset = (d.end_time_s() + 60.0 - self.bench.clock_s()).max(0.0);
         let mut runner = BenchRunner::new(self.bench.as_mut(), offset);
         let tx = self.tx.clone();
-        while let Some(step) = d.step(Some(&mut runner)).map_err(|e| e.to_string())? {
+        loop {
+            let step = match d.step(Some(&mut runner)) {
+                Ok(Some(step)) => step,
+                Ok(None) => break,
+                // A motion the stop cancelled fails the step: it was stopped all the same.
+                Err(_) if self.cancel.load(Ordering::Relaxed) => return Err(STOPPED.into()),
+                Err(e) => return Err(e.to_string()),
+            };
             let _ = tx.send(Event::DiagnosisStep(step.title().to_string(), step.summary()));
             (self.notify)();
-            // The stop also ends the computing between the bench motions.
-            if self.cancel.load(Ordering::Relaxed) {
-                return Err(STOPPED.into());
-            }
         }
         let effects = d.state().map(|s| s.library_effects()).unwrap_or_default();
         let result = d.result().cloned().ok_or("the diagnosis ended without a result")?;

@@ -39,6 +39,42 @@ impl ModelState {
 pub struct Predictor {
     base: PhaseModel,
     fps: Vec<(f64, FabryPerot)>,
+    stop: StopCheck,
+}
+
+/// Asked before every prediction: once it answers true, predictions fail with
+/// [`PredictError::Stopped`], so a fit, a scoring or a design in progress ends within one
+/// evaluation instead of at the end of its workflow step.
+#[derive(Clone, Default)]
+pub struct StopCheck(Option<std::sync::Arc<dyn Fn() -> bool + Send + Sync>>);
+
+impl StopCheck {
+    /// A check that asks `stopped`.
+    pub fn new(stopped: impl Fn() -> bool + Send + Sync + 'static) -> Self {
+        StopCheck(Some(std::sync::Arc::new(stopped)))
+    }
+
+    /// Whether a stop was asked for.
+    pub fn stopped(&self) -> bool {
+        self.0.as_ref().is_some_and(|f| f())
+    }
+}
+
+impl std::fmt::Debug for StopCheck {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() { "StopCheck(set)" } else { "StopCheck(none)" })
+    }
+}
+
+/// Why a prediction could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PredictError {
+    /// An effect could not be applied to the model.
+    #[error(transparent)]
+    Effect(#[from] EffectError),
+    /// The [`StopCheck`] asked to stop.
+    #[error("stopped")]
+    Stopped,
 }
 
 /// Number of gain groups among the observations.
@@ -64,7 +100,17 @@ impl Predictor {
                 fps.push((o.wavelength_nm, fp));
             }
         }
-        Ok(Self { base: base.clone(), fps })
+        Ok(Self { base: base.clone(), fps, stop: StopCheck::default() })
+    }
+
+    /// Ask `stop` before every prediction from now on.
+    pub fn set_stop(&mut self, stop: StopCheck) {
+        self.stop = stop;
+    }
+
+    /// Whether the [`StopCheck`] asks to stop.
+    pub fn stopped(&self) -> bool {
+        self.stop.stopped()
     }
 
     /// Add the wavelengths of more observations.
@@ -90,7 +136,10 @@ impl Predictor {
         effects: &[Effect],
         gains: &[f64],
         obs: &[Observation],
-    ) -> Result<Vec<f64>, EffectError> {
+    ) -> Result<Vec<f64>, PredictError> {
+        if self.stopped() {
+            return Err(PredictError::Stopped);
+        }
         let model = crate::diagnose::validation::extended_model(&self.base, *e, effects)?;
         let path: Vec<Effect> = effects.iter().filter(|e| e.is_path()).cloned().collect();
         // Optical effects: the optics models rebuilt with them (cheap next to the predictions).
@@ -130,7 +179,7 @@ impl Predictor {
     }
 
     /// Whitened residuals (measured − predicted)/σ of a state.
-    pub fn whitened_residuals(&self, state: &ModelState, obs: &[Observation]) -> Result<DVector<f64>, EffectError> {
+    pub fn whitened_residuals(&self, state: &ModelState, obs: &[Observation]) -> Result<DVector<f64>, PredictError> {
         let p = self.predict(&state.extrinsics, &state.library_effects(), &state.gains, obs)?;
         Ok(DVector::from_iterator(
             obs.len(),
@@ -246,7 +295,7 @@ fn jacobian(
     template: &ModelState,
     x: &DVector<f64>,
     obs: &[Observation],
-) -> Result<DMatrix<f64>, EffectError> {
+) -> Result<DMatrix<f64>, PredictError> {
     use rayon::prelude::*;
     let n_differenced = layout.free.len() + layout.effects;
     let columns: Vec<DVector<f64>> = (0..n_differenced)
@@ -261,7 +310,7 @@ fn jacobian(
             let rb = p.whitened_residuals(&layout.unpack(template, &b), obs)?;
             Ok((rb - ra) / (2.0 * h))
         })
-        .collect::<Result<_, EffectError>>()?;
+        .collect::<Result<_, PredictError>>()?;
     let mut j = DMatrix::zeros(obs.len(), x.len());
     for (c, col) in columns.iter().enumerate() {
         j.set_column(c, col);
@@ -284,7 +333,7 @@ fn jacobian(
 
 /// The whitened Jacobian of the predictions of `obs` at `state` with respect to every
 /// extrinsic, the state's effects and the gains of `obs`'s amplitude groups.
-pub fn jacobian_of(p: &Predictor, state: &ModelState, obs: &[Observation]) -> Result<DMatrix<f64>, EffectError> {
+pub fn jacobian_of(p: &Predictor, state: &ModelState, obs: &[Observation]) -> Result<DMatrix<f64>, PredictError> {
     let mut template = state.clone();
     let groups = gain_groups(obs);
     template.gains.resize(groups.max(template.gains.len()), 1.0);
@@ -315,7 +364,7 @@ pub fn fit(
     obs: &[Observation],
     start: &ModelState,
     free: &[bool; N_EXTRINSICS],
-) -> Result<Fit, EffectError> {
+) -> Result<Fit, PredictError> {
     let groups = gain_groups(obs);
     let mut template = start.clone();
     template.gains.resize(groups, 1.0);
@@ -335,9 +384,13 @@ pub fn fit(
             let xn = &x + &dx * scale;
             // A step that takes an effect out of its accepted range (a back-face reflectance
             // above 1) is refused like one that raises the cost.
-            let Ok(rn) = p.whitened_residuals(&layout.unpack(&template, &xn), obs) else {
-                scale *= 0.5;
-                continue;
+            let rn = match p.whitened_residuals(&layout.unpack(&template, &xn), obs) {
+                Ok(rn) => rn,
+                Err(PredictError::Stopped) => return Err(PredictError::Stopped),
+                Err(PredictError::Effect(_)) => {
+                    scale *= 0.5;
+                    continue;
+                }
             };
             let cn = rn.norm_squared();
             if cn.is_finite() && cn <= cost {

@@ -113,4 +113,16 @@ pub enum DiagnoseError {
     /// The discriminating motions could not be run.
     #[error("{0}")]
     Bench(String),
+    /// The caller's [`crate::diagnose::fit::StopCheck`] asked to stop.
+    #[error("stopped")]
+    Stopped,
+}
+
+impl From<crate::diagnose::fit::PredictError> for DiagnoseError {
+    fn from(e: crate::diagnose::fit::PredictError) -> Self {
+        match e {
+            crate::diagnose::fit::PredictError::Stopped => DiagnoseError::Stopped,
+            crate::diagnose::fit::PredictError::Effect(e) => DiagnoseError::Model(e.to_string()),
+        }
+    }
 }

@@ -19,10 +19,9 @@
 //! −1e6 ppm from uncalibrated extrinsics) is structure the candidate does not explain.
 
 use crate::diagnose::candidates::Candidate;
-use crate::diagnose::fit::{ModelState, Predictor};
+use crate::diagnose::fit::{ModelState, PredictError, Predictor};
 use crate::diagnose::projection::Projector;
 use crate::identify::Observation;
-use crate::model::effects::EffectError;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -43,7 +42,7 @@ pub fn signatures(
     state: &ModelState,
     candidates: &[Candidate],
     obs: &[Observation],
-) -> Result<Vec<DVector<f64>>, EffectError> {
+) -> Result<Vec<DVector<f64>>, PredictError> {
     use rayon::prelude::*;
     candidates
         .par_iter()

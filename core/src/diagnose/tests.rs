@@ -316,3 +316,36 @@ fn an_effect_too_small_for_every_motion_is_reported_as_not_detectable() {
     assert!(!r.not_detectable.iter().any(|n| n == "joint zero offset q4"), "{:?}", r.not_detectable);
     assert!(!r.not_detectable.iter().any(|n| n == "optical path scale"), "{:?}", r.not_detectable);
 }
+
+/// A stop asked halfway through a step ends it at once: the step returns `Stopped` after at
+/// most a few more checks (the evaluations already in flight on other threads), where it would
+/// have gone on for as many again, and every later step returns `Stopped` too.
+#[test]
+fn a_stop_ends_the_step_in_progress_within_one_evaluation() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+    let b = base();
+    let hidden = vec![Effect::ReversalError { joint: "q3".into(), step: 1.0 }];
+    let mut bench = SimulatedBench::new(&b, Extrinsics::table2(), hidden, 3).unwrap();
+    let obs = bench.simulate(&paper_calibration()).unwrap();
+    // Each diagnosis counts the checks it makes; `limit` is where the stop is asked.
+    let counted = |limit: usize| {
+        let checks = Arc::new(AtomicUsize::new(0));
+        let mut d = Diagnosis::new(&b, obs.clone(), Extrinsics::table2()).unwrap();
+        let n = checks.clone();
+        d.set_stop(fit::StopCheck::new(move || n.fetch_add(1, Ordering::SeqCst) >= limit));
+        (d, checks)
+    };
+    let (mut whole, checks) = counted(usize::MAX);
+    assert!(whole.step(None).unwrap().is_some(), "the baseline");
+    let baseline_checks = checks.load(Ordering::SeqCst);
+    assert!(baseline_checks > 40, "the baseline fit evaluates the model {baseline_checks} times");
+
+    let half = baseline_checks / 2;
+    let (mut stopped, checks) = counted(half);
+    assert_eq!(stopped.step(None).err(), Some(DiagnoseError::Stopped));
+    let after = checks.load(Ordering::SeqCst) - half;
+    assert!(after <= 16, "{after} checks after the stop, of {} left in the step", baseline_checks - half);
+    assert_eq!(stopped.step(None).err(), Some(DiagnoseError::Stopped), "and every later step");
+    assert!(stopped.result().is_none(), "a stopped diagnosis has no result");
+}

@@ -28,9 +28,8 @@ impl Diagnosis {
         let pool = motions::pool();
         let templates = motions::templates(&pool, t_end + 10.0);
         let all: Vec<Observation> = obs.iter().chain(&templates).cloned().collect();
-        let j = fit::jacobian_of(&self.predictor, &f.state, &all).map_err(|e| DiagnoseError::Model(e.to_string()))?;
-        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
-            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let j = fit::jacobian_of(&self.predictor, &f.state, &all)?;
+        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)?;
         let base_proj = Projector::new(&j);
         let mut per_motion = vec![vec![0.0; targets.len()]; pool.len()];
         let mut absorbed = Vec::new();
@@ -69,10 +68,7 @@ impl Diagnosis {
         // Every move's points in one prediction (the model is built once).
         let per: Vec<Vec<Observation>> = pool.iter().map(motions::turn_templates).collect();
         let all: Vec<Observation> = per.iter().flatten().cloned().collect();
-        let dl = self
-            .predictor
-            .predict(&f.state.extrinsics, &f.state.library_effects(), &f.state.gains, &all)
-            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let dl = self.predictor.predict(&f.state.extrinsics, &f.state.library_effects(), &f.state.gains, &all)?;
         let mut avoided = Vec::new();
         let mut at = 0;
         for ((m, row), t) in pool.iter().zip(per_motion.iter_mut()).zip(&per) {

@@ -198,6 +198,12 @@ impl Diagnosis {
         self.fit.as_ref().map(|f| &f.state)
     }
 
+    /// Ask `stop` before every prediction: once it answers true, the step in progress ends
+    /// within one model evaluation with [`DiagnoseError::Stopped`], and so does every later one.
+    pub fn set_stop(&mut self, stop: fit::StopCheck) {
+        self.predictor.set_stop(stop);
+    }
+
     /// Run every step.
     pub fn run<'r>(
         mut self,
@@ -217,21 +223,19 @@ impl Diagnosis {
     }
 
     fn refit(&self, start: &ModelState) -> Result<Fit, DiagnoseError> {
-        fit::fit(&self.predictor, &self.fit_set(), start, &[true; N_EXTRINSICS])
-            .map_err(|e| DiagnoseError::Model(e.to_string()))
+        Ok(fit::fit(&self.predictor, &self.fit_set(), start, &[true; N_EXTRINSICS])?)
     }
 
     fn held_rms(&self, state: &ModelState) -> Result<f64, DiagnoseError> {
         let held = self.held_set();
-        let r = self.predictor.whitened_residuals(state, &held).map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let r = self.predictor.whitened_residuals(state, &held)?;
         Ok(fit::rms(&r))
     }
 
     fn rescore(&mut self) -> Result<(), DiagnoseError> {
         let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("scored before the baseline".into()))?;
         let obs = self.fit_set();
-        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &obs)
-            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &obs)?;
         let (mut scores, projected) = scoring::score(&self.candidates, &signatures, &f.jacobian, &f.residuals);
         for (k, s) in scores.iter_mut().enumerate() {
             if self.excluded.contains(&k) || f.state.effects.iter().any(|(c, _)| c.name == s.name) {
@@ -245,6 +249,9 @@ impl Diagnosis {
 
     /// Advance one step; `Ok(None)` once finished. `runner` runs discriminating motions when given.
     pub fn step<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<Option<&Step>, DiagnoseError> {
+        if self.predictor.stopped() {
+            return Err(DiagnoseError::Stopped);
+        }
         match self.stage {
             Stage::Baseline => self.fit_baseline()?,
             Stage::Score => {
@@ -272,8 +279,7 @@ impl Diagnosis {
         let pool = motions::templates(&motions::pool(), 0.0);
         self.predictor.extend(&pool).map_err(DiagnoseError::Model)?;
         let all: Vec<Observation> = obs.iter().chain(&pool).cloned().collect();
-        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)
-            .map_err(|e| DiagnoseError::Model(e.to_string()))?;
+        let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)?;
         let mut invisible = self.not_seen.clone();
         let mut keep = Vec::new();
         for (c, s) in self.candidates.iter().zip(&signatures) {
