@@ -16,6 +16,8 @@ use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
+use photorobot_core::session::recording::{record, RecordSink};
+use photorobot_core::session::{Progress, SessionError};
 use photorobot_core::trace::Trace;
 use photorobot_core::validate::before_after::run_before_and_after;
 use photorobot_core::validate::{ValidationFigure, ValidationMotion};
@@ -431,7 +433,7 @@ impl Thread {
                 Command::Run { job, plan } => {
                     self.send(Event::Busy(Some(format!("running {}", plan.name))));
                     let pace = self.pace;
-                    let (traces, duration_s, outcome) = self.run(&plan, pace, true);
+                    let (traces, duration_s, outcome) = self.run(&plan, pace, Run::Step);
                     self.send(Event::PlanDone { job, traces, duration_s, outcome });
                     self.send(Event::Busy(None));
                 }
@@ -442,7 +444,7 @@ impl Thread {
                         description: String::new(),
                         segments: vec![Segment::Move { to: JointTarget::all(to), record: false, label: "jog".into() }],
                     };
-                    if let (_, _, Err(e)) = self.run(&plan, Pace::Unpaced, false) {
+                    if let (_, _, Err(e)) = self.run(&plan, Pace::Unpaced, Run::Motion) {
                         self.send(Event::Busy(Some(format!("jog refused: {e}"))));
                     } else {
                         self.send(Event::Busy(Some("jog done".into())));
@@ -574,14 +576,16 @@ impl Thread {
             })
             .collect();
         let plan = Plan { name: "live dither".into(), description: String::new(), segments };
-        let (_, _, outcome) = self.run(&plan, Pace::Speed(1.0), false);
+        let (_, _, outcome) = self.run(&plan, Pace::Speed(1.0), Run::Motion);
         if outcome.is_err() {
             self.live.store(false, Ordering::Relaxed);
         }
     }
 
-    /// Run a plan, streaming samples (paced) and progress; returns traces, bench time, outcome.
-    fn run(&mut self, plan: &Plan, pace: Pace, report_progress: bool) -> (Vec<Trace>, f64, Result<(), String>) {
+    /// Run a plan, streaming samples (paced) and, for a wizard step, progress; returns traces,
+    /// bench time, outcome.
+    fn run(&mut self, plan: &Plan, pace: Pace, kind: Run) -> (Vec<Trace>, f64, Result<(), String>) {
+        let report_progress = kind == Run::Step;
         let wall0 = Instant::now();
         let bench_t0 = self.bench.clock_s();
         let total_s = plan
@@ -638,22 +642,71 @@ impl Thread {
         let mut on_progress = |_: f64| {};
         let mut control =
             RunControl { cancel: &self.cancel, on_samples: &mut on_samples, on_progress: &mut on_progress };
-        // Each recorded segment goes to the UI at once, to be autosaved.
-        let (segment_tx, notify) = (self.tx.clone(), &self.notify);
-        let mut on_step = |step: photorobot_core::bench::StepDone<'_>| {
-            if let Some(trace) = step.trace.filter(|_| report_progress) {
-                let _ = segment_tx.send(Event::SegmentDone(Box::new(trace.clone())));
-                notify();
+        let run = match kind {
+            // A wizard step records as the command line does, each segment to the UI at once.
+            Run::Step => {
+                let mut sink =
+                    StepRecording { plan: plan.clone(), progress: None, traces: Vec::new(), tx: &self.tx, notify };
+                let recorded = record(self.bench.as_mut(), &mut sink, &mut control);
+                let (duration_s, outcome) = match recorded {
+                    Ok(r) => (r.duration_s, r.outcome.map_err(|e| e.to_string())),
+                    Err(e) => (0.0, Err(e.to_string())),
+                };
+                (sink.traces, duration_s, outcome)
             }
-            Ok(())
+            Run::Motion => {
+                let run = run_plan_with(self.bench.as_mut(), plan, &mut control, &mut |_| Ok(()));
+                (run.traces, run.duration_s, run.outcome.map_err(|e| e.to_string()))
+            }
         };
-        let run = run_plan_with(self.bench.as_mut(), plan, &mut control, &mut on_step);
         if report_progress {
             let done = (self.bench.clock_s() - bench_t0) / total_s;
             let _ = self.tx.send(Event::Progress { label: plan.name.clone(), fraction: done.clamp(0.0, 1.0) });
         }
         self.send(Event::Position(self.bench.position_display()));
-        (run.traces, run.duration_s, run.outcome.map_err(|e| e.to_string()))
+        run
+    }
+}
+
+/// What [`Thread::run`] runs: a wizard step (recorded, with progress) or a motion (jog, dither).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Run {
+    Step,
+    Motion,
+}
+
+/// A wizard step's recording: its one plan; each complete segment's trace goes to the UI at once
+/// ([`Event::SegmentDone`], autosaved by the UI's writer thread), and every trace, a stopped
+/// segment's partial one included, is kept for [`Event::PlanDone`].
+struct StepRecording<'a> {
+    plan: Plan,
+    progress: Option<Progress>,
+    traces: Vec<Trace>,
+    tx: &'a Sender<Event>,
+    notify: &'a (dyn Fn() + Send),
+}
+
+impl RecordSink for StepRecording<'_> {
+    fn plans(&self) -> Vec<Plan> {
+        vec![self.plan.clone()]
+    }
+
+    fn progress(&self) -> Option<Progress> {
+        self.progress
+    }
+
+    fn keep_trace(&mut self, trace: &Trace, _at: (usize, usize), complete: bool) -> Result<(), SessionError> {
+        if complete {
+            let _ = self.tx.send(Event::SegmentDone(Box::new(trace.clone())));
+            (self.notify)();
+        }
+        self.traces.push(trace.clone());
+        Ok(())
+    }
+
+    fn set_progress(&mut self, progress: Progress) -> Result<(), SessionError> {
+        self.progress = Some(progress);
+        Ok(())
     }
 }
 
