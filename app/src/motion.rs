@@ -66,13 +66,25 @@ impl AppState {
         }
     }
 
-    /// The answer to "redo step N?": `redo` discards the step's traces and runs it again, else
-    /// they are kept and nothing runs.
-    pub fn answer_redo(&mut self, redo: bool) {
+    /// The answer to "redo step N?" ([`RedoAnswer`]).
+    pub fn answer_redo(&mut self, answer: RedoAnswer) {
         if let Some(i) = self.wizard.confirm_redo.take() {
-            if redo {
-                self.run_step(i);
+            match answer {
+                RedoAnswer::Resume => self.resume_step(i),
+                RedoAnswer::Redo => self.run_step(i),
+                RedoAnswer::Keep => {}
             }
         }
     }
+}
+
+/// The technician's answer to the question before a wizard step with traces runs again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RedoAnswer {
+    /// Keep the whole traces of a stopped step and measure the rest.
+    Resume,
+    /// Discard the step's traces and run it from the start.
+    Redo,
+    /// Keep everything and run nothing.
+    Keep,
 }

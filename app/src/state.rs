@@ -8,7 +8,7 @@ use crate::decimate::Decimator;
 use crate::dialogs::Dialogs;
 use crate::session_io::{remember, Loaded, Snapshot};
 use crate::settings::Settings;
-use crate::worker::{Command, EffectValidation, Event, ValidationPair, Worker};
+use crate::worker::{Command, EffectValidation, Event, Resume, ValidationPair, Worker};
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::calibration::{CalibrationReport, Mode};
 use photorobot_core::measure::alignment::SignalQuality;
@@ -105,6 +105,8 @@ pub struct MeasurementStep {
     pub traces: Vec<Trace>,
     /// Bench time it took (s).
     pub duration_s: f64,
+    /// Where it stands when stopped before its end, to measure only the rest.
+    pub resume: Option<Resume>,
 }
 
 /// The wizard's measurement steps.
@@ -117,6 +119,7 @@ pub fn measurement_steps() -> Vec<MeasurementStep> {
         state: StepState::Pending,
         traces: vec![],
         duration_s: 0.0,
+        resume: None,
     };
     vec![
         step(
@@ -166,6 +169,8 @@ pub struct RunningStep {
     pub label: String,
     /// Fraction of the plan done (0..1).
     pub fraction: f64,
+    /// The step's traces kept from before when it resumes a stopped run (0 for a run from the start).
+    pub kept: usize,
 }
 
 /// The identification and its validation, as the Results and Validation views show them.
@@ -390,20 +395,37 @@ impl AppState {
 
     /// Start a wizard step (clears its earlier traces: a redo).
     pub fn run_step(&mut self, i: usize) {
+        self.start_step(i, false);
+    }
+
+    /// Measure the rest of a stopped wizard step: its whole traces are kept, the segment the stop
+    /// interrupted is measured again in full from its start, then the segments after it. A step
+    /// with nothing to resume runs from the start.
+    pub fn resume_step(&mut self, i: usize) {
+        self.start_step(i, true);
+    }
+
+    fn start_step(&mut self, i: usize, resume: bool) {
         if self.wizard.running.is_some() || self.busy.is_some() {
             return;
         }
         self.worker.live.store(false, std::sync::atomic::Ordering::Relaxed);
         let step = &mut self.wizard.steps[i];
-        step.traces.clear();
+        let from = step.resume.take().filter(|_| resume);
+        // The whole traces stay; a trace the stop cut short is measured again.
+        step.traces.truncate(from.map_or(0, |r| r.whole_traces));
         step.state = StepState::Running;
+        if from.is_none() {
+            step.duration_s = 0.0;
+        }
         self.analyses.clear();
         self.live.counter = LiveCounter::default();
-        self.wizard.running = Some(RunningStep { step: i, label: step.plan.name.clone(), fraction: 0.0 });
+        let (label, kept) = (step.plan.name.clone(), step.traces.len());
+        self.wizard.running = Some(RunningStep { step: i, label, fraction: 0.0, kept });
         self.worker.send(Command::SetPace(self.settings.pace()));
         // A bench without a tunable laser runs the step's motions without its sweeps.
         let plan = if self.worker.tunable_laser { step.plan.clone() } else { step.plan.without_sweeps() };
-        self.worker.send(Command::Run { job: i, plan });
+        self.worker.send(Command::Run { job: i, plan, from: from.map(|r| r.progress) });
         self.session.recording_starts(&self.worker.bench_identification);
     }
 
@@ -472,6 +494,7 @@ impl AppState {
         for st in &mut self.wizard.steps {
             st.traces.clear();
             st.state = StepState::Pending;
+            st.resume = None;
         }
         self.imported.clear();
         self.results.report = None;
@@ -621,6 +644,7 @@ impl AppState {
         for st in &mut self.wizard.steps {
             st.traces.clear();
             st.state = StepState::Pending;
+            st.resume = None;
         }
         self.imported = loaded.imported;
         let complete_plans: Vec<bool> = (0..loaded.plans.len())
@@ -671,15 +695,20 @@ impl AppState {
                 }
             }
             Event::Position(q) => self.q_display = q,
-            Event::PlanDone { job, traces, duration_s, outcome } => {
+            Event::PlanDone { job, traces, duration_s, outcome, resume } => {
+                let kept = self.wizard.running.as_ref().filter(|r| r.step == job).map_or(0, |r| r.kept);
                 if let Some(step) = self.wizard.steps.get_mut(job) {
-                    step.traces = traces;
-                    step.duration_s = duration_s;
+                    // A resumed run's traces follow the ones kept from before.
+                    step.traces.truncate(kept);
+                    step.traces.extend(traces);
+                    step.duration_s += duration_s;
+                    step.resume = resume.map(|r| Resume { whole_traces: kept + r.whole_traces, ..r });
                     step.state = match outcome {
                         Ok(()) => StepState::Done,
                         Err(e) => StepState::Stopped(e),
                     };
-                    self.status = format!("{}: {} traces recorded", step.title, step.traces.len());
+                    let n = step.traces.len();
+                    self.status = format!("{}: {n} trace{} recorded", step.title, if n == 1 { "" } else { "s" });
                 }
                 self.wizard.running = None;
                 // Autosave after every measured step: a crash never costs a measurement.

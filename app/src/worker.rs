@@ -47,6 +47,8 @@ pub enum Command {
         job: usize,
         /// The plan.
         plan: Plan,
+        /// Where a stopped run of it stands, to measure only the rest; `None`: from the start.
+        from: Option<Progress>,
     },
     /// Move (unrecorded) to joint values (µm, °).
     Jog([f64; 6]),
@@ -166,6 +168,8 @@ pub enum Event {
         duration_s: f64,
         /// `Err` with the reason when it did not run to the end.
         outcome: Result<(), String>,
+        /// Where a plan that did not run to the end stands, to resume it.
+        resume: Option<Resume>,
     },
     /// A segment of the running plan was recorded (its whole trace), before the next one starts.
     SegmentDone(Box<Trace>),
@@ -201,6 +205,17 @@ pub enum Event {
     /// A command panicked in the worker (the message): the worker caught it and serves the next
     /// command; a plan it interrupted was reported first with the traces recorded before.
     WorkerPanicked(String),
+}
+
+/// Where a stopped wizard step stands: the plan's progress (the segment to measure again and
+/// the pose the plan started from), and how many of its traces are whole (one after them, if
+/// any, was cut short by the stop).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Resume {
+    /// The plan's progress.
+    pub progress: Progress,
+    /// The traces before the interrupted segment.
+    pub whole_traces: usize,
 }
 
 /// The UI's handle on the worker thread.
@@ -372,7 +387,8 @@ impl Thread {
         if let Some((job, start_s)) = self.current.take() {
             let end_s = traces.last().and_then(|t| t.t_s.last().copied()).unwrap_or(start_s);
             let outcome = Err(format!("the worker panicked: {message}"));
-            self.send(Event::PlanDone { job, traces, duration_s: (end_s - start_s).max(0.0), outcome });
+            let duration_s = (end_s - start_s).max(0.0);
+            self.send(Event::PlanDone { job, traces, duration_s, outcome, resume: None });
         }
         self.send(Event::WorkerPanicked(message));
         self.send(Event::Busy(None));
@@ -430,11 +446,12 @@ impl Thread {
                         self.send(Event::LaserStatus(status));
                     }
                 }
-                Command::Run { job, plan } => {
+                Command::Run { job, plan, from } => {
                     self.send(Event::Busy(Some(format!("running {}", plan.name))));
                     let pace = self.pace;
-                    let (traces, duration_s, outcome) = self.run(&plan, pace, Run::Step);
-                    self.send(Event::PlanDone { job, traces, duration_s, outcome });
+                    let ran = self.run(&plan, pace, Run::Step(from));
+                    let (traces, duration_s, outcome, resume) = (ran.traces, ran.duration_s, ran.outcome, ran.resume);
+                    self.send(Event::PlanDone { job, traces, duration_s, outcome, resume });
                     self.send(Event::Busy(None));
                 }
                 Command::Jog(to) => {
@@ -444,7 +461,7 @@ impl Thread {
                         description: String::new(),
                         segments: vec![Segment::Move { to: JointTarget::all(to), record: false, label: "jog".into() }],
                     };
-                    if let (_, _, Err(e)) = self.run(&plan, Pace::Unpaced, Run::Motion) {
+                    if let Err(e) = self.run(&plan, Pace::Unpaced, Run::Motion).outcome {
                         self.send(Event::Busy(Some(format!("jog refused: {e}"))));
                     } else {
                         self.send(Event::Busy(Some("jog done".into())));
@@ -576,16 +593,14 @@ impl Thread {
             })
             .collect();
         let plan = Plan { name: "live dither".into(), description: String::new(), segments };
-        let (_, _, outcome) = self.run(&plan, Pace::Speed(1.0), Run::Motion);
-        if outcome.is_err() {
+        if self.run(&plan, Pace::Speed(1.0), Run::Motion).outcome.is_err() {
             self.live.store(false, Ordering::Relaxed);
         }
     }
 
-    /// Run a plan, streaming samples (paced) and, for a wizard step, progress; returns traces,
-    /// bench time, outcome.
-    fn run(&mut self, plan: &Plan, pace: Pace, kind: Run) -> (Vec<Trace>, f64, Result<(), String>) {
-        let report_progress = kind == Run::Step;
+    /// Run a plan, streaming samples (paced) and, for a wizard step, progress.
+    fn run(&mut self, plan: &Plan, pace: Pace, kind: Run) -> Ran {
+        let report_progress = matches!(kind, Run::Step(_));
         let wall0 = Instant::now();
         let bench_t0 = self.bench.clock_s();
         let total_s = plan
@@ -644,19 +659,30 @@ impl Thread {
             RunControl { cancel: &self.cancel, on_samples: &mut on_samples, on_progress: &mut on_progress };
         let run = match kind {
             // A wizard step records as the command line does, each segment to the UI at once.
-            Run::Step => {
-                let mut sink =
-                    StepRecording { plan: plan.clone(), progress: None, traces: Vec::new(), tx: &self.tx, notify };
+            Run::Step(from) => {
+                let mut sink = StepRecording {
+                    plan: plan.clone(),
+                    progress: from,
+                    traces: Vec::new(),
+                    whole: 0,
+                    tx: &self.tx,
+                    notify,
+                };
                 let recorded = record(self.bench.as_mut(), &mut sink, &mut control);
                 let (duration_s, outcome) = match recorded {
                     Ok(r) => (r.duration_s, r.outcome.map_err(|e| e.to_string())),
                     Err(e) => (0.0, Err(e.to_string())),
                 };
-                (sink.traces, duration_s, outcome)
+                let resume = sink
+                    .progress
+                    .filter(|_| outcome.is_err())
+                    .map(|progress| Resume { progress, whole_traces: sink.whole });
+                Ran { traces: sink.traces, duration_s, outcome, resume }
             }
             Run::Motion => {
                 let run = run_plan_with(self.bench.as_mut(), plan, &mut control, &mut |_| Ok(()));
-                (run.traces, run.duration_s, run.outcome.map_err(|e| e.to_string()))
+                let outcome = run.outcome.map_err(|e| e.to_string());
+                Ran { traces: run.traces, duration_s: run.duration_s, outcome, resume: None }
             }
         };
         if report_progress {
@@ -668,11 +694,21 @@ impl Thread {
     }
 }
 
-/// What [`Thread::run`] runs: a wizard step (recorded, with progress) or a motion (jog, dither).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// What [`Thread::run`] runs: a wizard step (recorded, with progress; from the start or from
+/// where a stopped run of it stands) or a motion (jog, dither).
+#[derive(Debug, Clone, Copy, PartialEq)]
 enum Run {
-    Step,
+    Step(Option<Progress>),
     Motion,
+}
+
+/// How a [`Thread::run`] ended: the traces, the bench time (s), the outcome, and where a stopped
+/// wizard step stands.
+struct Ran {
+    traces: Vec<Trace>,
+    duration_s: f64,
+    outcome: Result<(), String>,
+    resume: Option<Resume>,
 }
 
 /// A wizard step's recording: its one plan; each complete segment's trace goes to the UI at once
@@ -682,6 +718,8 @@ struct StepRecording<'a> {
     plan: Plan,
     progress: Option<Progress>,
     traces: Vec<Trace>,
+    /// How many of `traces` are whole.
+    whole: usize,
     tx: &'a Sender<Event>,
     notify: &'a (dyn Fn() + Send),
 }
@@ -697,6 +735,7 @@ impl RecordSink for StepRecording<'_> {
 
     fn keep_trace(&mut self, trace: &Trace, _at: (usize, usize), complete: bool) -> Result<(), SessionError> {
         if complete {
+            self.whole += 1;
             let _ = self.tx.send(Event::SegmentDone(Box::new(trace.clone())));
             (self.notify)();
         }

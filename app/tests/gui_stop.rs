@@ -1,7 +1,8 @@
 //! GUI tests (egui_kittest, headless) of stopping: the red Stop stops a validation and a
-//! diagnosis run (its computing within one model evaluation), an Esc while idle leaves nothing behind for the next jog or live dither, F5 and
-//! Redo on a step with traces ask before discarding them, the shortcuts act on the open tab only,
-//! and a panic in the worker is shown while the traces recorded before it are kept.
+//! diagnosis run (its computing within one model evaluation), an Esc while idle leaves nothing
+//! behind for the next jog or live dither, F5 and Redo on a step with traces ask before discarding
+//! them (F5 on a stopped one resumes it), the shortcuts act on the open tab only, and a panic in
+//! the worker is shown while the traces recorded before it are kept.
 
 mod common;
 
@@ -200,6 +201,45 @@ fn f5_and_redo_on_a_stopped_step_ask_and_keep_keeps_its_traces() {
     assert_eq!(h.state().state.moving(), Some(Motion::Step));
     assert!(h.state().state.wizard.steps[0].traces.is_empty());
     stop_and_wait(&mut h, "Stop (Esc)", Motion::Step, Duration::from_secs(60));
+}
+
+/// F5 on a stopped step offers to resume it: its whole traces stay, the segment the stop cut
+/// short is measured again in full, then the rest; the step ends with one trace per recorded
+/// segment of its plan, in order.
+#[test]
+fn f5_on_a_stopped_step_resumes_it_keeping_its_whole_traces() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = harness(workbench(Settings { speed: 20.0, ..Settings::default() }));
+    h.state_mut().state.session.dir = Some(dir.path().join("session"));
+    // Stop step 1 once two of its segments are recorded.
+    open(&mut h, Tab::Wizard);
+    h.get_by_label("Run step 1 (F5)").click();
+    wait_until(&mut h, "two segments", Duration::from_secs(300), |w| w.state.wizard.steps[0].traces.len() >= 2);
+    h.key_press(egui::Key::Escape);
+    wait_until(&mut h, "the stop", Duration::from_secs(60), |w| w.state.wizard.running.is_none());
+    let step = &h.state().state.wizard.steps[0];
+    let resume = step.resume.expect("a stopped step knows where it stands");
+    assert!(resume.whole_traces >= 2, "{resume:?}");
+    let whole: Vec<Trace> = step.traces[..resume.whole_traces].to_vec();
+    // The rest of the step unpaced.
+    h.state_mut().state.settings.speed = 0.0;
+    h.key_press(egui::Key::F5);
+    h.run_steps(2);
+    h.get_by_label_contains(&format!("Resume keeps its {} whole trace", resume.whole_traces));
+    screenshot(&mut h, "resume-confirm");
+    h.get_by_label("Resume").click();
+    h.run_steps(2);
+    assert_eq!(h.state().state.moving(), Some(Motion::Step));
+    assert_eq!(h.state().state.wizard.steps[0].traces, whole, "the whole traces are kept, the cut one dropped");
+    wait_until(&mut h, "the rest of step 1", Duration::from_secs(600), |w| {
+        w.state.wizard.steps[0].state == StepState::Done
+    });
+    let step = &h.state().state.wizard.steps[0];
+    assert_eq!(step.traces[..whole.len()], whole[..], "the traces from before the stop come first, unchanged");
+    let labels: Vec<&str> = step.traces.iter().map(|t| t.meta.label.as_str()).collect();
+    let planned: Vec<&str> = step.plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
+    assert_eq!(labels, planned, "one whole trace per recorded segment, in order");
+    assert!(step.resume.is_none(), "nothing left to resume");
 }
 
 /// A bench that panics in its `at`-th segment (from 1), as a driver bug would, and takes at least

@@ -2,6 +2,7 @@
 //! each explained (what the robot will do and why), with its planned motions, a run button,
 //! progress, cancel, the recorded traces and redo; then identification.
 
+use crate::motion::RedoAnswer;
 use crate::state::{AppState, StepState};
 use egui::RichText;
 use egui_plot::{Line, Plot, PlotPoints};
@@ -146,7 +147,7 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
             StepState::Done => ui.label(format!("done: {} traces", s.wizard.steps[i].traces.len())),
             StepState::Stopped(e) => ui.colored_label(
                 ui.visuals().warn_fg_color,
-                format!("stopped: {e}; {} traces kept", s.wizard.steps[i].traces.len()),
+                format!("stopped: {e}; {} kept", plural(s.wizard.steps[i].traces.len(), "trace")),
             ),
         };
     });
@@ -181,15 +182,18 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
     }
 }
 
-/// The question before a redo that would discard traces: "Redo" runs the step again, "Keep" (or
-/// Esc, or a click beside the question) keeps its traces.
+/// The question before a step with traces runs again: "Resume" (a stopped step) keeps its whole
+/// traces and measures the rest, "Redo" runs it again from the start, "Keep" (or Esc, or a click
+/// beside the question) keeps its traces and runs nothing.
 fn confirm_redo(ui: &mut egui::Ui, s: &mut AppState) {
     let Some(i) = s.wizard.confirm_redo else { return };
     let Some(step) = s.wizard.steps.get(i) else {
         s.wizard.confirm_redo = None;
         return;
     };
-    let (count, state) = (step.traces.len(), step.state.clone());
+    let (count, state, resume) = (step.traces.len(), step.state.clone(), step.resume);
+    let interrupted =
+        resume.and_then(|r| step.plan.segments.get(r.progress.next_segment)).map(|g| g.label().to_string());
     let mut answer = None;
     let modal = egui::Modal::new(egui::Id::unique("confirm redo")).show(ui.ctx(), |ui| {
         ui.heading(format!("Redo step {}?", i + 1));
@@ -198,21 +202,35 @@ fn confirm_redo(ui: &mut egui::Ui, s: &mut AppState) {
             StepState::Done => "it ran to the end".into(),
             _ => "it ran before".into(),
         };
-        let traces = if count == 1 { "trace" } else { "traces" };
-        ui.label(format!("Redo step {} discards its {count} {traces}: {how}.", i + 1));
+        ui.label(format!("Redo step {} discards its {}: {how}.", i + 1, plural(count, "trace")));
+        if let Some(r) = resume {
+            ui.label(format!(
+                "Resume keeps its {} and measures the rest, from the start of the segment the stop interrupted ({}).",
+                plural(r.whole_traces, "whole trace"),
+                interrupted.as_deref().unwrap_or("?")
+            ));
+        }
         ui.horizontal(|ui| {
+            if resume.is_some() && ui.button("Resume").clicked() {
+                answer = Some(RedoAnswer::Resume);
+            }
             if ui.button("Redo").clicked() {
-                answer = Some(true);
+                answer = Some(RedoAnswer::Redo);
             }
             if ui.button("Keep").clicked() {
-                answer = Some(false);
+                answer = Some(RedoAnswer::Keep);
             }
         });
     });
     if answer.is_none() && modal.should_close() {
-        answer = Some(false);
+        answer = Some(RedoAnswer::Keep);
     }
-    if let Some(redo) = answer {
-        s.answer_redo(redo);
+    if let Some(answer) = answer {
+        s.answer_redo(answer);
     }
+}
+
+/// `n` and `what`, plural unless one ("1 trace", "3 traces").
+fn plural(n: usize, what: &str) -> String {
+    format!("{n} {what}{}", if n == 1 { "" } else { "s" })
 }
