@@ -186,6 +186,8 @@ pub(crate) fn model_with(base: &PhaseModel, e: Extrinsics) -> PhaseModel {
 /// with it listed in [`Identification::tied`].
 pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Identification, String> {
     use rayon::prelude::*;
+    let t0 = std::time::Instant::now();
+    let phase_done = |what: &str| tracing::debug!(elapsed_s = t0.elapsed().as_secs_f64(), "identification: {what}");
     let (sweeps, motions): (Vec<Trace>, Vec<Trace>) = traces.iter().cloned().partition(crate::trace::is_sweep);
     // A sweep's two-beam fit does not depend on the extrinsics: fitted once, reused by every pass.
     let seeds = sweep_seeds(&sweeps, nominal);
@@ -193,7 +195,9 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
     if motions.is_empty() && swept.observations.is_empty() {
         return Err("no trace could be analysed: nothing to identify from".into());
     }
+    phase_done("sweeps fitted");
     let starts = starting_points(nominal, &motions, &swept.observations);
+    phase_done("starts found");
     // The first pass reads the sweeps as the nominal model analyses them: a sweep's gap depends
     // on the tilt the model puts the lamella at in its pose (up to 0.3 µm between a square
     // model and Table II's 1.1°), so there they count with that much uncertainty.
@@ -203,6 +207,7 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
         .map(|s| (s.name.clone(), one_pass(mode, nominal, &loose, &motions, s.extrinsics, FIRST_PASS)))
         .collect();
     runs.sort_by(|a, b| a.1.cost().total_cmp(&b.1.cost()));
+    phase_done("first passes");
     if mode == Mode::Joint {
         // Every distinct branch gets a second pass, the sweeps and motions analysed with its
         // first estimate (a start's first analysis can go astray and leave the right branch at
@@ -226,6 +231,7 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
             })
             .collect();
         runs.sort_by(|a, b| a.1.cost().total_cmp(&b.1.cost()));
+        phase_done("second passes");
     }
     let (best_name, mut best) = runs.remove(0);
     let best_cost = best.cost();
@@ -260,6 +266,7 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
     }
     best.branches = branches;
     best.tied = tied;
+    phase_done("branches compared");
     Ok(best)
 }
 
