@@ -48,7 +48,10 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
     let _one_at_a_time = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let bench = emulated_bench(&preset, 5, HardwareConfig::femto(), dir.path());
+    // On a clock 10× real time: this run checks the chain, not the accuracy (the validation's
+    // real-time motions took 83 s).
+    let config = HardwareConfig { time_scale: 10.0, ..HardwareConfig::femto() };
+    let bench = emulated_bench(&preset, 5, config, dir.path());
     let bench_file = &bench.file;
     let out = dir.path().join("session");
     let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/short-hardware-plan.ron");
@@ -83,11 +86,13 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
 
 /// Emulated seconds per real second of the calibration below. The SmarAct positions are polled,
 /// so a poll's latency becomes a timing error that grows with the scale: at 4× on a loaded 2-core
-/// host the short designed plan came out ambiguous once (two branches tied), so the suite runs it
-/// in real time. (An ambiguous verdict seen at real time on a busy host came from the analysis,
-/// not the timing: the last fringe amplitude of a tilt scan, its window cut short by the trace's
-/// end depending on where the stage stopped; such extrema now give no amplitude.)
-const TIME_SCALE: f64 = 1.0;
+/// host the short designed plan came out ambiguous once (two branches tied). At 2×, with the
+/// machine's two cores kept busy by another calibration, every parameter landed within 0.3σ of
+/// the truth (93 s, 79 s of it the validation motions; 184 s at 1×). (An ambiguous verdict seen
+/// at real time on a busy host came from the analysis, not the timing: the last fringe amplitude
+/// of a tilt scan, its window cut short by the trace's end depending on where the stage stopped;
+/// such extrema now give no amplitude.)
+const TIME_SCALE: f64 = 2.0;
 
 /// The experiment design's plan (`--plan optimised`: 26.5 s of bench time) through TCP on the
 /// emulated optical bench: the calibration converges, fits, and every parameter

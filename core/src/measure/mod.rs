@@ -140,7 +140,7 @@ pub struct AnalyseOptions {
     /// hint moves by more keeps the default: its fringes pin the phase (see [`crate::validate`]).
     pub free_phase_after: Option<usize>,
     /// Track with the model's fringe shape at every sample (`track::track_phase_shaped`
-    /// with [`PhaseModel::fringe_shape`]) instead of a harmonic profile estimated from the data.
+    /// with [`PhaseModel::hint_and_shape`]) instead of a harmonic profile estimated from the data.
     pub shaped: bool,
 }
 
@@ -163,8 +163,12 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         return analyse_sweep(trace, model, None);
     }
     let wavelength_nm = trace.wavelength_nm[0];
-    let hint =
-        model.hint_nm(trace, wavelength_nm).map_err(|problem| MeasureError::Trace { label: label.clone(), problem })?;
+    let trace_error = |problem| MeasureError::Trace { label: label.clone(), problem };
+    let (hint, shape) = if options.shaped {
+        model.hint_and_shape(trace, wavelength_nm).map(|(hint, shape)| (hint, Some(shape))).map_err(trace_error)?
+    } else {
+        (model.hint_nm(trace, wavelength_nm).map_err(trace_error)?, None)
+    };
     // The motion hint comes from a smooth model of the whole bench: stiff random walks of the
     // phase and the envelope relative to it track best (measured on the virtual bench with a
     // hint from extrinsics 20 % off: strategy 2 rms 1.9 nm vs 5.8 nm with the defaults).
@@ -189,7 +193,7 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
         ..TrackConfig::default()
     };
     // By default the harmonics are estimated along the path, not taken from the optics model: the
-    // shaped tracker (`track::track_phase_shaped` with `PhaseModel::fringe_shape`) is far
+    // shaped tracker (`track::track_phase_shaped` with `PhaseModel::hint_and_shape`) is far
     // better when the model is right (table2-ideal, tracked dL against the truth: rotations
     // 2.3 → 0.18 nm rms, tilt scans 9.6 → 0.06 nm), but fragile when it is not: with the
     // design extrinsics the modelled tilt is off by ~1°, the 2nd harmonic's phase (it turns by
@@ -197,11 +201,9 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
     // hidden-pivot diagnosis the discriminating rotations went wrong.
     // `AnalyseOptions::shaped` is for a model already fitted (the diagnosis's re-analysis,
     // `diagnose::REANALYSE_OPTIONS`).
-    // A trace the model's shape cannot be computed on (the beam misses the lamella at some
-    // sample) or the shaped tracker fails on is tracked the default way: the caller asked for
-    // the better estimate, not for losing the trace.
-    let shaped_track = options.shaped.then(|| {
-        let shape = model.fringe_shape(trace, wavelength_nm)?;
+    // A trace the shaped tracker fails on is tracked the default way: the caller asked for the
+    // better estimate, not for losing the trace.
+    let shaped_track = shape.map(|shape| {
         track::track_phase_shaped(&trace.irradiance, &hint, &shape.as_model(), wavelength_nm, model.n_air, &track_cfg)
             .map_err(|e| e.to_string())
     });

@@ -7,7 +7,7 @@
 //! which includes the tilt path term (the fringes follow the perpendicular fiber-to-lamella
 //! distance, `L·cos γ`) and the Gouy phase.
 //!
-//! What needs a trace or a bench preset (`PhaseModel::hint_nm`, `PhaseModel::fringe_shape`,
+//! What needs a trace or a bench preset (`PhaseModel::hint_nm`, `PhaseModel::hint_and_shape`,
 //! `PhaseModel::of_preset`) is implemented in `crate::measure::hint`, above this layer.
 
 use crate::model::air::{air_index_ciddor, AmbientConditions};
