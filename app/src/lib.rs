@@ -13,6 +13,7 @@ pub mod motion;
 pub mod session_io;
 pub mod settings;
 pub mod state;
+pub mod step_recording;
 pub mod sweep_forecast;
 pub mod views;
 pub mod worker;

@@ -16,8 +16,7 @@ use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
-use photorobot_core::session::recording::{record, RecordSink};
-use photorobot_core::session::{Progress, SessionError};
+use photorobot_core::session::Progress;
 use photorobot_core::trace::Trace;
 use photorobot_core::validate::before_after::run_before_and_after;
 use photorobot_core::validate::{ValidationFigure, ValidationMotion};
@@ -28,6 +27,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use crate::bench_guard::{lock, panic_message, GuardedBench, KeptTraces};
+pub use crate::step_recording::Resume;
+use crate::step_recording::{record_step, Ran};
 
 /// How fast the bench clock runs against the wall clock.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -205,17 +206,6 @@ pub enum Event {
     /// A command panicked in the worker (the message): the worker caught it and serves the next
     /// command; a plan it interrupted was reported first with the traces recorded before.
     WorkerPanicked(String),
-}
-
-/// Where a stopped wizard step stands: the plan's progress (the segment to measure again and
-/// the pose the plan started from), and how many of its traces are whole (one after them, if
-/// any, was cut short by the stop).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Resume {
-    /// The plan's progress.
-    pub progress: Progress,
-    /// The traces before the interrupted segment.
-    pub whole_traces: usize,
 }
 
 /// The UI's handle on the worker thread.
@@ -660,24 +650,12 @@ impl Thread {
         let run = match kind {
             // A wizard step records as the command line does, each segment to the UI at once.
             Run::Step(from) => {
-                let mut sink = StepRecording {
-                    plan: plan.clone(),
-                    progress: from,
-                    traces: Vec::new(),
-                    whole: 0,
-                    tx: &self.tx,
-                    notify,
+                // Each recorded segment goes to the UI at once, to be autosaved.
+                let mut on_segment = |trace: &Trace| {
+                    let _ = self.tx.send(Event::SegmentDone(Box::new(trace.clone())));
+                    notify();
                 };
-                let recorded = record(self.bench.as_mut(), &mut sink, &mut control);
-                let (duration_s, outcome) = match recorded {
-                    Ok(r) => (r.duration_s, r.outcome.map_err(|e| e.to_string())),
-                    Err(e) => (0.0, Err(e.to_string())),
-                };
-                let resume = sink
-                    .progress
-                    .filter(|_| outcome.is_err())
-                    .map(|progress| Resume { progress, whole_traces: sink.whole });
-                Ran { traces: sink.traces, duration_s, outcome, resume }
+                record_step(self.bench.as_mut(), plan, from, &mut control, &mut on_segment)
             }
             Run::Motion => {
                 let run = run_plan_with(self.bench.as_mut(), plan, &mut control, &mut |_| Ok(()));
@@ -700,53 +678,6 @@ impl Thread {
 enum Run {
     Step(Option<Progress>),
     Motion,
-}
-
-/// How a [`Thread::run`] ended: the traces, the bench time (s), the outcome, and where a stopped
-/// wizard step stands.
-struct Ran {
-    traces: Vec<Trace>,
-    duration_s: f64,
-    outcome: Result<(), String>,
-    resume: Option<Resume>,
-}
-
-/// A wizard step's recording: its one plan; each complete segment's trace goes to the UI at once
-/// ([`Event::SegmentDone`], autosaved by the UI's writer thread), and every trace, a stopped
-/// segment's partial one included, is kept for [`Event::PlanDone`].
-struct StepRecording<'a> {
-    plan: Plan,
-    progress: Option<Progress>,
-    traces: Vec<Trace>,
-    /// How many of `traces` are whole.
-    whole: usize,
-    tx: &'a Sender<Event>,
-    notify: &'a (dyn Fn() + Send),
-}
-
-impl RecordSink for StepRecording<'_> {
-    fn plans(&self) -> Vec<Plan> {
-        vec![self.plan.clone()]
-    }
-
-    fn progress(&self) -> Option<Progress> {
-        self.progress
-    }
-
-    fn keep_trace(&mut self, trace: &Trace, _at: (usize, usize), complete: bool) -> Result<(), SessionError> {
-        if complete {
-            self.whole += 1;
-            let _ = self.tx.send(Event::SegmentDone(Box::new(trace.clone())));
-            (self.notify)();
-        }
-        self.traces.push(trace.clone());
-        Ok(())
-    }
-
-    fn set_progress(&mut self, progress: Progress) -> Result<(), SessionError> {
-        self.progress = Some(progress);
-        Ok(())
-    }
 }
 
 #[cfg(test)]
