@@ -266,6 +266,11 @@ impl Diagnosis {
             Stage::Finish => self.conclude()?,
             Stage::Done => return Ok(None),
         }
+        // A stop during the step may have failed predictions the step passed over: its result
+        // is not reported.
+        if self.predictor.stopped() {
+            return Err(DiagnoseError::Stopped);
+        }
         Ok(self.steps.last())
     }
 
