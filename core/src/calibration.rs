@@ -230,13 +230,25 @@ pub fn report_from_traces(
     mode: Mode,
 ) -> Result<CalibrationReport, String> {
     let id = identify(&traces, nominal, mode)?;
+    Ok(report_from_identification(&id, traces, duration_s, bench_name, nominal, mode))
+}
+
+/// [`report_from_traces`] of an identification already made from `traces`.
+pub fn report_from_identification(
+    id: &Identification,
+    traces: Vec<Trace>,
+    duration_s: f64,
+    bench_name: String,
+    nominal: &PhaseModel,
+    mode: Mode,
+) -> CalibrationReport {
     let report = analyse_estimate(&id.estimate);
-    let fit = fit_check(&id, &report);
+    let fit = fit_check(id, &report);
     // Reported with their angles wrapped to ±180° (the same rotations): an angle the data do not
     // see can end whole turns away. The identification itself runs on the solver's values.
     let extrinsics = id.estimate.extrinsics.with_angles_wrapped();
     let mut parameters = parameter_rows(&extrinsics, &report);
-    widen_to_jackknife(&mut parameters, &id);
+    widen_to_jackknife(&mut parameters, id);
     withhold_undetermined(&mut parameters, &fit);
     let (est, obs) = (&id.estimate, &id.observations);
     let mut warnings = report.warnings.clone();
@@ -276,7 +288,7 @@ pub fn report_from_traces(
             s.evidence.iter().map(|e| e.source.words()).collect::<Vec<_>>().join(", ")
         ));
     }
-    Ok(CalibrationReport {
+    CalibrationReport {
         mode,
         bench: bench_name,
         parameters,
@@ -301,7 +313,7 @@ pub fn report_from_traces(
         sweep_cost: None,
         extrinsics,
         traces,
-    })
+    }
 }
 
 /// The validation forecast ([`forecast`]) of the parameters reported: their σ (withheld ones

@@ -15,7 +15,8 @@ use super::progress::{Progress, INTERRUPT};
 use crate::hardware_bench::open_hardware_bench;
 use photorobot_core::bench::{Bench, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::calibration::{
-    plan_durations, plans, predicted_validation_rows, report_from_traces, validation_rows, CalibrationReport, Mode,
+    identify, plan_durations, plans, predicted_validation_rows, report_from_identification, report_from_traces,
+    validation_rows, CalibrationReport, Mode,
 };
 use photorobot_core::files::{save_ron, write_atomic};
 use photorobot_core::hardware::emulator::EmuClock;
@@ -229,12 +230,18 @@ fn calibrate_from_traces(
         Some(m) => format!("traces imported from {} with the column mapping {}", dir.display(), m.display()),
         None => format!("traces imported from {}", dir.display()),
     };
-    timed("copy_traces", || session.add_sourced_traces(&a.out, &sourced))?;
-    let traces: Vec<Trace> = sourced.into_iter().map(|s| s.trace).collect();
-    let duration_s = traces.iter().map(span_s).sum();
+    let duration_s = sourced.traces.iter().map(span_s).sum();
     let name = session.bench.name.clone();
-    let mut report = timed("identify", || report_from_traces(traces, duration_s, name, nominal, mode))
-        .map_err(calibration_failed)?;
+    // The copy into the session mostly waits for the disk: it runs beside the identification.
+    let (copied, identified) = std::thread::scope(|scope| {
+        let copy = scope.spawn(|| timed("copy_traces", || session.add_sourced_traces(&a.out, &sourced)));
+        let identified = timed("identify", || identify(&sourced.traces, nominal, mode));
+        (copy.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)), identified)
+    });
+    copied?;
+    let id = identified.map_err(calibration_failed)?;
+    let mut report =
+        timed("report", || report_from_identification(&id, sourced.traces, duration_s, name, nominal, mode));
     report.validation = timed("validate", || predicted_validation_rows(preset, nominal, &report.extrinsics))
         .map_err(calibration_failed)?;
     report.validation_predicted = true;

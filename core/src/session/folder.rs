@@ -155,33 +155,35 @@ impl Session {
     }
 
     /// [`Session::add_trace`] for each of `traces` in order (complete, no plan step), their CSV
-    /// text formatted in parallel: the same files and references as one call per trace.
+    /// text formatted and their files written in parallel: the same files and references as
+    /// one call per trace.
     pub fn add_traces(&mut self, dir: &Path, traces: &[Trace]) -> Result<(), SessionError> {
         use rayon::prelude::*;
         // A trace that cannot be written is named by the folder (its file name comes later).
         let origin = dir.join(TRACES_DIR);
-        let bytes: Vec<Result<Vec<u8>, _>> = traces.par_iter().map(|t| t.to_csv_bytes(&origin)).collect();
-        for (trace, bytes) in traces.iter().zip(bytes) {
-            self.add_trace_bytes(dir, trace, bytes?, None, true)?;
-        }
-        Ok(())
+        let bytes: Vec<Vec<u8>> = traces.par_iter().map(|t| t.to_csv_bytes(&origin)).collect::<Result<_, _>>()?;
+        self.add_trace_files(dir, traces.iter().zip(bytes).collect(), None, true)
     }
 
     /// [`Session::add_traces`] for traces read from files: a file in our format whose bytes are
     /// still those it was read from is copied as it is (no formatting, the recording's own
     /// text kept); any other trace is written as [`Session::add_trace`] writes it.
-    pub fn add_sourced_traces(&mut self, dir: &Path, traces: &[Sourced]) -> Result<(), SessionError> {
-        for s in traces {
-            let unchanged = s.native.and_then(|key| {
-                let bytes = std::fs::read(&s.path).ok()?;
-                (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some(bytes)
-            });
-            match unchanged {
-                Some(bytes) => self.add_trace_bytes(dir, &s.trace, bytes, None, true)?,
-                None => self.add_trace(dir, &s.trace, None, true)?,
-            };
-        }
-        Ok(())
+    pub fn add_sourced_traces(&mut self, dir: &Path, sourced: &Sourced) -> Result<(), SessionError> {
+        use rayon::prelude::*;
+        let origin = dir.join(TRACES_DIR);
+        let bytes: Vec<Vec<u8>> = sourced
+            .traces
+            .par_iter()
+            .zip(&sourced.files)
+            .map(|(trace, file)| {
+                let unchanged = file.native.and_then(|key| {
+                    let bytes = std::fs::read(&file.path).ok()?;
+                    (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some(bytes)
+                });
+                unchanged.map_or_else(|| trace.to_csv_bytes(&origin), Ok)
+            })
+            .collect::<Result<_, _>>()?;
+        self.add_trace_files(dir, sourced.traces.iter().zip(bytes).collect(), None, true)
     }
 
     /// Write a trace into the session folder (a new `traces/NNN.csv`, atomically) and reference it.
@@ -192,42 +194,55 @@ impl Session {
         step: Option<(usize, usize)>,
         complete: bool,
     ) -> Result<&TraceRef, SessionError> {
-        // A name no file of the folder and no reference has: a trace file is never rewritten.
-        let file = (self.traces.len()..)
-            .map(|n| format!("{TRACES_DIR}/{n:03}.csv"))
-            .find(|f| !dir.join(f).exists() && self.traces.iter().all(|r| &r.file != f))
-            .expect("a free name");
+        let file = self.free_trace_files(dir, 1).remove(0);
         let bytes = trace.to_csv_bytes(&dir.join(&file))?;
-        self.add_trace_bytes(dir, trace, bytes, step, complete)
+        self.add_trace_files(dir, vec![(trace, bytes)], step, complete)?;
+        Ok(self.traces.last().expect("just pushed"))
     }
 
-    /// [`Session::add_trace`] with the trace's CSV text already formatted.
-    fn add_trace_bytes(
+    /// `count` trace file names, in order, that no file of the folder and no reference has: a
+    /// trace file is never rewritten.
+    fn free_trace_files(&self, dir: &Path, count: usize) -> Vec<String> {
+        let mut names: Vec<String> = Vec::with_capacity(count);
+        for n in self.traces.len().. {
+            if names.len() == count {
+                break;
+            }
+            let f = format!("{TRACES_DIR}/{n:03}.csv");
+            if !dir.join(&f).exists() && self.traces.iter().all(|r| r.file != f) {
+                names.push(f);
+            }
+        }
+        names
+    }
+
+    /// Write traces whose CSV text is already formatted into new files of the folder
+    /// ([`files::write_atomic_all`]) and reference them in order.
+    fn add_trace_files(
         &mut self,
         dir: &Path,
-        trace: &Trace,
-        bytes: Vec<u8>,
+        traces: Vec<(&Trace, Vec<u8>)>,
         step: Option<(usize, usize)>,
         complete: bool,
-    ) -> Result<&TraceRef, SessionError> {
-        let file = (self.traces.len()..)
-            .map(|n| format!("{TRACES_DIR}/{n:03}.csv"))
-            .find(|f| !dir.join(f).exists() && self.traces.iter().all(|r| &r.file != f))
-            .expect("a free name");
-        let path = dir.join(&file);
+    ) -> Result<(), SessionError> {
+        let names = self.free_trace_files(dir, traces.len());
         create_dir(&dir.join(TRACES_DIR))?;
-        files::write_atomic(&path, &bytes)?;
-        self.traces.push(TraceRef {
-            file,
-            label: trace.meta.label.clone(),
-            kind: trace.meta.kind,
-            samples: trace.len(),
-            bytes: bytes.len() as u64,
-            crc32: crc32fast::hash(&bytes),
-            step,
-            complete,
-        });
-        Ok(self.traces.last().expect("just pushed"))
+        let (traces, bytes): (Vec<&Trace>, Vec<Vec<u8>>) = traces.into_iter().unzip();
+        let files: Vec<(PathBuf, Vec<u8>)> = names.iter().map(|f| dir.join(f)).zip(bytes).collect();
+        files::write_atomic_all(&files)?;
+        for ((trace, (_, bytes)), file) in traces.into_iter().zip(&files).zip(names) {
+            self.traces.push(TraceRef {
+                file,
+                label: trace.meta.label.clone(),
+                kind: trace.meta.kind,
+                samples: trace.len(),
+                bytes: bytes.len() as u64,
+                crc32: crc32fast::hash(bytes),
+                step,
+                complete,
+            });
+        }
+        Ok(())
     }
 
     /// Read one referenced trace, checked against its recorded size (before reading), CRC-32

@@ -191,7 +191,7 @@ fn sourced_traces_are_copied_as_recorded_or_written_when_their_file_changed() {
     std::fs::write(src.path().join("a.csv"), own).unwrap();
     small_trace("changed after reading", 9).write_csv(&src.path().join("b.csv")).unwrap();
     let read = crate::trace::import::read_folder_sourced(src.path(), None).unwrap();
-    assert!(read.iter().all(|s| s.native.is_some()));
+    assert!(read.files.iter().all(|s| s.native.is_some()));
     small_trace("changed after reading", 12).write_csv(&src.path().join("b.csv")).unwrap();
     let out = tempfile::tempdir().unwrap();
     let bench = BenchInfo { name: "recorded traces".into(), preset: None, description: None, seed: None };
@@ -199,6 +199,6 @@ fn sourced_traces_are_copied_as_recorded_or_written_when_their_file_changed() {
     s.add_sourced_traces(out.path(), &read).unwrap();
     assert_eq!(std::fs::read_to_string(out.path().join(&s.traces[0].file)).unwrap(), own);
     let loaded = s.load_traces(out.path()).unwrap();
-    assert_eq!(loaded, read.iter().map(|r| r.trace.clone()).collect::<Vec<_>>());
+    assert_eq!(loaded, read.traces);
     assert_eq!(loaded[1].len(), 9, "the trace that was read, not the file as it is now");
 }

@@ -355,14 +355,12 @@ pub fn csv_files(dir: &Path) -> Result<Vec<PathBuf>, FileError> {
 
 /// Read every trace of a folder: in our format without a mapping, through the mapping otherwise.
 pub fn read_folder(dir: &Path, mapping: Option<&ColumnMapping>) -> Result<Vec<Trace>, TraceError> {
-    Ok(read_folder_sourced(dir, mapping)?.into_iter().map(|s| s.trace).collect())
+    Ok(read_folder_sourced(dir, mapping)?.traces)
 }
 
-/// A trace read from a file, with where it came from.
+/// Where a trace read from a file came from.
 #[derive(Debug, Clone)]
-pub struct Sourced {
-    /// The trace.
-    pub trace: Trace,
+pub struct TraceFile {
     /// The file.
     pub path: PathBuf,
     /// In our format: the CRC-32 and size of the bytes the trace was read from, so that a copy
@@ -371,23 +369,33 @@ pub struct Sourced {
     pub native: Option<(u32, u64)>,
 }
 
+/// Traces read from files, each with where it came from (`files[i]` is `traces[i]`'s).
+#[derive(Debug, Clone, Default)]
+pub struct Sourced {
+    /// The traces, in file-name order.
+    pub traces: Vec<Trace>,
+    /// Their files.
+    pub files: Vec<TraceFile>,
+}
+
 /// [`read_folder`], each trace with its file ([`Sourced`]).
-pub fn read_folder_sourced(dir: &Path, mapping: Option<&ColumnMapping>) -> Result<Vec<Sourced>, TraceError> {
+pub fn read_folder_sourced(dir: &Path, mapping: Option<&ColumnMapping>) -> Result<Sourced, TraceError> {
     use rayon::prelude::*;
     let options = ReadOptions::default();
     // Read in parallel; the first failing file (in name order) is the one reported.
-    let read: Vec<Result<Sourced, TraceError>> = csv_files(dir)?
+    let read: Vec<Result<(Trace, TraceFile), TraceError>> = csv_files(dir)?
         .par_iter()
         .map(|p| match mapping {
-            Some(m) => Ok(Sourced { trace: import_file(p, m, &options)?, path: p.clone(), native: None }),
+            Some(m) => Ok((import_file(p, m, &options)?, TraceFile { path: p.clone(), native: None })),
             None => read_native(p, &options),
         })
         .collect();
-    read.into_iter().collect()
+    let (traces, files) = read.into_iter().collect::<Result<Vec<_>, _>>()?.into_iter().unzip();
+    Ok(Sourced { traces, files })
 }
 
 /// A file in our format, read whole and checksummed.
-fn read_native(path: &Path, options: &ReadOptions) -> Result<Sourced, TraceError> {
+fn read_native(path: &Path, options: &ReadOptions) -> Result<(Trace, TraceFile), TraceError> {
     let mut bytes = Vec::new();
     open_limited(path, options)?.read_to_end(&mut bytes).map_err(|source| FileError::Io {
         file: path.to_path_buf(),
@@ -396,7 +404,7 @@ fn read_native(path: &Path, options: &ReadOptions) -> Result<Sourced, TraceError
     })?;
     let trace = Trace::from_csv_reader_with(&bytes[..], path, options)?;
     let native = Some((crc32fast::hash(&bytes), bytes.len() as u64));
-    Ok(Sourced { trace, path: path.to_path_buf(), native })
+    Ok((trace, TraceFile { path: path.to_path_buf(), native }))
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! started by a variable-projection grid around the FFT seed.
 
 use super::{
-    check_n_air, fft_estimate, fringe_phase, gouy, linear_at, validate, GapEstimate, GapMethod, Spectrum, SweepConfig,
+    check_n_air, fft_estimate, linear_at, validate, FringePhase, GapEstimate, GapMethod, Spectrum, SweepConfig,
     SweepError, SweepFit, GRID_SAMPLES, MIN_FRINGES,
 };
 use crate::measure::signal::sincos;
@@ -28,16 +28,16 @@ impl SweepProblem<'_> {
     fn eval(&self, with_jac: bool) -> Evaluation {
         let n = self.sp.k.len();
         let [a, a1, a2, b, l, psi] = [self.p[0], self.p[1], self.p[2], self.p[3], self.p[4], self.p[5]];
-        let g0 = gouy(self.k0, l, self.w0);
+        let theta = FringePhase::new(self.k0, self.half, l, self.n_air, self.w0);
         let mut r = OVector::<f64, Dyn>::zeros(if with_jac { 0 } else { n });
         let mut j = if with_jac { Some(OMatrix::<f64, Dyn, U6>::zeros(n)) } else { None };
         for (i, (&k, &y)) in self.sp.k.iter().zip(self.sp.y.iter()).enumerate() {
             let x = (k - self.k0) / self.half;
-            let (th, dth) = fringe_phase(k, self.k0, l, self.n_air, self.w0, g0);
-            let (s, c) = sincos(th + psi);
             let shape = 1.0 + a1 * x + a2 * x * x;
             match j.as_mut() {
                 Some(j) => {
+                    let (th, dth) = theta.phase_and_slope(k);
+                    let (s, c) = sincos(th + psi);
                     j[(i, 0)] = shape;
                     j[(i, 1)] = a * x;
                     j[(i, 2)] = a * x * x;
@@ -45,7 +45,7 @@ impl SweepProblem<'_> {
                     j[(i, 4)] = -b * s * dth;
                     j[(i, 5)] = -b * s;
                 }
-                None => r[i] = a * shape + b * c - y,
+                None => r[i] = a * shape + b * sincos(theta.phase(k) + psi).1 - y,
             }
         }
         (r, j)

@@ -251,24 +251,96 @@ fn validate(wavelength_nm: &[f64], irradiance: &[f64]) -> Result<Spectrum, Sweep
     Ok(Spectrum { k, y })
 }
 
-/// Gouy phase G(k, L) = arctan(L/z_R(k)) and ∂G/∂L, with z_R = w0²·k/2.
+/// Gouy phase G(k, L) = arctan(L/z_R(k)), with z_R = w0²·k/2.
 #[inline]
-fn gouy(k: f64, l: f64, w0: Option<f64>) -> (f64, f64) {
-    match w0 {
-        None => (0.0, 0.0),
-        Some(w) => {
-            let zr = 0.5 * w * w * k;
-            let x = l / zr;
-            (x.atan(), 1.0 / (zr * (1.0 + x * x)))
-        }
-    }
+fn gouy_phase(k: f64, l: f64, w0: f64) -> f64 {
+    (l / (0.5 * w0 * w0 * k)).atan()
 }
 
-/// Fringe phase relative to the centre (without ψ0) and its derivative in L.
+/// ∂G/∂L = z_R/(z_R² + L²).
 #[inline]
-fn fringe_phase(k: f64, k0: f64, l: f64, n_air: f64, w0: Option<f64>, g0: (f64, f64)) -> (f64, f64) {
-    let (g, dg) = gouy(k, l, w0);
-    (2.0 * n_air * l * (k - k0) - (g - g0.0), 2.0 * n_air * (k - k0) - (dg - g0.1))
+fn gouy_slope(k: f64, l: f64, w0: f64) -> f64 {
+    let zr = 0.5 * w0 * w0 * k;
+    zr / (zr * zr + l * l)
+}
+
+/// Highest degree of the Gouy phase's series; a sweep too wide for it (over a tenth of its
+/// centre wavenumber on each side) takes the arctangent at every sample.
+const GOUY_SERIES_MAX_DEGREE: usize = 12;
+/// What the series may be off by, rad.
+const GOUY_SERIES_TOLERANCE_RAD: f64 = 1e-12;
+
+/// The fringe phase of one gap L relative to the sweep's centre k0, without ψ0:
+/// `θ(k) = 2·n·L·(k - k0) - [G(k, L) - G(k0, L)]`, and ∂θ/∂L.
+#[derive(Clone, Copy)]
+struct FringePhase {
+    k0: f64,
+    l: f64,
+    n_air: f64,
+    w0: Option<f64>,
+    /// ∂G/∂L at k0.
+    dg0: f64,
+    /// G(k) - G(k0) = Σ cₙ·δⁿ (n = 1..=degree, δ = k - k0) when the series is used.
+    series: [f64; GOUY_SERIES_MAX_DEGREE],
+    degree: usize,
+}
+
+impl FringePhase {
+    /// For the gap `l` (nm) on a sweep of centre `k0` and half-width `half` (rad/nm).
+    fn new(k0: f64, half: f64, l: f64, n_air: f64, w0: Option<f64>) -> Self {
+        let dg0 = w0.map_or(0.0, |w| gouy_slope(k0, l, w));
+        let mut phase = Self { k0, l, n_air, w0, dg0, series: [0.0; GOUY_SERIES_MAX_DEGREE], degree: 0 };
+        if let Some(w) = w0 {
+            phase.expand_gouy(half, 2.0 * l / (w * w));
+        }
+        phase
+    }
+
+    /// The series of G(k) - G(k0) when it reaches the tolerance within its highest degree:
+    /// G(k) = arctan(a/k) = arg(k + i·a), a = 2L/w0², so G(k) - G(k0) = Im ln(1 + z) with
+    /// z = δ/(k0 + i·a), whose terms are (-1)ⁿ⁺¹·zⁿ/n and whose remainder after degree N is
+    /// below |z|ᴺ⁺¹/((N + 1)·(1 - |z|)).
+    fn expand_gouy(&mut self, half: f64, a: f64) {
+        let w = nalgebra::Complex::new(self.k0, a).inv();
+        let r = half.abs() * w.norm();
+        let Some(degree) = (1..=GOUY_SERIES_MAX_DEGREE)
+            .find(|&n| r < 1.0 && r.powi(n as i32 + 1) / ((n + 1) as f64 * (1.0 - r)) <= GOUY_SERIES_TOLERANCE_RAD)
+        else {
+            return;
+        };
+        let mut wn = w;
+        for n in 1..=degree {
+            let sign = if n % 2 == 1 { 1.0 } else { -1.0 };
+            self.series[n - 1] = sign * wn.im / n as f64;
+            wn *= w;
+        }
+        self.degree = degree;
+    }
+
+    /// θ(k).
+    #[inline]
+    fn phase(&self, k: f64) -> f64 {
+        2.0 * self.n_air * self.l * (k - self.k0) - self.gouy_change(k)
+    }
+
+    /// θ(k) and ∂θ/∂L.
+    #[inline]
+    fn phase_and_slope(&self, k: f64) -> (f64, f64) {
+        let d = k - self.k0;
+        let dg = self.w0.map_or(0.0, |w| gouy_slope(k, self.l, w));
+        (2.0 * self.n_air * self.l * d - self.gouy_change(k), 2.0 * self.n_air * d - (dg - self.dg0))
+    }
+
+    /// G(k, L) - G(k0, L).
+    #[inline]
+    fn gouy_change(&self, k: f64) -> f64 {
+        let d = k - self.k0;
+        match self.w0 {
+            Some(_) if self.degree > 0 => d * self.series[..self.degree].iter().rev().fold(0.0, |acc, &c| c + d * acc),
+            Some(w) => gouy_phase(k, self.l, w) - gouy_phase(self.k0, self.l, w),
+            None => 0.0,
+        }
+    }
 }
 
 /// FFT seed: spectrum resampled uniformly in k by linear interpolation, detrended,
@@ -339,13 +411,12 @@ const GRID_SAMPLES: usize = 8192;
 /// Linear least squares of the model at fixed L: basis 1, x, x², cos θ, sin θ.
 /// Returns (coefficients, RSS).
 fn linear_at(sp: &Spectrum, k0: f64, half: f64, l: f64, n_air: f64, w0: Option<f64>) -> (SVector<f64, 5>, f64) {
-    let g0 = gouy(k0, l, w0);
+    let theta = FringePhase::new(k0, half, l, n_air, w0);
     let mut ata = SMatrix::<f64, 5, 5>::zeros();
     let mut aty = SVector::<f64, 5>::zeros();
     let mut yy = 0.0;
     for (&k, &y) in sp.k.iter().zip(sp.y.iter()) {
-        let (th, _) = fringe_phase(k, k0, l, n_air, w0, g0);
-        let (s, c) = sincos(th);
+        let (s, c) = sincos(theta.phase(k));
         let x = (k - k0) / half;
         let v = SVector::<f64, 5>::from([1.0, x, x * x, c, s]);
         ata += v * v.transpose();

@@ -139,6 +139,32 @@ fn ignoring_the_gouy_phase_biases_short_gaps() {
 }
 
 #[test]
+fn the_gouy_series_is_the_arctangent_within_its_tolerance() {
+    // sweeps from 0.1 nm to 300 nm wide around 1560 nm, gaps from 1 µm to 3 mm, waists 2-20 µm
+    let mut rng = StdRng::seed_from_u64(3);
+    let mut used = 0;
+    for _ in 0..300 {
+        let span_nm = 10f64.powf(rng.random_range(-1.0..2.5));
+        let (l, w0) = (10f64.powf(rng.random_range(3.0..6.5)), rng.random_range(2000.0..20_000.0));
+        let (k_lo, k_hi) = (TAU / (CENTER + 0.5 * span_nm), TAU / (CENTER - 0.5 * span_nm));
+        let (k0, half) = (0.5 * (k_lo + k_hi), 0.5 * (k_hi - k_lo));
+        let theta = FringePhase::new(k0, half, l, N_AIR, Some(w0));
+        used += usize::from(theta.degree > 0);
+        for i in 0..=100 {
+            let k = k_lo + (k_hi - k_lo) * i as f64 / 100.0;
+            let exact = gouy_phase(k, l, w0) - gouy_phase(k0, l, w0);
+            let err = (theta.gouy_change(k) - exact).abs();
+            assert!(
+                err < 2e-12,
+                "span {span_nm} nm, L {l} nm, w0 {w0} nm, degree {}: off by {err:e} rad",
+                theta.degree
+            );
+        }
+    }
+    assert!(used > 250, "the series was used on {used} of 300 sweeps");
+}
+
+#[test]
 fn decreasing_wavelengths_give_the_same_gap() {
     let (mut wl, mut y) = sweep(300e3, 1e-3, 0.2, 11);
     let up = fit_gap(&wl, &y, &cfg()).unwrap();
