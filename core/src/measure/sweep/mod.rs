@@ -264,7 +264,7 @@ fn gouy_slope(k: f64, l: f64, w0: f64) -> f64 {
     zr / (zr * zr + l * l)
 }
 
-/// Highest degree of the Gouy phase's series; a sweep too wide for it (over a tenth of its
+/// Highest degree of the Gouy phase's series; a sweep too wide for it (beyond about 14 % of its
 /// centre wavenumber on each side) takes the arctangent at every sample.
 const GOUY_SERIES_MAX_DEGREE: usize = 12;
 /// What the series may be off by, rad.

@@ -162,6 +162,11 @@ fn the_gouy_series_is_the_arctangent_within_its_tolerance() {
         }
     }
     assert!(used > 250, "the series was used on {used} of 300 sweeps");
+    // 500 nm wide, ±16 % of k0: within the series' degrees at a long gap (|k0 + i·a| ≫ k0), not
+    // at a short one
+    let (k_lo, k_hi) = (TAU / (CENTER + 250.0), TAU / (CENTER - 250.0));
+    let wide = |l: f64| FringePhase::new(0.5 * (k_lo + k_hi), 0.5 * (k_hi - k_lo), l, N_AIR, Some(W0)).degree;
+    assert!(wide(3e6) > 0 && wide(1e3) == 0, "degrees {} and {}", wide(3e6), wide(1e3));
 }
 
 #[test]
