@@ -167,27 +167,34 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
     sync_dir(&parent_dir(path))
 }
 
+/// How many files [`write_atomic_all`] writes and flushes at once.
+pub const WRITE_AT_ONCE: usize = 16;
+
 /// [`write_atomic`] for many files at once: every temporary file written and flushed, several
 /// at a time, then renamed over its target in order, then each folder flushed once (waiting
 /// for the disk one file after the other is most of the time of many small saves). Each file
 /// is atomic as with [`write_atomic`]; on an error, the files renamed before it stay written.
 pub fn write_atomic_all(files: &[(PathBuf, Vec<u8>)]) -> Result<(), FileError> {
-    // Threads of their own rather than the compute pool's: they mostly wait for the disk.
-    const AT_ONCE: usize = 16;
-    let per_thread = files.len().div_ceil(AT_ONCE).max(1);
-    let temporaries: Vec<tempfile::NamedTempFile> = std::thread::scope(|scope| {
-        let writers: Vec<_> = files
-            .chunks(per_thread)
-            .map(|chunk| {
-                scope
-                    .spawn(move || chunk.iter().map(|(path, bytes)| flushed_temporary(path, bytes)).collect::<Vec<_>>())
-            })
-            .collect();
-        writers
-            .into_iter()
-            .flat_map(|w| w.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
-            .collect::<Result<_, _>>()
-    })?;
+    let per_thread = files.len().div_ceil(WRITE_AT_ONCE).max(1);
+    let temporaries: Vec<tempfile::NamedTempFile> = if files.len() <= 1 {
+        files.iter().map(|(path, bytes)| flushed_temporary(path, bytes)).collect::<Result<_, _>>()?
+    } else {
+        // Threads of their own rather than the compute pool's: they mostly wait for the disk.
+        std::thread::scope(|scope| {
+            let writers: Vec<_> = files
+                .chunks(per_thread)
+                .map(|chunk| {
+                    scope.spawn(move || {
+                        chunk.iter().map(|(path, bytes)| flushed_temporary(path, bytes)).collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            writers
+                .into_iter()
+                .flat_map(|w| w.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+                .collect::<Result<_, _>>()
+        })?
+    };
     let mut dirs: Vec<PathBuf> = Vec::new();
     for (tmp, (path, _)) in temporaries.into_iter().zip(files) {
         persist(tmp, path)?;

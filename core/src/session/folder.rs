@@ -155,14 +155,17 @@ impl Session {
     }
 
     /// [`Session::add_trace`] for each of `traces` in order (complete, no plan step), their CSV
-    /// text formatted and their files written in parallel: the same files and references as
-    /// one call per trace.
+    /// text formatted and their files written several at a time: the same files and references
+    /// as one call per trace.
     pub fn add_traces(&mut self, dir: &Path, traces: &[Trace]) -> Result<(), SessionError> {
         use rayon::prelude::*;
         // A trace that cannot be written is named by the folder (its file name comes later).
         let origin = dir.join(TRACES_DIR);
-        let bytes: Vec<Vec<u8>> = traces.par_iter().map(|t| t.to_csv_bytes(&origin)).collect::<Result<_, _>>()?;
-        self.add_trace_files(dir, traces.iter().zip(bytes).collect(), None, true)
+        for group in traces.chunks(files::WRITE_AT_ONCE) {
+            let bytes: Vec<Vec<u8>> = group.par_iter().map(|t| t.to_csv_bytes(&origin)).collect::<Result<_, _>>()?;
+            self.add_trace_files(dir, group.iter().zip(bytes).collect(), None, true)?;
+        }
+        Ok(())
     }
 
     /// [`Session::add_traces`] for traces read from files: a file in our format whose bytes are
@@ -171,19 +174,22 @@ impl Session {
     pub fn add_sourced_traces(&mut self, dir: &Path, sourced: &Sourced) -> Result<(), SessionError> {
         use rayon::prelude::*;
         let origin = dir.join(TRACES_DIR);
-        let bytes: Vec<Vec<u8>> = sourced
-            .traces
-            .par_iter()
-            .zip(&sourced.files)
-            .map(|(trace, file)| {
-                let unchanged = file.native.and_then(|key| {
-                    let bytes = std::fs::read(&file.path).ok()?;
-                    (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some(bytes)
-                });
-                unchanged.map_or_else(|| trace.to_csv_bytes(&origin), Ok)
-            })
-            .collect::<Result<_, _>>()?;
-        self.add_trace_files(dir, sourced.traces.iter().zip(bytes).collect(), None, true)
+        let at_once = files::WRITE_AT_ONCE;
+        for (traces, sources) in sourced.traces.chunks(at_once).zip(sourced.files.chunks(at_once)) {
+            let bytes: Vec<Vec<u8>> = traces
+                .par_iter()
+                .zip(sources)
+                .map(|(trace, file)| {
+                    let unchanged = file.native.and_then(|key| {
+                        let bytes = std::fs::read(&file.path).ok()?;
+                        (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some(bytes)
+                    });
+                    unchanged.map_or_else(|| trace.to_csv_bytes(&origin), Ok)
+                })
+                .collect::<Result<_, _>>()?;
+            self.add_trace_files(dir, traces.iter().zip(bytes).collect(), None, true)?;
+        }
+        Ok(())
     }
 
     /// Write a trace into the session folder (a new `traces/NNN.csv`, atomically) and reference it.
@@ -225,19 +231,21 @@ impl Session {
         step: Option<(usize, usize)>,
         complete: bool,
     ) -> Result<(), SessionError> {
+        use rayon::prelude::*;
         let names = self.free_trace_files(dir, traces.len());
         create_dir(&dir.join(TRACES_DIR))?;
         let (traces, bytes): (Vec<&Trace>, Vec<Vec<u8>>) = traces.into_iter().unzip();
         let files: Vec<(PathBuf, Vec<u8>)> = names.iter().map(|f| dir.join(f)).zip(bytes).collect();
         files::write_atomic_all(&files)?;
-        for ((trace, (_, bytes)), file) in traces.into_iter().zip(&files).zip(names) {
+        let crcs: Vec<u32> = files.par_iter().map(|(_, bytes)| crc32fast::hash(bytes)).collect();
+        for (((trace, (_, bytes)), file), crc32) in traces.into_iter().zip(&files).zip(names).zip(crcs) {
             self.traces.push(TraceRef {
                 file,
                 label: trace.meta.label.clone(),
                 kind: trace.meta.kind,
                 samples: trace.len(),
                 bytes: bytes.len() as u64,
-                crc32: crc32fast::hash(bytes),
+                crc32,
                 step,
                 complete,
             });
