@@ -605,7 +605,8 @@ fn cancelling_a_step_keeps_what_was_recorded_and_imports_go_through_the_dialog()
     assert!(matches!(step.state, StepState::Stopped(_)), "{:?}", step.state);
     assert!(!step.traces.is_empty() && !step.traces[0].is_empty(), "the partial trace is kept");
     h.get_by_label_contains("stopped: ");
-    h.get_by_label("Redo step 1");
+    assert!(step.resume.is_some(), "a step stopped by the technician can be resumed");
+    h.get_by_label("Resume or redo step 1 (F5)");
     // Import: the trace recorded so far, written to a file and opened through the dialog.
     let path = dir.path().join("partial.csv");
     step.traces[0].write_csv(&path).unwrap();

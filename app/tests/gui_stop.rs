@@ -180,13 +180,14 @@ fn f5_and_redo_on_a_stopped_step_ask_and_keep_keeps_its_traces() {
     let traces = if kept == 1 { "trace" } else { "traces" };
     let question = format!("Redo step 1 discards its {kept} {traces}: it was stopped (segment ");
     h.get_by_label_contains(&question);
+    h.get_by_label("Resume or redo step 1?");
     screenshot(&mut h, "redo-confirm");
     h.get_by_label("Keep").click();
     h.run_steps(2);
     assert!(h.state().state.wizard.running.is_none() && h.state().state.wizard.confirm_redo.is_none());
     assert_eq!(h.state().state.wizard.steps[0].traces, before, "the traces are kept");
-    // Redo asks too; Esc on the question keeps them as well.
-    h.get_by_label("Redo step 1").click();
+    // The step's button asks too; Esc on the question keeps them as well.
+    h.get_by_label("Resume or redo step 1 (F5)").click();
     h.run_steps(2);
     h.get_by_label("Keep");
     h.key_press(egui::Key::Escape);
@@ -194,7 +195,7 @@ fn f5_and_redo_on_a_stopped_step_ask_and_keep_keeps_its_traces() {
     assert!(h.query_by_label("Keep").is_none(), "the question closed");
     assert_eq!(h.state().state.wizard.steps[0].traces, before);
     // "Redo" discards them and runs the step again.
-    h.get_by_label("Redo step 1").click();
+    h.get_by_label("Resume or redo step 1 (F5)").click();
     h.run_steps(2);
     h.get_by_label("Redo").click();
     h.run_steps(2);
@@ -319,6 +320,10 @@ fn a_worker_panic_is_shown_and_the_traces_recorded_before_it_are_kept() {
     assert!(h.query_by_label("The bench worker failed").is_none());
     let session = photorobot_core::session::Session::load(&saved).expect("the saved session loads");
     assert_eq!(session.traces.len(), recorded);
+    // No resume point after a fault: the step's button offers to redo it.
+    open(&mut h, Tab::Wizard);
+    assert!(h.state().state.wizard.steps[0].resume.is_none());
+    h.get_by_label("Redo step 1 (F5)");
     // The worker serves the next command: a jog reaches its targets.
     open(&mut h, Tab::Robot);
     let target = [5.0, 0.0, 0.0, 0.0, 0.0, 0.0];

@@ -132,9 +132,14 @@ fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
         }
     });
     let running_this = s.wizard.running.as_ref().is_some_and(|r| r.step == i);
-    let pending = st.state == StepState::Pending;
+    // F5 runs the first step not done: one never run or one stopped before its end.
+    let label = match (&st.state, st.resume) {
+        (StepState::Pending, _) => format!("Run step {} (F5)", i + 1),
+        (StepState::Stopped(_), Some(_)) => format!("Resume or redo step {} (F5)", i + 1),
+        (StepState::Stopped(_), None) => format!("Redo step {} (F5)", i + 1),
+        _ => format!("Redo step {}", i + 1),
+    };
     ui.horizontal(|ui| {
-        let label = if pending { format!("Run step {} (F5)", i + 1) } else { format!("Redo step {}", i + 1) };
         if ui.add_enabled(idle && used, egui::Button::new(label)).clicked() {
             s.request_step(i);
         }
@@ -196,7 +201,11 @@ fn confirm_redo(ui: &mut egui::Ui, s: &mut AppState) {
         resume.and_then(|r| step.plan.segments.get(r.progress.next_segment)).map(|g| g.label().to_string());
     let mut answer = None;
     let modal = egui::Modal::new(egui::Id::unique("confirm redo")).show(ui.ctx(), |ui| {
-        ui.heading(format!("Redo step {}?", i + 1));
+        ui.heading(if resume.is_some() {
+            format!("Resume or redo step {}?", i + 1)
+        } else {
+            format!("Redo step {}?", i + 1)
+        });
         let how = match &state {
             StepState::Stopped(e) => format!("it was stopped ({e})"),
             StepState::Done => "it ran to the end".into(),
