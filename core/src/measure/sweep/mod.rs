@@ -326,9 +326,8 @@ impl FringePhase {
     /// θ(k) and ∂θ/∂L.
     #[inline]
     fn phase_and_slope(&self, k: f64) -> (f64, f64) {
-        let d = k - self.k0;
         let dg = self.w0.map_or(0.0, |w| gouy_slope(k, self.l, w));
-        (2.0 * self.n_air * self.l * d - self.gouy_change(k), 2.0 * self.n_air * d - (dg - self.dg0))
+        (self.phase(k), 2.0 * self.n_air * (k - self.k0) - (dg - self.dg0))
     }
 
     /// G(k, L) - G(k0, L).
