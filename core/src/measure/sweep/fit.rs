@@ -8,10 +8,11 @@ use super::{
 use crate::measure::signal::sincos;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, MinimizationReport};
 use nalgebra::{storage::Owned, Dyn, OMatrix, OVector, SMatrix, SVector, U6};
+use std::cell::RefCell;
 use std::f64::consts::{PI, TAU};
 
-/// Residuals and (optionally) the Jacobian of the sweep model.
-type Evaluation = (OVector<f64, Dyn>, Option<OMatrix<f64, Dyn, U6>>);
+/// The model's derivatives at every sample, one row each.
+type Jacobian = OMatrix<f64, Dyn, U6>;
 
 /// The LM problem: parameters (A, a1, a2, B, L, ψ0).
 struct SweepProblem<'a> {
@@ -21,34 +22,52 @@ struct SweepProblem<'a> {
     n_air: f64,
     w0: Option<f64>,
     p: SVector<f64, 6>,
+    /// The Jacobian computed beside the last residuals, with the parameters it is at: the
+    /// solver asks for the Jacobian right after the residuals of a step it accepts.
+    jacobian_at: RefCell<Option<(SVector<f64, 6>, Jacobian)>>,
 }
 
 impl SweepProblem<'_> {
-    /// The residuals, or (`with_jac`) only the Jacobian: the solver asks for them apart.
-    fn eval(&self, with_jac: bool) -> Evaluation {
-        let n = self.sp.k.len();
+    /// Calls `row(i, residual, ∂r/∂p)` for every sample, one sine-cosine each.
+    #[inline]
+    fn for_each_row(&self, mut row: impl FnMut(usize, f64, [f64; 6])) {
         let [a, a1, a2, b, l, psi] = [self.p[0], self.p[1], self.p[2], self.p[3], self.p[4], self.p[5]];
         let theta = FringePhase::new(self.k0, self.half, l, self.n_air, self.w0);
-        let mut r = OVector::<f64, Dyn>::zeros(if with_jac { 0 } else { n });
-        let mut j = if with_jac { Some(OMatrix::<f64, Dyn, U6>::zeros(n)) } else { None };
         for (i, (&k, &y)) in self.sp.k.iter().zip(self.sp.y.iter()).enumerate() {
             let x = (k - self.k0) / self.half;
             let shape = 1.0 + a1 * x + a2 * x * x;
-            match j.as_mut() {
-                Some(j) => {
-                    let (th, dth) = theta.phase_and_slope(k);
-                    let (s, c) = sincos(th + psi);
-                    j[(i, 0)] = shape;
-                    j[(i, 1)] = a * x;
-                    j[(i, 2)] = a * x * x;
-                    j[(i, 3)] = c;
-                    j[(i, 4)] = -b * s * dth;
-                    j[(i, 5)] = -b * s;
-                }
-                None => r[i] = a * shape + b * sincos(theta.phase(k) + psi).1 - y,
-            }
+            let (th, dth) = theta.phase_and_slope(k);
+            let (s, c) = sincos(th + psi);
+            row(i, a * shape + b * c - y, [shape, a * x, a * x * x, c, -b * s * dth, -b * s]);
         }
+    }
+
+    /// The residuals and the Jacobian.
+    fn evaluate(&self) -> (OVector<f64, Dyn>, OMatrix<f64, Dyn, U6>) {
+        let n = self.sp.k.len();
+        let mut r = OVector::<f64, Dyn>::zeros(n);
+        let mut j = OMatrix::<f64, Dyn, U6>::zeros(n);
+        self.for_each_row(|i, ri, ji| {
+            r[i] = ri;
+            for (c, v) in ji.into_iter().enumerate() {
+                j[(i, c)] = v;
+            }
+        });
         (r, j)
+    }
+
+    /// The residual sum of squares and JᵀJ, without holding the Jacobian.
+    fn normal_matrix(&self) -> (f64, SMatrix<f64, 6, 6>) {
+        let (mut rss, mut jtj) = (0.0, [[0.0; 6]; 6]);
+        self.for_each_row(|_, ri, ji| {
+            rss += ri * ri;
+            for (r, row) in jtj.iter_mut().enumerate() {
+                for (c, v) in row.iter_mut().enumerate().take(r + 1) {
+                    *v += ji[r] * ji[c];
+                }
+            }
+        });
+        (rss, SMatrix::<f64, 6, 6>::from_fn(|r, c| if c <= r { jtj[r][c] } else { jtj[c][r] }))
     }
 }
 
@@ -66,17 +85,23 @@ impl LeastSquaresProblem<f64, Dyn, U6> for SweepProblem<'_> {
     }
 
     fn residuals(&self) -> Option<OVector<f64, Dyn>> {
-        Some(self.eval(false).0)
+        let (r, j) = self.evaluate();
+        *self.jacobian_at.borrow_mut() = Some((self.p, j));
+        Some(r)
     }
 
     fn jacobian(&self) -> Option<OMatrix<f64, Dyn, U6>> {
-        self.eval(true).1
+        match self.jacobian_at.borrow_mut().take() {
+            Some((p, j)) if p == self.p => Some(j),
+            _ => Some(self.evaluate().1),
+        }
     }
 }
 
 /// Absolute gap by nonlinear least squares (levenberg-marquardt) of the two-beam model,
 /// seeded by the FFT peak and a variable-projection grid over ±2.5 fringes (which removes
-/// the leakage bias of the seed when there are few fringes). σ from the fit covariance
+/// the leakage bias of the seed when there are few fringes), on the samples averaged in blocks
+/// of at most 0.01 rad of fringe phase. σ from the covariance of every sample,
 /// σ²·(JᵀJ)⁻¹ (pseudo-inverse) with σ² = RSS/(N - 6).
 pub fn fit_gap(wavelength_nm: &[f64], irradiance: &[f64], cfg: &SweepConfig) -> Result<SweepFit, SweepError> {
     check_n_air(cfg.n_air)?;
@@ -89,47 +114,62 @@ pub fn fit_gap(wavelength_nm: &[f64], irradiance: &[f64], cfg: &SweepConfig) -> 
             });
         }
     }
-    let sp = validate(wavelength_nm, irradiance)?;
+    fit_spectrum(&validate(wavelength_nm, irradiance)?, cfg, MAX_BLOCK_PHASE_RAD)
+}
+
+/// [`fit_gap`] on a validated sweep, its samples averaged in blocks spanning at most
+/// `max_block_phase_rad` of the fringes' phase.
+pub(super) fn fit_spectrum(sp: &Spectrum, cfg: &SweepConfig, max_block_phase_rad: f64) -> Result<SweepFit, SweepError> {
     let n = sp.k.len();
     let n_air = cfg.n_air;
-    let seed = fft_estimate(&sp, n_air)?;
+    let seed = fft_estimate(sp, n_air)?;
     let span = sp.k[n - 1] - sp.k[0];
     let half = 0.5 * span;
     let k0 = 0.5 * (sp.k[0] + sp.k[n - 1]);
     let l_per_fringe = PI / (n_air * span);
-    let l_start = grid_start(&sp, k0, half, seed.fringes_across_sweep, l_per_fringe, cfg);
-    let (lin, _) = linear_at(&sp, k0, half, l_start, n_air, cfg.gouy_waist_nm);
+    // The start only has to be in the fit's basin: a few thousand samples spread over the
+    // fringes place it.
+    let coarse = sp.strided(GRID_SAMPLES);
+    let l_start = grid_start(&coarse, k0, half, seed.fringes_across_sweep, l_per_fringe, cfg);
+    let (lin, _) = linear_at(&coarse, k0, half, l_start, n_air, cfg.gouy_waist_nm);
     let a_start = lin[0];
     let (a1_start, a2_start) = if a_start != 0.0 { (lin[1] / a_start, lin[2] / a_start) } else { (0.0, 0.0) };
     let b_start = (lin[3] * lin[3] + lin[4] * lin[4]).sqrt();
     let psi_start = (-lin[4]).atan2(lin[3]);
 
+    // The fit runs on block means short enough in phase that a block's mean is the model at its
+    // mean wavenumber (a fringe's contrast falls by δ²/24, 4e-6 at 0.01 rad, and B absorbs it):
+    // the gap of a fit to every sample within a few hundredths of its σ, at a twentieth of the
+    // solver's cost on a dense sweep.
+    let fringe_phase_per_sample = 2.0 * n_air * l_start * span / (n - 1) as f64;
+    let block = ((max_block_phase_rad / fringe_phase_per_sample).floor() as usize).clamp(1, n / MIN_BLOCKS + 1);
+    let binned = sp.binned(block);
     let problem = SweepProblem {
-        sp: &sp,
+        sp: &binned,
         k0,
         half,
         n_air,
         w0: cfg.gouy_waist_nm,
         p: SVector::<f64, 6>::from([a_start, a1_start, a2_start, b_start, l_start, psi_start]),
+        jacobian_at: RefCell::new(None),
     };
     // Converged at 1e-10 relative (0.1 pm at 900 µm) rather than the solver's 7e-15: the steps
     // below it cost half the evaluations and move the gap by femtometres.
     let (problem, report) = LevenbergMarquardt::new().with_xtol(1e-10).with_ftol(1e-10).minimize(problem);
-    fit_outcome(&problem, &report, l_start, span, seed)
+    // The covariance and the residuals' rms from every sample.
+    fit_outcome(&SweepProblem { sp, ..problem }, &report, l_start, span, seed)
 }
 
+/// The phase of the fringes across one block of the sweep the fit averages samples over, rad.
+const MAX_BLOCK_PHASE_RAD: f64 = 0.01;
+/// Fewest blocks a sweep is averaged into.
+const MIN_BLOCKS: usize = 1024;
+
 /// Where the fit starts: the gap of least RSS on a variable-projection grid in fringes across
-/// the sweep, ±2.5 fringes around the FFT seed `f_seed`, refined by a parabola (nm).
-fn grid_start(sp: &Spectrum, k0: f64, half: f64, f_seed: f64, l_per_fringe: f64, cfg: &SweepConfig) -> f64 {
-    let n = sp.k.len();
-    // The grid only places the start of the fit: every sample is not needed to find the RSS
-    // minimum (a few thousand spread over tens of fringes), the fit uses them all.
-    let stride = (n / GRID_SAMPLES).max(1);
-    let coarse = Spectrum {
-        k: sp.k.iter().step_by(stride).copied().collect(),
-        y: sp.y.iter().step_by(stride).copied().collect(),
-    };
-    let rss = |f: f64| linear_at(&coarse, k0, half, f * l_per_fringe, cfg.n_air, cfg.gouy_waist_nm).1;
+/// the sweep, ±2.5 fringes around the FFT seed `f_seed`, refined by a parabola (nm), on the
+/// thinned sweep `coarse`.
+fn grid_start(coarse: &Spectrum, k0: f64, half: f64, f_seed: f64, l_per_fringe: f64, cfg: &SweepConfig) -> f64 {
+    let rss = |f: f64| linear_at(coarse, k0, half, f * l_per_fringe, cfg.n_air, cfg.gouy_waist_nm).1;
     // The RSS's main lobe is about a fringe wide: a tenth of a fringe finds it, a fiftieth
     // around the best tenth places its bottom.
     let f_lo = (f_seed - 2.5).max(0.3);
@@ -187,12 +227,9 @@ fn fit_outcome(
     if p.iter().any(|v| !v.is_finite()) {
         return Err(SweepError::FitFailed("non-finite parameters".to_string()));
     }
-    let (r, j) = (problem.eval(false).0, problem.eval(true).1);
-    let j = j.ok_or_else(|| SweepError::FitFailed("no Jacobian".to_string()))?;
-    let rss = r.norm_squared();
+    let (rss, jtj) = problem.normal_matrix();
     let dof = (n as f64 - 6.0).max(1.0);
     let s2 = rss / dof;
-    let jtj: SMatrix<f64, 6, 6> = j.transpose() * &j;
     let cov = pseudo_inverse_sym(&jtj) * s2;
     if p[3] < 0.0 {
         p[3] = -p[3];

@@ -198,6 +198,25 @@ struct Spectrum {
     y: Vec<f64>,
 }
 
+impl Spectrum {
+    /// Every so many samples, about `samples` of them spread over the whole sweep (all of them
+    /// when there are fewer).
+    fn strided(&self, samples: usize) -> Spectrum {
+        let stride = (self.k.len() / samples.max(1)).max(1);
+        Spectrum {
+            k: self.k.iter().step_by(stride).copied().collect(),
+            y: self.y.iter().step_by(stride).copied().collect(),
+        }
+    }
+
+    /// The means of wavenumber and irradiance over blocks of `block` consecutive samples (the
+    /// last block may be shorter).
+    fn binned(&self, block: usize) -> Spectrum {
+        let mean = |c: &[f64]| c.iter().sum::<f64>() / c.len() as f64;
+        Spectrum { k: self.k.chunks(block).map(mean).collect(), y: self.y.chunks(block).map(mean).collect() }
+    }
+}
+
 fn check_n_air(n_air: f64) -> Result<(), SweepError> {
     if n_air.is_finite() && (1.0..2.0).contains(&n_air) {
         Ok(())
@@ -342,10 +361,31 @@ impl FringePhase {
     }
 }
 
-/// FFT seed: spectrum resampled uniformly in k by linear interpolation, detrended,
-/// Hann-windowed, zero-padded 4×; the peak (above 0.5 fringe) with parabolic
-/// interpolation. Returns (L in nm, fringes across the sweep).
+/// FFT seed: spectrum resampled uniformly in k by linear interpolation, averaged over blocks
+/// down to about [`SEED_SAMPLES`], detrended, Hann-windowed, zero-padded 4×; the peak (above
+/// 0.5 fringe) with parabolic interpolation. Returns (L in nm, fringes across the sweep).
+///
+/// A block mean passes fringes far below the averaged series' Nyquist frequency and nulls
+/// the ones that would alias next to them; a peak above a sixteenth of that frequency, or a
+/// sweep whose fringes the averaging took most of the power from, is looked for again in the
+/// full series.
 fn fft_seed(sp: &Spectrum, n_air: f64) -> Result<(f64, f64), SweepError> {
+    let n = sp.k.len();
+    let uniform = uniform_in_k(sp);
+    let block = n / SEED_SAMPLES;
+    if block >= 2 {
+        let means: Vec<f64> = uniform.chunks_exact(block).map(|c| c.iter().sum::<f64>() / block as f64).collect();
+        let (averaged, full) = (detrended_variance(&means), detrended_variance(&uniform));
+        let (l, fringes) = fft_peak(sp, &means, block, n_air)?;
+        if fringes < means.len() as f64 / 32.0 && averaged >= 0.5 * full {
+            return Ok((l, fringes));
+        }
+    }
+    fft_peak(sp, &uniform, 1, n_air)
+}
+
+/// The sweep's irradiance at `n` wavenumbers evenly spaced over its span, linearly interpolated.
+fn uniform_in_k(sp: &Spectrum) -> Vec<f64> {
     let n = sp.k.len();
     let (kmin, kmax) = (sp.k[0], sp.k[n - 1]);
     let dk = (kmax - kmin) / (n - 1) as f64;
@@ -359,16 +399,36 @@ fn fft_seed(sp: &Spectrum, n_air: f64) -> Result<(f64, f64), SweepError> {
         let t = ((kk - sp.k[j]) / (sp.k[j + 1] - sp.k[j])).clamp(0.0, 1.0);
         u.push(sp.y[j] + t * (sp.y[j + 1] - sp.y[j]));
     }
-    // detrend
-    let nf = n as f64;
+    u
+}
+
+/// The mean and slope of the straight line through `u` against its index.
+fn trend(u: &[f64]) -> (f64, f64) {
+    let nf = u.len() as f64;
     let xm = (nf - 1.0) / 2.0;
     let ym = u.iter().sum::<f64>() / nf;
-    let sxx: f64 = (0..n).map(|i| (i as f64 - xm).powi(2)).sum();
+    let sxx = nf * (nf * nf - 1.0) / 12.0;
     let sxy: f64 = u.iter().enumerate().map(|(i, v)| (i as f64 - xm) * (v - ym)).sum();
-    let slope = sxy / sxx;
+    (ym, sxy / sxx)
+}
+
+/// The variance of `u` about its straight line.
+fn detrended_variance(u: &[f64]) -> f64 {
+    let (ym, slope) = trend(u);
+    let xm = (u.len() as f64 - 1.0) / 2.0;
+    u.iter().enumerate().map(|(i, v)| (v - ym - slope * (i as f64 - xm)).powi(2)).sum::<f64>() / u.len() as f64
+}
+
+/// The FFT peak of `u`, the sweep's irradiance evenly spaced in k, each value the mean of
+/// `block` samples of the full spacing: (L in nm, fringes across the sweep).
+fn fft_peak(sp: &Spectrum, u: &[f64], block: usize, n_air: f64) -> Result<(f64, f64), SweepError> {
+    let (n, nu) = (sp.k.len(), u.len());
+    let nf = nu as f64;
+    let xm = (nf - 1.0) / 2.0;
+    let (ym, slope) = trend(u);
     // Padded 4×: the peak to a quarter fringe before the parabola; the fit's grid searches
     // ±2.5 fringes around it anyway.
-    let m = (4 * n).next_power_of_two();
+    let m = (4 * nu).next_power_of_two();
     thread_local! {
         // Plans cached per length: a session's sweeps share one.
         static PLANNER: std::cell::RefCell<RealFftPlanner<f64>> = std::cell::RefCell::new(RealFftPlanner::new());
@@ -381,28 +441,30 @@ fn fft_seed(sp: &Spectrum, n_air: f64) -> Result<(f64, f64), SweepError> {
     }
     let mut spec = r2c.make_output_vec();
     r2c.process(&mut input, &mut spec).map_err(|e| SweepError::FitFailed(format!("FFT: {e}")))?;
-    let mag: Vec<f64> = spec.iter().map(|c| c.norm()).collect();
-    // fringes across the sweep for bin b: b·(n-1)/m
-    let bin_of_fringes = |f: f64| f * m as f64 / (n - 1) as f64;
-    let lo = bin_of_fringes(0.5).ceil() as usize;
-    let hi = mag.len() - 1;
+    // fringes across the sweep for bin b: b·(n-1)/(m·block)
+    let fringes_per_bin = (n - 1) as f64 / (m * block) as f64;
+    let lo = (0.5 / fringes_per_bin).ceil() as usize;
+    let hi = spec.len() - 1;
     if lo + 2 >= hi {
         return Err(SweepError::TooFewSamples { n, min: MIN_SAMPLES });
     }
     let (mut best, mut bi) = (f64::NEG_INFINITY, lo);
-    for (b, &v) in mag.iter().enumerate().take(hi).skip(lo) {
-        if v > best {
-            best = v;
+    for (b, v) in spec.iter().enumerate().take(hi).skip(lo) {
+        if v.norm_sqr() > best {
+            best = v.norm_sqr();
             bi = b;
         }
     }
-    let (a, b, c) = (mag[bi - 1], mag[bi], mag[bi + 1]);
+    let (a, b, c) = (spec[bi - 1].norm(), spec[bi].norm(), spec[bi + 1].norm());
     let den = a - 2.0 * b + c;
     let delta = if den < 0.0 { (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { 0.0 };
-    let fringes = (bi as f64 + delta) * (n - 1) as f64 / m as f64;
-    let l = PI * fringes / (n_air * (kmax - kmin));
+    let fringes = (bi as f64 + delta) * fringes_per_bin;
+    let l = PI * fringes / (n_air * (sp.k[n - 1] - sp.k[0]));
     Ok((l, fringes))
 }
+
+/// Samples the FFT seed averages a sweep down to.
+const SEED_SAMPLES: usize = 16384;
 
 /// Samples kept for the variable-projection grid that seeds the sweep fit.
 const GRID_SAMPLES: usize = 8192;
@@ -411,17 +473,25 @@ const GRID_SAMPLES: usize = 8192;
 /// Returns (coefficients, RSS).
 fn linear_at(sp: &Spectrum, k0: f64, half: f64, l: f64, n_air: f64, w0: Option<f64>) -> (SVector<f64, 5>, f64) {
     let theta = FringePhase::new(k0, half, l, n_air, w0);
-    let mut ata = SMatrix::<f64, 5, 5>::zeros();
-    let mut aty = SVector::<f64, 5>::zeros();
-    let mut yy = 0.0;
+    // AᵀA's upper triangle, row by row, and Aᵀy, summed in arrays the compiler unrolls.
+    let (mut ata, mut aty, mut yy) = ([0.0; 15], [0.0; 5], 0.0);
     for (&k, &y) in sp.k.iter().zip(sp.y.iter()) {
         let (s, c) = sincos(theta.phase(k));
         let x = (k - k0) / half;
-        let v = SVector::<f64, 5>::from([1.0, x, x * x, c, s]);
-        ata += v * v.transpose();
-        aty += v * y;
+        let v = [1.0, x, x * x, c, s];
+        let mut at = 0;
+        for r in 0..5 {
+            aty[r] += v[r] * y;
+            for vc in &v[r..] {
+                ata[at] += v[r] * vc;
+                at += 1;
+            }
+        }
         yy += y * y;
     }
+    let upper = |r: usize, c: usize| r * 5 - r * (r + 1) / 2 + c;
+    let ata = SMatrix::<f64, 5, 5>::from_fn(|r, c| ata[upper(r.min(c), r.max(c))]);
+    let aty = SVector::<f64, 5>::from(aty);
     match ata.cholesky() {
         Some(ch) => {
             let p = ch.solve(&aty);
@@ -444,14 +514,16 @@ fn fft_estimate(sp: &Spectrum, n_air: f64) -> Result<GapEstimate, SweepError> {
     let (l, fringes) = fft_seed(sp, n_air)?;
     let span = sp.k[n - 1] - sp.k[0];
     let k0 = 0.5 * (sp.k[0] + sp.k[n - 1]);
-    let (_, rss) = linear_at(sp, k0, 0.5 * span, l, n_air, None);
+    // The rms of the linear fit at the seed's gap, over samples spread across the sweep.
+    let coarse = sp.strided(GRID_SAMPLES);
+    let (_, rss) = linear_at(&coarse, k0, 0.5 * span, l, n_air, None);
     let l_per_fringe = PI / (n_air * span);
     Ok(GapEstimate {
         method: GapMethod::FftPeak,
         gap_um: l * 1e-3,
         sigma_um: 0.5 / 3f64.sqrt() * l_per_fringe * 1e-3,
         fringes_across_sweep: fringes,
-        fit_rms: (rss / n as f64).sqrt(),
+        fit_rms: (rss / coarse.k.len() as f64).sqrt(),
     })
 }
 

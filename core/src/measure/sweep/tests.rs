@@ -169,6 +169,57 @@ fn the_gouy_series_is_the_arctangent_within_its_tolerance() {
     assert!(wide(3e6) > 0 && wide(1e3) == 0, "degrees {} and {}", wide(3e6), wide(1e3));
 }
 
+/// A dense sweep (200 k samples, 20 nm) at `gap_nm`, σ of the noise 10 % of B.
+fn dense_sweep(gap_nm: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    let n = 200_001;
+    let wl: Vec<f64> = (0..n).map(|i| 1550.0 + 20.0 * i as f64 / (n - 1) as f64).collect();
+    let sig = TwoBeamSweep {
+        gap_nm,
+        n_air: N_AIR,
+        offset: 1.0,
+        offset_slope_per_nm: 0.001,
+        center_nm: 1560.0,
+        amplitude: B,
+        phase_rad: seed as f64,
+        gouy_waist_nm: Some(W0),
+        noise_sigma: 0.1 * B,
+    };
+    let y = sig.render(&wl, &mut StdRng::seed_from_u64(seed)).unwrap();
+    (wl, y)
+}
+
+#[test]
+fn the_fit_on_block_means_is_the_fit_on_every_sample() {
+    // Oracle: the same fit with blocks of one sample.
+    for (seed, gap_nm) in [(1u64, 120_000.0), (2, 900_000.0), (3, 2_400_000.0)] {
+        let (wl, y) = dense_sweep(gap_nm, seed);
+        let sp = validate(&wl, &y).unwrap();
+        let blocks = super::fit::fit_spectrum(&sp, &cfg(), 0.01).unwrap().estimate;
+        let every = super::fit::fit_spectrum(&sp, &cfg(), 0.0).unwrap().estimate;
+        let sigma_nm = every.sigma_um * 1e3;
+        let moved_nm = (blocks.gap_um - every.gap_um) * 1e3;
+        assert!(moved_nm.abs() < 0.03 * sigma_nm, "gap {gap_nm} nm: moved {moved_nm} nm, σ {sigma_nm} nm");
+        assert!((blocks.sigma_um / every.sigma_um - 1.0).abs() < 1e-3, "{blocks:?} vs {every:?}");
+        assert!((blocks.fit_rms / every.fit_rms - 1.0).abs() < 1e-3, "{blocks:?} vs {every:?}");
+        assert!((blocks.gap_um * 1e3 - gap_nm).abs() < 4.0 * sigma_nm, "{blocks:?} against {gap_nm} nm");
+    }
+}
+
+#[test]
+fn the_fft_seed_finds_fringes_too_fast_for_its_block_means() {
+    // 150 fringes fit the averaged series (16,666 means of 12 samples); 600 are above the
+    // sixteenth of its Nyquist frequency it trusts, 12,000 alias above it, and 16,766 alias
+    // onto 100 but the averaging took nearly all their power: those are looked for again in
+    // every sample.
+    for fringes in [150.0, 600.0, 12_000.0, 16_766.0] {
+        let span_k = TAU / 1550.0 - TAU / 1570.0;
+        let gap_nm = fringes * PI / (N_AIR * span_k);
+        let (wl, y) = dense_sweep(gap_nm, 4);
+        let seed = fft_gap(&wl, &y, N_AIR).unwrap();
+        assert!((seed.fringes_across_sweep - fringes).abs() < 0.5, "{fringes} fringes: seed {seed:?}");
+    }
+}
+
 #[test]
 fn decreasing_wavelengths_give_the_same_gap() {
     let (mut wl, mut y) = sweep(300e3, 1e-3, 0.2, 11);
