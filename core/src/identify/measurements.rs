@@ -7,6 +7,7 @@ use crate::measure::{self, AnalyseOptions, MeasureError, Measurement, SweepSeed}
 use crate::model::effects::update_approach;
 use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
+use std::borrow::Borrow;
 
 /// How traces become observations.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -439,7 +440,11 @@ fn first_motion(trace: &Trace, start: &[i8; 6]) -> [i8; 6] {
 /// Observations from many traces; a trace whose analysis fails is listed in
 /// [`Extracted::skipped`] and the others are still used. Motions are tracked with the default
 /// [`AnalyseOptions`] ([`observations_from_traces_with`]).
-pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &ExtractOptions) -> Extracted {
+pub fn observations_from_traces<T: Borrow<Trace> + Sync>(
+    traces: &[T],
+    model: &PhaseModel,
+    options: &ExtractOptions,
+) -> Extracted {
     observations_from_traces_with(&[], traces, model, options, &|_| false)
 }
 
@@ -450,9 +455,9 @@ pub fn observations_from_traces(traces: &[Trace], model: &PhaseModel, options: &
 /// approach directions. The others start, as their tracking sees them, with each
 /// moving stage approached in its direction of motion: the tracker takes the start phase from
 /// the motion over the first fringe, where a stage that reverses takes up its play.
-pub fn observations_from_traces_with(
+pub fn observations_from_traces_with<T: Borrow<Trace> + Sync>(
     earlier: &[Trace],
-    traces: &[Trace],
+    traces: &[T],
     model: &PhaseModel,
     options: &ExtractOptions,
     free_start: &(dyn Fn(&Trace) -> bool + Sync),
@@ -462,16 +467,22 @@ pub fn observations_from_traces_with(
 
 /// The extrinsics-free part of the analysis of every sweep among `traces`, in parallel (`None`
 /// for a motion, or a sweep whose fit fails: its analysis then reports why).
-pub fn sweep_seeds(traces: &[Trace], model: &PhaseModel) -> Vec<Option<SweepSeed>> {
+pub fn sweep_seeds<T: Borrow<Trace> + Sync>(traces: &[T], model: &PhaseModel) -> Vec<Option<SweepSeed>> {
     use rayon::prelude::*;
-    traces.par_iter().map(|t| crate::trace::is_sweep(t).then(|| measure::sweep_seed(t, model).ok()).flatten()).collect()
+    traces
+        .par_iter()
+        .map(|t| {
+            let t = t.borrow();
+            crate::trace::is_sweep(t).then(|| measure::sweep_seed(t, model).ok()).flatten()
+        })
+        .collect()
 }
 
 /// [`observations_from_traces`] reusing each sweep's seed (`seeds[k]` for `traces[k]`, from
 /// [`sweep_seeds`]): the same observations, without fitting a sweep's two-beam model again for
 /// every model it is analysed with.
-pub fn observations_from_seeded(
-    traces: &[Trace],
+pub fn observations_from_seeded<T: Borrow<Trace> + Sync>(
+    traces: &[T],
     seeds: &[Option<SweepSeed>],
     model: &PhaseModel,
     options: &ExtractOptions,
@@ -480,9 +491,9 @@ pub fn observations_from_seeded(
 }
 
 /// [`observations_from_traces_with`], the sweeps' seeds taken from `seeds` where given.
-fn extract(
+fn extract<T: Borrow<Trace> + Sync>(
     earlier: &[Trace],
-    traces: &[Trace],
+    traces: &[T],
     seeds: &[Option<SweepSeed>],
     model: &PhaseModel,
     options: &ExtractOptions,
@@ -495,6 +506,7 @@ fn extract(
         .par_iter()
         .enumerate()
         .map(|(k, t)| {
+            let t = t.borrow();
             if !options.sweeps && crate::trace::is_sweep(t) {
                 // What an analysed sweep gives besides its absolute gap: no phase at its ends.
                 return Ok(Traced { observations: Vec::new(), free_start: false, ends: None });
@@ -511,7 +523,7 @@ fn extract(
     }
     // The last trace and its phase at the ends, when it was a tracked motion.
     let mut previous: Option<(&Trace, PhaseEnds)> = None;
-    for (t, r) in traces.iter().zip(results) {
+    for (t, r) in traces.iter().map(Borrow::borrow).zip(results) {
         // Every trace moves the stages, analysed or not.
         let start = approach.enter(t);
         let Traced { observations: mut obs, free_start: free, ends } = match r {

@@ -18,6 +18,7 @@ use crate::identify::{paper, Observation, ObservationKind};
 use crate::model::extrinsics::Extrinsics;
 use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
+use std::borrow::Borrow;
 
 /// Which identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -51,7 +52,7 @@ const SKIPPED_TRACE_COST: f64 = 100.0;
 /// The starts the data allow, without duplicates: the bootstrap from at least three absolute
 /// gaps (the lamella normal from gap differences between poses, and the gap), then the minima
 /// of the sign-free start fit.
-pub fn starting_points(nominal: &PhaseModel, motions: &[Trace], gaps: &[Observation]) -> Vec<Start> {
+pub fn starting_points<T: Borrow<Trace>>(nominal: &PhaseModel, motions: &[T], gaps: &[Observation]) -> Vec<Start> {
     let mut starts: Vec<Start> = Vec::new();
     if gaps.len() >= 3 {
         let boot = JointOptions { free: [true, true, false, false, false, false, true, false], ..Default::default() };
@@ -60,7 +61,7 @@ pub fn starting_points(nominal: &PhaseModel, motions: &[Trace], gaps: &[Observat
             starts.push(Start { name: "absolute gaps".into(), extrinsics: est.extrinsics });
         }
     }
-    let wavelength_nm = motions.iter().find_map(|t| t.wavelength_nm.first().copied()).unwrap_or(1560.0);
+    let wavelength_nm = motions.iter().find_map(|t| t.borrow().wavelength_nm.first().copied()).unwrap_or(1560.0);
     let branches = start_branches(nominal, &travels(motions, nominal.n_air), gaps, wavelength_nm);
     if let Some(best) = branches.first().map(|b| b.chi2) {
         let keep = START_KEEP_FACTOR * best + START_KEEP_MARGIN;
@@ -188,7 +189,7 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
     use rayon::prelude::*;
     let t0 = std::time::Instant::now();
     let phase_done = |what: &str| tracing::debug!(elapsed_s = t0.elapsed().as_secs_f64(), "identification: {what}");
-    let (sweeps, motions): (Vec<Trace>, Vec<Trace>) = traces.iter().cloned().partition(crate::trace::is_sweep);
+    let (sweeps, motions): (Vec<&Trace>, Vec<&Trace>) = traces.iter().partition(|t| crate::trace::is_sweep(t));
     // A sweep's two-beam fit does not depend on the extrinsics: fitted once, reused by every pass.
     let seeds = sweep_seeds(&sweeps, nominal);
     let swept = observations_from_seeded(&sweeps, &seeds, nominal, &extract_options());
@@ -382,7 +383,7 @@ fn one_pass(
     mode: Mode,
     nominal: &PhaseModel,
     swept: &Extracted,
-    motions: &[Trace],
+    motions: &[&Trace],
     current: Extrinsics,
     pass: Pass,
 ) -> Identification {

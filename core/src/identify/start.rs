@@ -13,12 +13,13 @@
 
 use crate::identify::{parameter_scale, predict, Observation, ObservationKind, N_EXTRINSICS};
 use crate::measure::extrema::{detect_extrema, HysteresisConfig};
-use crate::model::extrinsics::Extrinsics;
+use crate::model::extrinsics::{Extrinsics, FiberGeometry};
 use crate::model::optics::FabryPerot;
 use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+use nalgebra::{storage::Owned, DMatrix, DVector, Dyn, Isometry3};
+use std::borrow::Borrow;
 
 /// Points along a motion at which the model's gap is evaluated for its travel.
 const TRAVEL_POINTS: usize = 48;
@@ -43,9 +44,10 @@ pub struct Travel {
 /// The sign-free travel of each motion trace (sweeps are left out): the number of intensity
 /// extrema (adaptive hysteresis) times λ/(4n). A motion without a detectable fringe travelled
 /// under a quarter wavelength.
-pub fn travels(motions: &[Trace], n_air: f64) -> Vec<Travel> {
+pub fn travels<T: Borrow<Trace>>(motions: &[T], n_air: f64) -> Vec<Travel> {
     motions
         .iter()
+        .map(Borrow::borrow)
         .filter(|t| t.len() >= 2 && !crate::trace::is_sweep(t))
         .map(|t| {
             let wavelength_nm = t.wavelength_nm[0];
@@ -63,17 +65,16 @@ pub fn travels(motions: &[Trace], n_air: f64) -> Vec<Travel> {
         .collect()
 }
 
-/// The model's sign-free travel along a motion (nm, smoothed) and its number of turning points;
-/// `None` where the beam misses the lamella.
-fn model_travel(model: &PhaseModel, fp: &FabryPerot, e: &Extrinsics, t: &Travel) -> Option<(f64, usize)> {
+/// The model's sign-free travel along a motion through end-effector `poses` (nm, smoothed) and
+/// its number of turning points; `None` where the beam misses the lamella.
+fn model_travel(fp: &FabryPerot, geometry: &FiberGeometry, poses: &[Isometry3<f64>]) -> Option<(f64, usize)> {
     let to_nm = fp.wavelength_nm() / (4.0 * std::f64::consts::PI * fp.medium_index());
-    let gaps: Vec<f64> = t
-        .joints_display
+    let gaps: Vec<f64> = poses
         .iter()
-        .map(|q| {
-            let q = model.chain.description().q_from_display(q);
-            e.cavity(&model.chain.end_effector(&q))
-                .map_or(f64::NAN, |c| fp.fundamental_phase_rad(c.length_um.abs(), c.tilt_rad) * to_nm)
+        .map(|wte| {
+            geometry
+                .gap_and_tilt(wte)
+                .map_or(f64::NAN, |(gap_um, tilt_rad)| fp.fundamental_phase_rad(gap_um, tilt_rad) * to_nm)
         })
         .collect();
     if gaps.iter().any(|g| !g.is_finite()) {
@@ -105,6 +106,8 @@ struct StartProblem<'a> {
     model: &'a PhaseModel,
     fp: FabryPerot,
     travels: &'a [Travel],
+    /// The end effector's pose at each travel's joints: the extrinsics do not move it.
+    poses: &'a [Vec<Isometry3<f64>>],
     gaps: &'a [Observation],
     prior: [f64; N_EXTRINSICS],
     x: DVector<f64>,
@@ -127,8 +130,9 @@ impl StartProblem<'_> {
         let e = self.extrinsics(x);
         let n_air = self.model.n_air;
         let mut r = Vec::with_capacity(self.travels.len() + self.gaps.len() + FREE.len());
-        for t in self.travels {
-            r.push(match model_travel(self.model, &self.fp, &e, t) {
+        let geometry = e.geometry();
+        for (t, poses) in self.travels.iter().zip(self.poses) {
+            r.push(match model_travel(&self.fp, &geometry, poses) {
                 Some((travel, turns)) => (travel - t.travel_nm) / travel_sigma_nm(t, n_air, turns),
                 None => 1e3,
             });
@@ -208,6 +212,11 @@ pub fn start_branches(
     let gaps: Vec<Observation> =
         gaps.iter().filter(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. })).cloned().collect();
     let prior = nominal.extrinsics.to_array();
+    let chain = &nominal.chain;
+    let poses: Vec<Vec<Isometry3<f64>>> = travels
+        .iter()
+        .map(|t| t.joints_display.iter().map(|q| chain.end_effector(&chain.description().q_from_display(q))).collect())
+        .collect();
     let grid: Vec<(f64, f64)> =
         TILT_GRID_DEG.iter().flat_map(|&b| TILT_GRID_DEG.iter().map(move |&t| (b, t))).collect();
     let mut minima: Vec<StartBranch> = grid
@@ -217,7 +226,8 @@ pub fn start_branches(
             start[0] += db;
             start[1] += dt;
             let x = DVector::from_iterator(FREE.len(), FREE.iter().map(|&i| start[i] / parameter_scale(i)));
-            let problem = StartProblem { model: nominal, fp: fp.clone(), travels, gaps: &gaps, prior, x };
+            let problem =
+                StartProblem { model: nominal, fp: fp.clone(), travels, poses: &poses, gaps: &gaps, prior, x };
             let (problem, _) = LevenbergMarquardt::new().with_patience(60).minimize(problem);
             let chi2 = problem.residuals_at(&problem.x).norm_squared();
             StartBranch { extrinsics: problem.extrinsics(&problem.x), chi2 }

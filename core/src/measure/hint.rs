@@ -20,10 +20,11 @@ impl PhaseModel {
     /// relative to the first sample.
     pub fn hint_nm(&self, trace: &Trace, wavelength_nm: f64) -> Result<Vec<f64>, String> {
         let fp = FabryPerot::new(&self.optics, wavelength_nm, self.n_air).map_err(|e| e.to_string())?;
+        let geometry = self.extrinsics.geometry();
         let mut out = Vec::with_capacity(trace.len());
         let mut first = None;
         for i in 0..trace.len() {
-            let g = self.phase_gap_nm(&fp, &trace.joints_display(i));
+            let g = self.phase_gap_nm_in(&geometry, &fp, &trace.joints_display(i));
             if !g.is_finite() {
                 return Err(format!("sample {i}: the beam misses the lamella at these joints"));
             }
@@ -50,9 +51,10 @@ impl PhaseModel {
             amplitude: Vec::with_capacity(n),
         };
         let mut first = None;
+        let geometry = self.extrinsics.geometry();
         for i in 0..n {
             let (gap_um, tilt_rad) = self
-                .gap_and_tilt(&trace.joints_display(i))
+                .gap_and_tilt_in(&geometry, &trace.joints_display(i))
                 .ok_or_else(|| format!("sample {i}: the beam misses the lamella at these joints"))?;
             let s = fp.fringe_shape(gap_um, tilt_rad, &mut ex);
             // The fundamental's phase as `FabryPerot::fundamental_phase_rad` gives it, to the bit.

@@ -269,6 +269,20 @@ pub struct FiberGeometry {
 }
 
 impl FiberGeometry {
+    /// |L| (µm) and the tilt (rad) of the cavity at end-effector pose `wte`, as
+    /// [`Extrinsics::cavity`] gives them (to rounding); None when the beam runs parallel to the
+    /// lamella.
+    #[inline]
+    pub fn gap_and_tilt(&self, wte: &Isometry3<f64>) -> Option<(f64, f64)> {
+        let n_t = wte.rotation * self.n_t_in_ee;
+        let den = n_t.dot(&self.n_f);
+        if den.abs() < 1e-12 {
+            return None;
+        }
+        let l = (n_t.dot(&(wte.translation.vector - self.origin.coords)) + self.n_t_dot_o_t_in_ee) / den;
+        Some((l.abs(), den.abs().min(1.0).acos()))
+    }
+
     /// Fiber origin O_f in the world (µm).
     pub fn origin(&self) -> Point3<f64> {
         self.origin

@@ -12,7 +12,7 @@
 
 use crate::model::air::{air_index_ciddor, AmbientConditions};
 use crate::model::effects::{real_joints, reversal_play, Effect};
-use crate::model::extrinsics::{Cavity, Extrinsics};
+use crate::model::extrinsics::{Cavity, Extrinsics, FiberGeometry};
 use crate::model::kinematics::Chain;
 use crate::model::optics::{FabryPerot, OpticalParams};
 use crate::model::robot::RobotDescription;
@@ -48,7 +48,12 @@ impl PhaseModel {
     /// The phase-equivalent gap (nm) at joints `q_display` (µm, °) and vacuum wavelength
     /// `wavelength_nm`: `φ·λ/(4π·n)`.
     pub fn phase_gap_nm(&self, fp: &FabryPerot, q_display: &[f64; 6]) -> f64 {
-        match self.gap_and_tilt(q_display) {
+        self.phase_gap_nm_in(&self.extrinsics.geometry(), fp, q_display)
+    }
+
+    /// [`PhaseModel::phase_gap_nm`] with the extrinsics' `geometry` computed once for many poses.
+    pub fn phase_gap_nm_in(&self, geometry: &FiberGeometry, fp: &FabryPerot, q_display: &[f64; 6]) -> f64 {
+        match self.gap_and_tilt_in(geometry, q_display) {
             Some((gap_um, tilt_rad)) => {
                 fp.fundamental_phase_rad(gap_um, tilt_rad) * fp.wavelength_nm() / (4.0 * PI * fp.medium_index())
             }
@@ -59,9 +64,14 @@ impl PhaseModel {
     /// |L| (µm) and the tilt (rad) of the cavity at joints `q_display` (µm, °); None when the
     /// beam misses the lamella.
     pub fn gap_and_tilt(&self, q_display: &[f64; 6]) -> Option<(f64, f64)> {
+        self.gap_and_tilt_in(&self.extrinsics.geometry(), q_display)
+    }
+
+    /// [`PhaseModel::gap_and_tilt`] with the extrinsics' `geometry` ([`Extrinsics::geometry`])
+    /// computed once for many poses.
+    pub fn gap_and_tilt_in(&self, geometry: &FiberGeometry, q_display: &[f64; 6]) -> Option<(f64, f64)> {
         let q = self.chain.description().q_from_display(q_display);
-        let c = self.extrinsics.cavity(&self.chain.end_effector(&q)).ok()?;
-        Some((c.length_um.abs(), c.tilt_rad))
+        geometry.gap_and_tilt(&self.chain.end_effector(&q))
     }
 }
 
