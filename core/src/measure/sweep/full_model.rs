@@ -137,13 +137,7 @@ fn linear_start(problem: &Problem, g: f64) -> Option<Vector4<f64>> {
         aty += row * y;
     }
     let x = ata.cholesky()?.solve(&aty);
-    // The fringes determine (a, b); |C|² varies little across a sweep and trades with the
-    // offset, so its own coefficient is a poor gain (3.2 or -1.1 where |(a, b)| is 0.9, on the
-    // virtual bench): the gain is |(a, b)|, the offset moved to keep the mean level.
-    let gain = x[2].hypot(x[3]);
-    let mean_base = ata[(0, 1)] / ata[(0, 0)];
-    let offset = x[0] + (x[1] - gain) * mean_base;
-    (x.iter().all(|v| v.is_finite()) && gain > 0.0).then(|| Vector4::new(g, x[3].atan2(x[2]), gain, offset))
+    (x.iter().all(|v| v.is_finite()) && x[1] > 0.0).then(|| Vector4::new(g, x[3].atan2(x[2]), x[1], x[0]))
 }
 
 /// Least-squares `y ≈ gain·x + offset`.
