@@ -43,10 +43,10 @@ impl SweepProblem<'_> {
     }
 
     /// The residuals and the Jacobian.
-    fn evaluate(&self) -> (OVector<f64, Dyn>, OMatrix<f64, Dyn, U6>) {
+    fn evaluate(&self) -> (OVector<f64, Dyn>, Jacobian) {
         let n = self.sp.k.len();
         let mut r = OVector::<f64, Dyn>::zeros(n);
-        let mut j = OMatrix::<f64, Dyn, U6>::zeros(n);
+        let mut j = Jacobian::zeros(n);
         self.for_each_row(|i, ri, ji| {
             r[i] = ri;
             for (c, v) in ji.into_iter().enumerate() {
@@ -90,7 +90,7 @@ impl LeastSquaresProblem<f64, Dyn, U6> for SweepProblem<'_> {
         Some(r)
     }
 
-    fn jacobian(&self) -> Option<OMatrix<f64, Dyn, U6>> {
+    fn jacobian(&self) -> Option<Jacobian> {
         match self.jacobian_at.borrow_mut().take() {
             Some((p, j)) if p == self.p => Some(j),
             _ => Some(self.evaluate().1),
