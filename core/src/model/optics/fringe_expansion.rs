@@ -47,6 +47,15 @@ impl FringeExpansion {
     }
 }
 
+/// w^(e_m) for m = 0, 1, 2, ... ([`tilt_phase_order`]), by recurrence: three complex products
+/// per beam where a power takes a dozen (e_m reaches hundreds). With s_m = w^(m(m+1)) and
+/// g_m = w^(2(m+1)): w^(e_(m+1)) = w^(e_m)·s_m, s_(m+1) = s_m·g_m, g_(m+1) = g_m·w².
+pub(crate) fn tilt_phasors(w: Complex<f64>) -> impl Iterator<Item = Complex<f64>> {
+    let one = Complex::new(1.0, 0.0);
+    let w2 = w * w;
+    std::iter::successors(Some((one, one, w2)), move |&(p, s, g)| Some((p * s, s * g, g * w2))).map(|(p, _, _)| p)
+}
+
 /// e_m = m(m² - 1)/3 = a_m - m, the multiple of ψ = k·θ²·|L| in beam m's tilt phase
 /// ([`FringeExpansion`]); e_{m+1} - e_m = m(m + 1).
 pub fn tilt_phase_order(m: usize) -> u64 {

@@ -4,7 +4,7 @@
 use std::f64::consts::PI;
 
 use super::fabry_perot::FabryPerot;
-use super::fringe_expansion::{tilt_phase_order, FringeExpansion};
+use super::fringe_expansion::{tilt_phasors, FringeExpansion};
 use crate::model::kinematics::sin_cos;
 use nalgebra::Complex;
 
@@ -57,8 +57,8 @@ impl FabryPerot {
         let w = Complex::new(wc, ws);
         let mut g1 = Complex::new(0.0, 0.0);
         let mut prev = g1;
-        for (m, b) in scratch.coefficients.iter().enumerate() {
-            let d = b * w.powi(tilt_phase_order(m) as i32);
+        for (b, wp) in scratch.coefficients.iter().zip(tilt_phasors(w)) {
+            let d = b * wp;
             g1 += d * prev.conj();
             prev = d;
         }
@@ -69,7 +69,7 @@ impl FabryPerot {
     /// is reused between calls.
     pub fn fringe_shape(&self, gap_um: f64, tilt_rad: f64, scratch: &mut FringeExpansion) -> FringeShape {
         let t = tilt_rad * tilt_rad;
-        self.expansion(gap_um, t, scratch);
+        self.expansion_coefficients(gap_um, t, scratch);
         let (phi, psi) = self.expansion_phases_rad(gap_um, t);
         let (ws, wc) = sin_cos(psi);
         let w = Complex::new(wc, ws);
@@ -78,8 +78,8 @@ impl FabryPerot {
         let mut g0 = 0.0;
         // prev[k - 1] = D_{m-k}: the three beams before m (zero before the first)
         let mut prev = [zero; 3];
-        for (m, b) in scratch.coefficients.iter().enumerate() {
-            let d = b * w.powi(tilt_phase_order(m) as i32);
+        for (b, wp) in scratch.coefficients.iter().zip(tilt_phasors(w)) {
+            let d = b * wp;
             g0 += d.norm_sqr();
             for (gk, p) in g[1..].iter_mut().zip(&prev) {
                 *gk += d * p.conj();
