@@ -43,6 +43,33 @@ fn parse_field(bytes: &[u8]) -> Option<f64> {
     std::str::from_utf8(bytes.trim_ascii()).ok()?.parse::<f64>().ok()
 }
 
+/// The last field read in a column and its value: most columns of a recording repeat their
+/// field row after row (the stages that do not move, a fixed wavelength), and comparing a few
+/// bytes costs a fraction of parsing them.
+#[derive(Clone, Default)]
+struct LastField {
+    bytes: [u8; 32],
+    /// Length of the field in `bytes`; 0 before the first (an empty field is never a number).
+    len: usize,
+    value: f64,
+}
+
+impl LastField {
+    /// The value of `field` when it is the last field kept, byte for byte.
+    fn value_of(&self, field: &[u8]) -> Option<f64> {
+        (self.len > 0 && field == &self.bytes[..self.len]).then_some(self.value)
+    }
+
+    /// Keep `field` (parsed to the finite `value`) when it fits.
+    fn keep(&mut self, field: &[u8], value: f64) {
+        if let Some(bytes) = self.bytes.get_mut(..field.len()) {
+            bytes.copy_from_slice(field);
+            self.len = field.len();
+            self.value = value;
+        }
+    }
+}
+
 /// Read the metadata lines (and blank lines) before the header. Returns the metadata and the
 /// number of lines consumed.
 fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usize), TraceError> {
@@ -235,6 +262,7 @@ pub fn read_table<R: Read>(
     let time_column = header(&names, header_line)?;
     let n_cols = names.len();
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); n_cols];
+    let mut last = vec![LastField::default(); n_cols];
     let mut rows = 0usize;
     let mut previous: Option<(usize, f64)> = None;
     while let Some(line) = next_record(&mut record)? {
@@ -245,15 +273,22 @@ pub fn read_table<R: Read>(
             return Err(TraceError::FieldCount { file: file(), line, expected: n_cols, found: record.len() });
         }
         for (column, field) in record.iter().enumerate() {
-            let value = parse_field(field).ok_or_else(|| TraceError::NotANumber {
-                file: file(),
-                line,
-                column: names[column].clone(),
-                text: field_text(field),
-            })?;
-            if !value.is_finite() {
-                return Err(TraceError::NonFinite { file: file(), line, column: names[column].clone(), value });
-            }
+            let value = match last[column].value_of(field) {
+                Some(value) => value,
+                None => {
+                    let value = parse_field(field).ok_or_else(|| TraceError::NotANumber {
+                        file: file(),
+                        line,
+                        column: names[column].clone(),
+                        text: field_text(field),
+                    })?;
+                    if !value.is_finite() {
+                        return Err(TraceError::NonFinite { file: file(), line, column: names[column].clone(), value });
+                    }
+                    last[column].keep(field, value);
+                    value
+                }
+            };
             columns[column].push(value);
         }
         let t = columns[time_column][rows];

@@ -433,6 +433,42 @@ proptest! {
         assert_bit_identical(&t, &back);
     }
 
+    /// A field equal to the column's last one is not parsed again: the values read are those of
+    /// parsing every field, whatever the repeats, the spacing and the lengths (fields longer than
+    /// the bytes kept, fields that differ only past them).
+    #[test]
+    fn repeated_fields_read_as_each_field_parses(
+        rows in prop::collection::vec(prop::collection::vec(0usize..8, 8), 1..30),
+    ) {
+        const POOL: [&str; 8] = [
+            "0.0",
+            "-0.0",
+            " 1.5",
+            "1.5 ",
+            "150.000000000000000000000000000000001",
+            "150.000000000000000000000000000000002",
+            "1e-310",
+            "-2.5e+3",
+        ];
+        let mut text = format!("{HEADER}\n");
+        for (i, row) in rows.iter().enumerate() {
+            text += &i.to_string();
+            for &k in row {
+                text += ",";
+                text += POOL[k];
+            }
+            text += "\n";
+        }
+        let t = read_str(&text).unwrap();
+        let columns: Vec<&[f64]> = t.columns().skip(1).map(|(_, v)| v).collect();
+        for (i, row) in rows.iter().enumerate() {
+            for (c, &k) in row.iter().enumerate() {
+                let want: f64 = POOL[k].trim().parse().unwrap();
+                prop_assert_eq!(columns[c][i].to_bits(), want.to_bits(), "row {} column {}", i, c);
+            }
+        }
+    }
+
     #[test]
     fn arbitrary_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..600)) {
         check_any_input(&bytes);

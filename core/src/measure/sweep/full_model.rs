@@ -43,19 +43,19 @@ impl LeastSquaresProblem<f64, Dyn, U4> for Problem<'_> {
         let pred = self.predict(&self.p);
         Some(OVector::<f64, Dyn>::from_iterator(pred.len(), pred.iter().zip(self.y).map(|(a, b)| a - b)))
     }
-    /// ψ, gain and offset in closed form; the gap by central differences (the field's
-    /// derivative along the gap is the multi-beam sum's).
+    /// In closed form: ψ, gain and offset, and the gap through the multi-beam sum's own
+    /// derivative ([`FabryPerot::field_and_gap_slope`]).
     fn jacobian(&self) -> Option<OMatrix<f64, Dyn, U4>> {
         let (g, psi, gain) = (self.p[0], self.p[1], self.p[2]);
-        let h = 1e-5;
-        let (at, up, dn) = (self.cavity(g), self.cavity(g + h), self.cavity(g - h));
         let rot = Complex::from_polar(1.0, psi);
         let mut j = OMatrix::<f64, Dyn, U4>::zeros(self.y.len());
-        for (i, c) in at.iter().enumerate() {
-            let (power, f) = self.detected(*c, psi);
-            // d|F|²/dψ = 2·Re(F̄·i·C·e^{iψ}).
+        for (i, fp) in self.fps.iter().enumerate() {
+            let (field, slope) = fp.field_and_gap_slope(g, self.tilt);
+            let c = field - self.r1;
+            let (power, f) = self.detected(c, psi);
+            // d|F|²/dψ = 2·Re(F̄·i·C·e^{iψ}), d|F|²/dg = 2·Re(F̄·C'·e^{iψ}).
             let d_psi = 2.0 * (f.conj() * Complex::i() * c * rot).re;
-            let d_g = (self.detected(up[i], psi).0 - self.detected(dn[i], psi).0) / (2.0 * h);
+            let d_g = 2.0 * (f.conj() * slope * rot).re;
             j[(i, 0)] = gain * d_g;
             j[(i, 1)] = gain * d_psi;
             j[(i, 2)] = power;

@@ -176,3 +176,34 @@ fn tilt_phasors_are_the_powers_of_the_tilt_phasor() {
         }
     }
 }
+
+/// The field's slope along the gap is the derivative of the field (Richardson-extrapolated
+/// central differences), and the field beside it is `field`'s to the bit, on both sides of the
+/// fiber and for every optics variant (Gouy on, off and scaled, a back face, a cleave, a
+/// high-finesse cavity).
+#[test]
+fn the_field_slope_along_the_gap_is_its_derivative() {
+    let cases = [
+        OpticalParams::default(),
+        OpticalParams { gouy_phase: false, cleave_angle_deg: 0.7, beams: 6, ..OpticalParams::default() },
+        OpticalParams { gouy_scale_error: -0.4, beams: 5, ..OpticalParams::default() },
+        OpticalParams { back_face: Some(BackFace::default()), cleave_angle_deg: 0.3, ..OpticalParams::default() },
+        OpticalParams { beams: 1000, lamella_reflectance: 0.306, ..OpticalParams::default() },
+    ];
+    for params in cases {
+        let fp = bench(&params);
+        for gap in [3.0, 54.0, 333.3, -898.83] {
+            for tilt in [0.0, 0.004, -0.0195, 0.07] {
+                let (field, slope) = fp.field_and_gap_slope(gap, tilt);
+                assert_eq!(field, fp.field(gap, tilt), "{params:?} gap {gap} tilt {tilt}");
+                let diff = |h: f64| (fp.field(gap + h, tilt) - fp.field(gap - h, tilt)) / (2.0 * h);
+                let h = 2e-4;
+                let numeric = (diff(h / 2.0) * 4.0 - diff(h)) / 3.0;
+                assert!(
+                    (slope - numeric).norm() < 1e-7 * (1.0 + slope.norm()),
+                    "{params:?} gap {gap} tilt {tilt}: {slope} vs {numeric}"
+                );
+            }
+        }
+    }
+}
