@@ -505,17 +505,12 @@ impl RecordedValidation {
         else {
             return Err(ValidationError::Run { motion: motion.name(), problem: "not a motion trace".into() });
         };
-        // Tilt correction: the model's phase-equivalent gap minus the geometric |L| (nm).
-        let fp = crate::model::optics::FabryPerot::new(&analysis.optics, m.wavelength_nm, analysis.n_air)
-            .map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?;
-        let desc = analysis.chain.description();
-        let tilt_term = |i: usize| {
-            let qd = analysed.joints_display(i);
-            let q = desc.q_from_display(&qd);
-            let l =
-                analysis.extrinsics.cavity(&analysis.chain.end_effector(&q)).map(|c| c.length_um.abs()).unwrap_or(0.0);
-            analysis.phase_gap_nm(&fp, &qd) - l * 1e3
-        };
+        // Tilt correction: the model's phase-equivalent gap (the hint, relative to the first
+        // sample) minus the geometric |L| (nm).
+        let lengths = analysis
+            .gap_um_along(analysed)
+            .map_err(|problem| ValidationError::Run { motion: motion.name(), problem })?;
+        let tilt_term = |i: usize| m.hint_nm[i] - lengths[i] * 1e3;
         let t0 = tilt_term(dither_end);
         let d0 = m.track.dl_nm[dither_end];
         let variation: Vec<f64> =

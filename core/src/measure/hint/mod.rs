@@ -72,6 +72,23 @@ impl PhaseModel {
     }
 }
 
+impl PhaseModel {
+    /// The cavity's length |L| (µm) at every sample: the model's geometry alone, without the
+    /// optics (within [`GAP_TOL_UM`] of it, [`knots::along_trace`]).
+    pub fn gap_um_along(&self, trace: &Trace) -> Result<Vec<f64>, String> {
+        let geometry = self.extrinsics.geometry();
+        let gaps = knots::along_trace(trace, &[GAP_TOL_UM], |i| {
+            self.gap_and_tilt_in(&geometry, &trace.joints_display(i))
+                .map(|(gap_um, _)| [gap_um])
+                .ok_or_else(|| format!("sample {i}: the beam misses the lamella at these joints"))
+        })?;
+        Ok(gaps.iter().map(|g| g[0]).collect())
+    }
+}
+
+/// How far the interpolated cavity length may be from the model at an interval's middle, µm.
+pub const GAP_TOL_UM: f64 = 1e-8;
+
 /// How far the interpolated hint may be from the model at an interval's middle, nm.
 pub const HINT_TOL_NM: f64 = 1e-5;
 
@@ -158,9 +175,9 @@ mod tests {
         (hint_err, shape_err)
     }
 
-    /// The hint and the shape, evaluated at knots and interpolated, are the model's at every
-    /// sample within their tolerances, on translations, rotations and a motion of all six joints
-    /// (where the tilt, the pulling and the harmonics all move).
+    /// The hint, the shape and the cavity's length, evaluated at knots and interpolated, are the
+    /// model's at every sample within their tolerances, on translations, rotations and a motion
+    /// of all six joints (where the tilt, the pulling and the harmonics all move).
     #[test]
     fn the_interpolated_hint_and_shape_are_the_model_at_every_sample() {
         let preset = BenchPreset::resolve("table2-ideal").unwrap();
@@ -175,6 +192,11 @@ mod tests {
             let (hint_err, shape_err) = worst(&model, &trace);
             assert!(hint_err <= HINT_TOL_NM, "to {to:?}: hint {hint_err:e} nm off the model");
             assert!(shape_err <= SHAPE_TOL, "to {to:?}: shape {shape_err:e} off the model");
+            let gaps = model.gap_um_along(&trace).unwrap();
+            for (i, g) in gaps.iter().enumerate() {
+                let (exact, _) = model.gap_and_tilt(&trace.joints_display(i)).unwrap();
+                assert!((g - exact).abs() <= GAP_TOL_UM, "to {to:?}, sample {i}: |L| {g} µm vs {exact} µm");
+            }
         }
     }
 
