@@ -5,6 +5,10 @@ use crate::model::optics::FabryPerot;
 use crate::model::phase::PhaseModel;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{storage::Owned, Complex, Dyn, Matrix4, OMatrix, OVector, Vector4, U4};
+use std::cell::RefCell;
+
+/// The cavity part of the field at one sample and its slope along the gap, per µm.
+type FieldAndSlope = (Complex<f64>, Complex<f64>);
 
 /// The fit: parameters (g µm, ψ rad, gain, offset), the fields per (decimated) sample.
 struct Problem<'a> {
@@ -13,20 +17,34 @@ struct Problem<'a> {
     r1: f64,
     tilt: f64,
     p: Vector4<f64>,
+    /// The cavity part of the field and its slope along the gap per sample, at the gap they were
+    /// computed at: the solver asks for the Jacobian where it last asked for the residuals.
+    at_gap: RefCell<(f64, Vec<FieldAndSlope>)>,
 }
 impl Problem<'_> {
     /// The cavity part of the field per sample at gap `g`, `E − r₁`.
     fn cavity(&self, g: f64) -> Vec<Complex<f64>> {
         self.fps.iter().map(|fp| fp.field(g, self.tilt) - self.r1).collect()
     }
+    /// The cavity part of the field and its slope along the gap per sample at gap `g`.
+    fn cavity_and_slope(&self, g: f64) -> std::cell::Ref<'_, Vec<FieldAndSlope>> {
+        if self.at_gap.borrow().0.to_bits() != g.to_bits() || self.at_gap.borrow().1.is_empty() {
+            let fields = self
+                .fps
+                .iter()
+                .map(|fp| {
+                    let (field, slope) = fp.field_and_gap_slope(g, self.tilt);
+                    (field - self.r1, slope)
+                })
+                .collect();
+            *self.at_gap.borrow_mut() = (g, fields);
+        }
+        std::cell::Ref::map(self.at_gap.borrow(), |(_, fields)| fields)
+    }
     /// `|r₁ + C·e^{iψ}|²` and the field itself, per sample.
     fn detected(&self, c: Complex<f64>, psi: f64) -> (f64, Complex<f64>) {
         let f = c * Complex::from_polar(1.0, psi) + self.r1;
         (f.norm_sqr(), f)
-    }
-    fn predict(&self, p: &Vector4<f64>) -> Vec<f64> {
-        let (psi, gain, off) = (p[1], p[2], p[3]);
-        self.cavity(p[0]).into_iter().map(|c| off + gain * self.detected(c, psi).0).collect()
     }
 }
 impl LeastSquaresProblem<f64, Dyn, U4> for Problem<'_> {
@@ -40,8 +58,10 @@ impl LeastSquaresProblem<f64, Dyn, U4> for Problem<'_> {
         self.p
     }
     fn residuals(&self) -> Option<OVector<f64, Dyn>> {
-        let pred = self.predict(&self.p);
-        Some(OVector::<f64, Dyn>::from_iterator(pred.len(), pred.iter().zip(self.y).map(|(a, b)| a - b)))
+        let (psi, gain, off) = (self.p[1], self.p[2], self.p[3]);
+        let fields = self.cavity_and_slope(self.p[0]);
+        let pred = fields.iter().map(|(c, _)| off + gain * self.detected(*c, psi).0);
+        Some(OVector::<f64, Dyn>::from_iterator(self.y.len(), pred.zip(self.y).map(|(a, b)| a - b)))
     }
     /// In closed form: ψ, gain and offset, and the gap through the multi-beam sum's own
     /// derivative ([`FabryPerot::field_and_gap_slope`]).
@@ -49,9 +69,7 @@ impl LeastSquaresProblem<f64, Dyn, U4> for Problem<'_> {
         let (g, psi, gain) = (self.p[0], self.p[1], self.p[2]);
         let rot = Complex::from_polar(1.0, psi);
         let mut j = OMatrix::<f64, Dyn, U4>::zeros(self.y.len());
-        for (i, fp) in self.fps.iter().enumerate() {
-            let (field, slope) = fp.field_and_gap_slope(g, self.tilt);
-            let c = field - self.r1;
+        for (i, &(c, slope)) in self.cavity_and_slope(g).iter().enumerate() {
             let (power, f) = self.detected(c, psi);
             // d|F|²/dψ = 2·Re(F̄·i·C·e^{iψ}), d|F|²/dg = 2·Re(F̄·C'·e^{iψ}).
             let d_psi = 2.0 * (f.conj() * Complex::i() * c * rot).re;
@@ -93,7 +111,7 @@ pub fn refine_gap_full_model(
     let q0 = model.chain.description().q_from_display(&first_joints);
     let tilt = model.extrinsics.cavity(&model.chain.end_effector(&q0)).map(|c| c.tilt_rad).unwrap_or(0.0);
     let g0 = seed.estimate.gap_um / (1.0 - tilt * tilt / 2.0);
-    let problem = |p| Problem { fps: &fps, y: &y, r1, tilt, p };
+    let problem = |p| Problem { fps: &fps, y: &y, r1, tilt, p, at_gap: RefCell::new((f64::NAN, Vec::new())) };
     let solve = |p| {
         // Converged at 1e-10 relative, as the two-beam fit.
         let (problem, report) = LevenbergMarquardt::new().with_xtol(1e-10).with_ftol(1e-10).minimize(problem(p));
