@@ -168,17 +168,17 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for StartProblem<'_> {
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let r0 = self.residuals_at(&self.x);
-        let mut j = DMatrix::zeros(r0.len(), self.x.len());
-        for c in 0..self.x.len() {
-            // 0.01 mrad, 0.01 µm: above the travel's smoothing, far below its features.
-            let h = 1e-2;
-            let (mut a, mut b) = (self.x.clone(), self.x.clone());
-            a[c] += h;
-            b[c] -= h;
-            j.set_column(c, &((self.residuals_at(&a) - self.residuals_at(&b)) / (2.0 * h)));
-        }
-        Some(j)
+        let columns: Vec<DVector<f64>> = (0..self.x.len())
+            .map(|c| {
+                // 0.01 mrad, 0.01 µm: above the travel's smoothing, far below its features.
+                let h = 1e-2;
+                let (mut a, mut b) = (self.x.clone(), self.x.clone());
+                a[c] += h;
+                b[c] -= h;
+                (self.residuals_at(&a) - self.residuals_at(&b)) / (2.0 * h)
+            })
+            .collect();
+        Some(DMatrix::from_columns(&columns))
     }
 }
 
