@@ -19,8 +19,9 @@ impl PhaseModel {
     }
 
     /// The motion hint of a trace: predicted phase-equivalent gap change (nm) per sample,
-    /// relative to the first sample. Evaluated at knots and interpolated where the motion is
-    /// smooth ([`knots::along_trace`]): within [`HINT_TOL_NM`] of the model at every sample.
+    /// relative to the first sample. The model is evaluated at every 16th sample and at each
+    /// interval's middle, and interpolated between where the joints are smooth at the sample
+    /// scale and the middle agrees within [`HINT_TOL_NM`]; elsewhere at every sample.
     pub fn hint_nm(&self, trace: &Trace, wavelength_nm: f64) -> Result<Vec<f64>, String> {
         let fp = FabryPerot::new(&self.optics, wavelength_nm, self.n_air).map_err(|e| e.to_string())?;
         let geometry = self.extrinsics.geometry();
@@ -36,9 +37,23 @@ impl PhaseModel {
         Ok(gaps.iter().map(|g| g[0] - g0).collect())
     }
 
+    /// The cavity's length |L| (µm) at every sample: the model's geometry alone, without the
+    /// optics, evaluated and interpolated as [`PhaseModel::hint_nm`] (within [`GAP_TOL_UM`] at
+    /// the intervals' middles).
+    pub fn gap_um_along(&self, trace: &Trace) -> Result<Vec<f64>, String> {
+        let geometry = self.extrinsics.geometry();
+        let gaps = knots::along_trace(trace, &[GAP_TOL_UM], |i| {
+            self.gap_and_tilt_in(&geometry, &trace.joints_display(i))
+                .map(|(gap_um, _)| [gap_um])
+                .ok_or_else(|| format!("sample {i}: the beam misses the lamella at these joints"))
+        })?;
+        Ok(gaps.iter().map(|g| g[0]).collect())
+    }
+
     /// The motion hint ([`PhaseModel::hint_nm`], the same values) and the fringe's shape at
-    /// every sample ([`FabryPerot::fringe_shape`] at the sample's gap and tilt, within
-    /// [`SHAPE_TOL`]): what the shaped tracker takes as its fringe model.
+    /// every sample ([`FabryPerot::fringe_shape`] at the sample's gap and tilt, evaluated and
+    /// interpolated as the hint, within [`SHAPE_TOL`] at the intervals' middles): what the
+    /// shaped tracker takes as its fringe model.
     pub fn hint_and_shape(&self, trace: &Trace, wavelength_nm: f64) -> Result<(Vec<f64>, FringeShapeTrace), String> {
         let fp = FabryPerot::new(&self.optics, wavelength_nm, self.n_air).map_err(|e| e.to_string())?;
         let mut ex = FringeExpansion::default();
@@ -69,20 +84,6 @@ impl PhaseModel {
             amplitude: values.iter().map(|v| v[6].max(f64::MIN_POSITIVE)).collect(),
         };
         Ok((hint, out))
-    }
-}
-
-impl PhaseModel {
-    /// The cavity's length |L| (µm) at every sample: the model's geometry alone, without the
-    /// optics (within [`GAP_TOL_UM`] of it, [`knots::along_trace`]).
-    pub fn gap_um_along(&self, trace: &Trace) -> Result<Vec<f64>, String> {
-        let geometry = self.extrinsics.geometry();
-        let gaps = knots::along_trace(trace, &[GAP_TOL_UM], |i| {
-            self.gap_and_tilt_in(&geometry, &trace.joints_display(i))
-                .map(|(gap_um, _)| [gap_um])
-                .ok_or_else(|| format!("sample {i}: the beam misses the lamella at these joints"))
-        })?;
-        Ok(gaps.iter().map(|g| g[0]).collect())
     }
 }
 

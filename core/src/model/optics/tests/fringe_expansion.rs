@@ -2,17 +2,23 @@
 
 use super::*;
 
-/// The fringe expansion sums to the field, and its derivatives match finite differences
-/// (the wavenumber derivative against a model rebuilt at a shifted wavelength).
-#[test]
-fn fringe_expansion_equals_the_field_and_its_derivatives_are_exact() {
-    let cases = [
+/// The optics variants the expansion is checked on: Gouy on, off and scaled, a cleave, a back
+/// face, a high-finesse cavity.
+fn optics_variants() -> [OpticalParams; 5] {
+    [
         OpticalParams::default(),
         OpticalParams { gouy_phase: false, cleave_angle_deg: 0.7, beams: 6, ..OpticalParams::default() },
         OpticalParams { gouy_scale_error: -0.4, beams: 5, ..OpticalParams::default() },
         OpticalParams { back_face: Some(BackFace::default()), cleave_angle_deg: 0.3, ..OpticalParams::default() },
         OpticalParams { beams: 1000, lamella_reflectance: 0.306, ..OpticalParams::default() },
-    ];
+    ]
+}
+
+/// The fringe expansion sums to the field, and its derivatives match finite differences
+/// (the wavenumber derivative against a model rebuilt at a shifted wavelength).
+#[test]
+fn fringe_expansion_equals_the_field_and_its_derivatives_are_exact() {
+    let cases = optics_variants();
     assert_eq!((1..6).map(tilt_phase_order).collect::<Vec<_>>(), [0, 2, 8, 20, 40]);
     let mut e = FringeExpansion::default();
     let mut ep = FringeExpansion::default();
@@ -183,13 +189,7 @@ fn tilt_phasors_are_the_powers_of_the_tilt_phasor() {
 /// high-finesse cavity).
 #[test]
 fn the_field_slope_along_the_gap_is_its_derivative() {
-    let cases = [
-        OpticalParams::default(),
-        OpticalParams { gouy_phase: false, cleave_angle_deg: 0.7, beams: 6, ..OpticalParams::default() },
-        OpticalParams { gouy_scale_error: -0.4, beams: 5, ..OpticalParams::default() },
-        OpticalParams { back_face: Some(BackFace::default()), cleave_angle_deg: 0.3, ..OpticalParams::default() },
-        OpticalParams { beams: 1000, lamella_reflectance: 0.306, ..OpticalParams::default() },
-    ];
+    let cases = optics_variants();
     for params in cases {
         let fp = bench(&params);
         for gap in [3.0, 54.0, 333.3, -898.83] {
