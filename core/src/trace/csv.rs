@@ -1,7 +1,7 @@
 //! Our own trace format on disk: reading a file (the required columns first, the rest kept as
 //! extra columns) and writing one atomically, bit-exact on reading back.
 
-use super::table::{open_limited, read_table, ReadOptions};
+use super::table::{open_limited, read_table_sized, ReadOptions};
 use super::{escape_meta, ExtraColumn, Trace, TraceError, FORMAT_LINE, REQUIRED_COLUMNS};
 use crate::files::{write_atomic, FileError};
 use rayon::prelude::*;
@@ -72,7 +72,8 @@ impl Trace {
     /// [`ReadOptions::max_bytes`] is refused from its size, before any of it is read.
     pub fn read_csv_with(path: &Path, options: &ReadOptions) -> Result<Self, TraceError> {
         let file = open_limited(path, options)?;
-        Self::from_csv_reader_with(file, path, options)
+        let size = file.metadata().ok().map(|m| m.len());
+        Self::from_csv_sized(file, path, options, size)
     }
 
     /// Read and validate a trace from any reader; `origin` names it in errors.
@@ -83,7 +84,18 @@ impl Trace {
     /// Read and validate a trace from any reader, with options; `origin` names it in errors.
     /// Never panics, whatever the bytes.
     pub fn from_csv_reader_with<R: Read>(reader: R, origin: &Path, options: &ReadOptions) -> Result<Self, TraceError> {
-        let table = read_table(reader, origin, options, |names, line| {
+        Self::from_csv_sized(reader, origin, options, None)
+    }
+
+    /// [`Trace::from_csv_reader_with`] of an input of `size_bytes` when known (the columns are
+    /// sized from it).
+    pub(crate) fn from_csv_sized<R: Read>(
+        reader: R,
+        origin: &Path,
+        options: &ReadOptions,
+        size_bytes: Option<u64>,
+    ) -> Result<Self, TraceError> {
+        let table = read_table_sized(reader, origin, options, size_bytes, |names, line| {
             check_required(names, origin, line)?;
             Ok(0)
         })?;

@@ -219,6 +219,18 @@ pub fn read_table<R: Read>(
     options: &ReadOptions,
     header: impl FnOnce(&[String], usize) -> Result<usize, TraceError>,
 ) -> Result<Table, TraceError> {
+    read_table_sized(reader, origin, options, None, header)
+}
+
+/// [`read_table`] of an input of `size_bytes` when known: the columns are sized from it and the
+/// first row's length instead of growing row by row.
+pub(crate) fn read_table_sized<R: Read>(
+    reader: R,
+    origin: &Path,
+    options: &ReadOptions,
+    size_bytes: Option<u64>,
+    header: impl FnOnce(&[String], usize) -> Result<usize, TraceError>,
+) -> Result<Table, TraceError> {
     let file = || origin.to_path_buf();
     let mut input = BufReader::with_capacity(64 * 1024, reader);
     let (meta, meta_lines) = read_meta(&mut input, origin)?;
@@ -262,6 +274,7 @@ pub fn read_table<R: Read>(
     let time_column = header(&names, header_line)?;
     let n_cols = names.len();
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); n_cols];
+    let mut sized = size_bytes.is_none();
     let mut last = vec![LastField::default(); n_cols];
     let mut rows = 0usize;
     let mut previous: Option<(usize, f64)> = None;
@@ -271,6 +284,13 @@ pub fn read_table<R: Read>(
         }
         if record.len() != n_cols {
             return Err(TraceError::FieldCount { file: file(), line, expected: n_cols, found: record.len() });
+        }
+        if !sized {
+            // The rows of a recording are about as long as its first (fields, delimiters, end).
+            let row_bytes = (record.as_slice().len() + n_cols) as u64;
+            let rows_est = size_bytes.unwrap_or(0) / row_bytes + 1;
+            columns.iter_mut().for_each(|c| c.reserve(rows_est.min(options.max_rows as u64) as usize));
+            sized = true;
         }
         for (column, field) in record.iter().enumerate() {
             let value = match last[column].value_of(field) {
@@ -309,6 +329,10 @@ pub fn read_table<R: Read>(
     }
     if rows == 0 {
         return Err(TraceError::EmptyTrace { file: file() });
+    }
+    // A first row much shorter than the others sized the columns too large.
+    for c in columns.iter_mut().filter(|c| c.capacity() > c.len() + c.len() / 2) {
+        c.shrink_to_fit();
     }
     Ok(Table { meta, header_line, names, columns })
 }

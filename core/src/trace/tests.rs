@@ -435,7 +435,8 @@ proptest! {
 
     /// A field equal to the column's last one is not parsed again: the values read are those of
     /// parsing every field, whatever the repeats, the spacing and the lengths (fields longer than
-    /// the bytes kept, fields that differ only past them).
+    /// the bytes kept, fields that differ only past them), and the same when the columns are
+    /// sized from the input's length.
     #[test]
     fn repeated_fields_read_as_each_field_parses(
         rows in prop::collection::vec(prop::collection::vec(0usize..8, 8), 1..30),
@@ -460,6 +461,9 @@ proptest! {
             text += "\n";
         }
         let t = read_str(&text).unwrap();
+        // Sized from the input's length and the first row's (rows here differ up to fivefold).
+        let sized = Trace::from_csv_sized(text.as_bytes(), Path::new("bad.csv"), &ReadOptions::default(), Some(text.len() as u64));
+        assert_bit_identical(&t, &sized.unwrap());
         let columns: Vec<&[f64]> = t.columns().skip(1).map(|(_, v)| v).collect();
         for (i, row) in rows.iter().enumerate() {
             for (c, &k) in row.iter().enumerate() {
