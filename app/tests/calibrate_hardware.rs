@@ -64,7 +64,13 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
         .unwrap();
     let stdout = String::from_utf8_lossy(&run.stdout);
     let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "calibrate failed:\n{stdout}\n{stderr}");
+    // Three short moves and a sweep of under one fringe determine none of the eight parameters
+    // (rank 3 of 8): whether the solver then stops on its step or on its evaluation limit depends
+    // on the recorded noise, so the verdict may be a refusal. The chain is what this run checks.
+    let refused_undetermined = run.status.code() == Some(1)
+        && stderr.contains("not a calibration: the solver did not converge")
+        && format!("{stdout}{stderr}").contains("8 of 8 free parameters are not determined");
+    assert!(run.status.success() || refused_undetermined, "calibrate failed:\n{stdout}\n{stderr}");
     assert!(stdout.contains("validation (FP cavity variation"), "the validation motions ran on the bench:\n{stdout}");
 
     let session = Session::load(&out).unwrap();
