@@ -155,7 +155,7 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
     let _lock = FolderLock::acquire(&a.out)?;
     refuse_saved_session(a)?;
     open_log(a, mode);
-    let (mut session, report) = match &a.traces {
+    let (mut session, mut report) = match &a.traces {
         Some(dir) => calibrate_from_traces(a, dir, &preset, &nominal, mode)?,
         None => match hardware {
             Some(config) => calibrate_on_hardware(a, config, &preset, &nominal, mode)?,
@@ -163,7 +163,7 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         },
     };
     a.lab.apply(&mut session.lab);
-    let json = timed("write_session", || write_session(a, &mut session, &report))?;
+    let json = timed("write_session", || write_session(a, &mut session, &mut report))?;
     tracing::info!(session = %a.out.display(), converged = report.converged, "session written");
     if a.json {
         writeln!(out, "{json}")?;
@@ -232,18 +232,24 @@ fn calibrate_from_traces(
     };
     let duration_s = sourced.traces.iter().map(span_s).sum();
     let name = session.bench.name.clone();
-    // The copy into the session mostly waits for the disk: it runs beside the identification.
+    // The copy into the session mostly waits for the disk: it runs beside the identification
+    // and the validation, which is predicted for the extrinsics the report gives (the
+    // estimate's, angles wrapped).
     let (copied, identified) = std::thread::scope(|scope| {
         let copy = scope.spawn(|| timed("copy_traces", || session.add_sourced_traces(&a.out, &sourced)));
-        let identified = timed("identify", || identify(&sourced.traces, nominal, mode));
+        let identified = timed("identify", || identify(&sourced.traces, nominal, mode)).and_then(|id| {
+            let extrinsics = id.estimate.extrinsics.with_angles_wrapped();
+            let validation = timed("validate", || predicted_validation_rows(preset, nominal, &extrinsics))?;
+            Ok((id, validation))
+        });
         (copy.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)), identified)
     });
     copied?;
-    let id = identified.map_err(calibration_failed)?;
+    let (id, validation) = identified.map_err(calibration_failed)?;
     let mut report =
         timed("report", || report_from_identification(&id, sourced.traces, duration_s, name, nominal, mode));
-    report.validation = timed("validate", || predicted_validation_rows(preset, nominal, &report.extrinsics))
-        .map_err(calibration_failed)?;
+    debug_assert_eq!(report.extrinsics, id.estimate.extrinsics.with_angles_wrapped());
+    report.validation = validation;
     report.validation_predicted = true;
     Ok((session, report))
 }
@@ -491,8 +497,12 @@ fn sweep_cost(
 
 /// Write the session with its calibration, the identified extrinsics and the report; the
 /// report's JSON text is returned for printing.
-fn write_session(a: &CalibrateArgs, session: &mut Session, report: &CalibrationReport) -> Result<String, CliError> {
-    session.calibration = Some(CalibrationReport { traces: Vec::new(), ..report.clone() });
+fn write_session(a: &CalibrateArgs, session: &mut Session, report: &mut CalibrationReport) -> Result<String, CliError> {
+    // The session keeps the report without its traces (they are its trace files): set aside
+    // while the rest is copied, rather than copied and dropped.
+    let traces = std::mem::take(&mut report.traces);
+    session.calibration = Some(report.clone());
+    report.traces = traces;
     session.save(&a.out)?;
     // Extrinsics beyond ±90° feed no inverse model: kept in the session's record only.
     if report.extrinsics.validate().is_ok() {
