@@ -9,6 +9,7 @@ use crate::model::phase::PhaseModel;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
 use serde::Serialize;
+use std::sync::Mutex;
 
 /// A Gaussian prior on a parameter (display units: ° or µm).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -71,6 +72,9 @@ struct Problem<'a> {
     free: Vec<usize>,
     groups: usize,
     x: DVector<f64>,
+    /// The last residuals computed by [`Problem::residuals_cached`] and where: the solver asks
+    /// for the Jacobian right after the residuals of the step it accepts.
+    last: Mutex<Option<(DVector<f64>, DVector<f64>)>>,
 }
 
 impl Problem<'_> {
@@ -88,23 +92,42 @@ impl Problem<'_> {
     }
 
     fn residuals_at(&self, x: &DVector<f64>) -> DVector<f64> {
+        use rayon::prelude::*;
         let (e, gains) = self.unpack(x);
         let priors: Vec<(usize, Prior)> =
             self.options.priors.iter().enumerate().filter_map(|(i, p)| p.map(|p| (i, p))).collect();
-        let mut r = DVector::zeros(self.obs.len() + priors.len());
-        for (k, o) in self.obs.iter().enumerate() {
-            let gain = match o.kind {
-                ObservationKind::FringeAmplitude { group, .. } => gains[group],
-                _ => 1.0,
-            };
-            let p = predict(self.model, self.fp(o.wavelength_nm), &e, o, gain);
-            r[k] = if p.is_finite() { (o.value() - p) / o.sigma } else { 1e6 };
-        }
+        let observed: Vec<f64> = self
+            .obs
+            .par_iter()
+            .map(|o| {
+                let gain = match o.kind {
+                    ObservationKind::FringeAmplitude { group, .. } => gains[group],
+                    _ => 1.0,
+                };
+                let p = predict(self.model, self.fp(o.wavelength_nm), &e, o, gain);
+                if p.is_finite() {
+                    (o.value() - p) / o.sigma
+                } else {
+                    1e6
+                }
+            })
+            .collect();
         let a = e.to_array();
-        for (k, (i, p)) in priors.iter().enumerate() {
-            r[self.obs.len() + k] = (a[*i] - p.value) / p.sigma;
+        let prior = priors.iter().map(|(i, p)| (a[*i] - p.value) / p.sigma);
+        DVector::from_iterator(observed.len() + priors.len(), observed.iter().copied().chain(prior))
+    }
+
+    /// [`Problem::residuals_at`], kept: computed again only when `x` moved since the last call.
+    fn residuals_cached(&self, x: &DVector<f64>) -> DVector<f64> {
+        let mut last = self.last.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        match &*last {
+            Some((at, r)) if at == x => r.clone(),
+            _ => {
+                let r = self.residuals_at(x);
+                *last = Some((x.clone(), r.clone()));
+                r
+            }
         }
-        r
     }
 
     /// The Jacobian at `x`: the extrinsic columns by central differences (`central`: what the
@@ -112,7 +135,7 @@ impl Problem<'_> {
     fn jacobian_at(&self, x: &DVector<f64>, central: bool) -> DMatrix<f64> {
         use rayon::prelude::*;
         let n = x.len();
-        let r0 = self.residuals_at(x);
+        let r0 = self.residuals_cached(x);
         let mut j = DMatrix::zeros(r0.len(), n);
         // Extrinsic columns by differences of 1e-4 mrad or µm, in parallel: each evaluates
         // every observation once or twice.
@@ -165,7 +188,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
     fn residuals(&self) -> Option<DVector<f64>> {
         // The solver minimises ½‖r‖² with r = model − data: negate our data − model.
-        Some(-self.residuals_at(&self.x))
+        Some(-self.residuals_cached(&self.x))
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
@@ -223,7 +246,8 @@ fn run(
     for (k, &i) in free.iter().enumerate() {
         x[k] = start_a[i] / parameter_scale(i);
     }
-    let mut problem = Problem { model, fps, obs: observations, start: start_a, options, free, groups, x };
+    let mut problem =
+        Problem { model, fps, obs: observations, start: start_a, options, free, groups, x, last: Mutex::new(None) };
     // Start each gain at the ratio of measured to predicted amplitudes (linear in the gain).
     if groups > 0 {
         let (e, _) = problem.unpack(&problem.x);
@@ -251,7 +275,7 @@ fn run(
     } else {
         (problem, true, "evaluated, not minimised".to_string(), 1)
     };
-    let r = problem.residuals_at(&problem.x);
+    let r = problem.residuals_cached(&problem.x);
     let finite = r.iter().all(|v| v.is_finite());
     let (extrinsics, gains) = problem.unpack(&problem.x);
     let weighted_jacobian = problem.jacobian_at(&problem.x, true);

@@ -295,6 +295,34 @@ impl Trace {
         self.irradiance.push(irradiance);
     }
 
+    /// Append the samples of `other` later than this trace's last (all of them when this one is
+    /// empty), column by column. Extra columns continue where both traces have the same ones,
+    /// in the same order; otherwise this trace's are dropped, so that every column stays as
+    /// long as `t_s`.
+    pub fn append_later(&mut self, other: &Trace) {
+        let from = self.t_s.last().map_or(0, |&last| other.t_s.partition_point(|&t| t <= last));
+        let same_extras =
+            self.extra.len() == other.extra.len() && self.extra.iter().zip(&other.extra).all(|(a, b)| a.name == b.name);
+        if !same_extras {
+            self.extra.clear();
+        }
+        let columns = [
+            (&mut self.t_s, &other.t_s),
+            (&mut self.q1_um, &other.q1_um),
+            (&mut self.q2_um, &other.q2_um),
+            (&mut self.q3_um, &other.q3_um),
+            (&mut self.q4_deg, &other.q4_deg),
+            (&mut self.q5_deg, &other.q5_deg),
+            (&mut self.q6_deg, &other.q6_deg),
+            (&mut self.wavelength_nm, &other.wavelength_nm),
+            (&mut self.irradiance, &other.irradiance),
+        ];
+        let extras = self.extra.iter_mut().zip(&other.extra).map(|(a, b)| (&mut a.values, &b.values));
+        for (to, from_column) in columns.into_iter().chain(extras) {
+            to.extend_from_slice(from_column.get(from..).unwrap_or(&[]));
+        }
+    }
+
     /// Append one sample including one value per extra column (in [`Trace::extra`] order).
     /// Nothing is appended if `extras` has the wrong length.
     pub fn push_sample_with_extras(

@@ -487,3 +487,47 @@ proptest! {
         check_any_input(&bytes);
     }
 }
+
+/// A trace of samples at the given times, every column a function of the time; with a
+/// `temperature_C` extra column when `extra`.
+fn timed_trace(times: &[f64], extra: bool) -> Trace {
+    let mut t = Trace::new(TraceMeta::default());
+    if extra {
+        t.extra.push(ExtraColumn { name: "temperature_C".into(), values: Vec::new() });
+    }
+    for &s in times {
+        let q = [s, 2.0 * s, 3.0 * s, -s, 0.5 * s, s * s];
+        t.push_sample_with_extras(s, q, 1550.0 + s, (3.0 * s).sin(), &vec![20.0 + s; t.extra.len()]).unwrap();
+    }
+    t
+}
+
+proptest! {
+    /// Appending keeps exactly the later samples, as pushing them one by one does, and every
+    /// column as long as the time column: with and without matching extra columns, from an
+    /// empty trace.
+    #[test]
+    fn appending_keeps_the_later_samples_as_pushing_them_does(
+        a in proptest::collection::vec(0u32..50, 0..20),
+        b in proptest::collection::vec(0u32..50, 0..20),
+        extra_a in any::<bool>(),
+        extra_b in any::<bool>(),
+    ) {
+        let times = |v: &Vec<u32>| { let mut v: Vec<f64> = v.iter().map(|&k| f64::from(k) * 0.1).collect(); v.sort_by(f64::total_cmp); v.dedup(); v };
+        let (first, second) = (timed_trace(&times(&a), extra_a), timed_trace(&times(&b), extra_b));
+        let mut appended = first.clone();
+        appended.append_later(&second);
+        let mut pushed = first.clone();
+        if extra_a != extra_b {
+            pushed.extra.clear();
+        }
+        for i in 0..second.len() {
+            if pushed.t_s.last().is_none_or(|&last| second.t_s[i] > last) {
+                let extras: Vec<f64> = second.extra.iter().take(pushed.extra.len()).map(|c| c.values[i]).collect();
+                pushed.push_sample_with_extras(second.t_s[i], second.joints_display(i), second.wavelength_nm[i], second.irradiance[i], &extras).unwrap();
+            }
+        }
+        prop_assert_eq!(&appended, &pushed);
+        prop_assert!(appended.validate().is_ok());
+    }
+}

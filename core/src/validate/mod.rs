@@ -17,7 +17,7 @@ use crate::model::extrinsics::Extrinsics;
 use crate::model::kinematics::{IgmError, LimitViolation};
 use crate::model::phase::PhaseModel;
 use crate::plan::{JointTarget, Plan, Segment};
-use crate::trace::Trace;
+use crate::trace::{ExtraColumn, Trace};
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 use std::sync::atomic::AtomicBool;
@@ -376,14 +376,11 @@ pub fn pair_note(
 
 /// Join the recorded traces of a plan run into one.
 fn join(traces: &[Trace]) -> Option<Trace> {
-    let mut it = traces.iter();
-    let mut out = it.next()?.clone();
-    for t in it {
-        for i in 0..t.len() {
-            if t.t_s[i] > *out.t_s.last().unwrap() {
-                out.push_sample(t.t_s[i], t.joints_display(i), t.wavelength_nm[i], t.irradiance[i]);
-            }
-        }
+    let (first, rest) = traces.split_first()?;
+    let mut out = Trace::with_capacity(first.meta.clone(), traces.iter().map(Trace::len).sum());
+    out.extra = first.extra.iter().map(|c| ExtraColumn { name: c.name.clone(), values: Vec::new() }).collect();
+    for t in std::iter::once(first).chain(rest) {
+        out.append_later(t);
     }
     Some(out)
 }
