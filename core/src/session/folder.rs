@@ -176,16 +176,21 @@ impl Session {
         let origin = dir.join(TRACES_DIR);
         let at_once = files::WRITE_AT_ONCE;
         for (traces, sources) in sourced.traces.chunks(at_once).zip(sourced.files.chunks(at_once)) {
+            // Files still as they were read are read again by this thread rather than the
+            // compute pool's, which the identification has meanwhile; the other traces are
+            // formatted in parallel.
+            let unchanged: Vec<Option<Vec<u8>>> = sources
+                .iter()
+                .map(|file| {
+                    let key = file.native?;
+                    let bytes = std::fs::read(&file.path).ok()?;
+                    (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some(bytes)
+                })
+                .collect();
             let bytes: Vec<Vec<u8>> = traces
                 .par_iter()
-                .zip(sources)
-                .map(|(trace, file)| {
-                    let unchanged = file.native.and_then(|key| {
-                        let bytes = std::fs::read(&file.path).ok()?;
-                        (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some(bytes)
-                    });
-                    unchanged.map_or_else(|| trace.to_csv_bytes(&origin), Ok)
-                })
+                .zip(unchanged)
+                .map(|(trace, unchanged)| unchanged.map_or_else(|| trace.to_csv_bytes(&origin), Ok))
                 .collect::<Result<_, _>>()?;
             self.add_trace_files(dir, traces.iter().zip(bytes).collect(), None, true)?;
         }

@@ -43,13 +43,14 @@ impl FabryPerot {
         thread_local! {
             static SCRATCH: std::cell::RefCell<FringeExpansion> = std::cell::RefCell::new(FringeExpansion::default());
         }
-        let pulling = SCRATCH.with(|ex| self.pulling_rad(gap_um, tilt_rad, &mut ex.borrow_mut()));
-        self.fringe_phase_rad(gap_um, tilt_rad) + pulling
+        let two_beam = self.fringe_phase_rad(gap_um, tilt_rad);
+        two_beam + SCRATCH.with(|ex| self.pulling_rad(gap_um, tilt_rad, two_beam, &mut ex.borrow_mut()))
     }
 
     /// [`FringeShape::pulling_rad`] alone: the fundamental G₁ without the harmonics, from the
-    /// expansion's coefficients without their derivatives (the same sums, the same bits).
-    fn pulling_rad(&self, gap_um: f64, tilt_rad: f64, scratch: &mut FringeExpansion) -> f64 {
+    /// expansion's coefficients without their derivatives (the same sums, the same bits);
+    /// `two_beam` is [`FabryPerot::fringe_phase_rad`] at the same gap and tilt.
+    fn pulling_rad(&self, gap_um: f64, tilt_rad: f64, two_beam: f64, scratch: &mut FringeExpansion) -> f64 {
         let t = tilt_rad * tilt_rad;
         self.expansion_coefficients(gap_um, t, scratch);
         let (phi, psi) = self.expansion_phases_rad(gap_um, t);
@@ -62,7 +63,7 @@ impl FabryPerot {
             g1 += d * prev.conj();
             prev = d;
         }
-        wrap_pi(phi - g1.arg() - self.fringe_phase_rad(gap_um, tilt_rad))
+        wrap_pi(phi - g1.arg() - two_beam)
     }
 
     /// The fringe's shape at gap `gap_um` and tilt `tilt_rad` ([`FringeShape`]); `scratch`
