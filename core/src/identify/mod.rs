@@ -262,7 +262,7 @@ fn windowed_top(
     let top = |mut shift_um: f64| -> Option<f64> {
         let mut value = f64::NAN;
         for _ in 0..4 {
-            let ys: [f64; K] = std::array::from_fn(|k| fp.power(gap(k, shift_um), path[k].1));
+            let ys = fp.powers(&std::array::from_fn(|k| gap(k, shift_um)), &tilts);
             let (v, x, _) = parabola_top(&xs, &ys).filter(|t| sign * t.2 < 0.0)?;
             value = v;
             let step_um = run * x * half_width_um;

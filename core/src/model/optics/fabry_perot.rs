@@ -152,25 +152,31 @@ impl FabryPerot {
     /// and tilt `tilt_rad` between lamella normal and fiber axis. Even in both arguments.
     /// Finite inputs give finite outputs (a huge tilt just extinguishes the cavity).
     pub fn field(&self, gap_um: f64, tilt_rad: f64) -> Complex<f64> {
-        self.field_sums::<false>(gap_um, tilt_rad).0
+        self.field_sums::<1, false>(&[gap_um], &[tilt_rad]).0[0]
     }
 
     /// [`FabryPerot::field`] (the same bits) and its derivative along the signed gap, per µm,
     /// from the same sums: what a fit of the gap needs, at a fraction of two more fields.
     pub fn field_and_gap_slope(&self, gap_um: f64, tilt_rad: f64) -> (Complex<f64>, Complex<f64>) {
-        let (e, slope) = self.field_sums::<true>(gap_um, tilt_rad);
-        (e, slope * gap_um.signum())
+        let (e, slope) = self.field_sums::<1, true>(&[gap_um], &[tilt_rad]);
+        (e[0], slope[0] * gap_um.signum())
     }
 
-    /// The field and, with `SLOPE`, its derivative along |L|.
-    fn field_sums<const SLOPE: bool>(&self, gap_um: f64, tilt_rad: f64) -> (Complex<f64>, Complex<f64>) {
-        let gap = gap_um.abs();
-        let (front, mut slope) = self.cavity_field::<SLOPE>(&self.front, gap, tilt_rad);
-        let mut e = Complex::new(self.r1_direct, 0.0) + front;
+    /// The fields at `K` gaps and tilts and, with `SLOPE`, their derivatives along |L|.
+    fn field_sums<const K: usize, const SLOPE: bool>(
+        &self,
+        gaps_um: &[f64; K],
+        tilts_rad: &[f64; K],
+    ) -> ([Complex<f64>; K], [Complex<f64>; K]) {
+        let gaps = gaps_um.map(f64::abs);
+        let (front, mut slope) = self.cavity_fields::<K, SLOPE>(&self.front, &gaps, tilts_rad);
+        let mut e = front.map(|f| Complex::new(self.r1_direct, 0.0) + f);
         if let Some(back) = &self.back {
-            let (field, d) = self.cavity_field::<SLOPE>(back, gap, tilt_rad);
-            e += field;
-            slope += d;
+            let (field, d) = self.cavity_fields::<K, SLOPE>(back, &gaps, tilts_rad);
+            for k in 0..K {
+                e[k] += field[k];
+                slope[k] += d[k];
+            }
         }
         (e, slope)
     }
@@ -178,7 +184,13 @@ impl FabryPerot {
     /// Reflected power reaching the detector side of the circulator, mW (the reflectance
     /// times `input_power_mw`).
     pub fn power(&self, gap_um: f64, tilt_rad: f64) -> f64 {
-        self.input_power_mw * self.field(gap_um, tilt_rad).norm_sqr()
+        self.powers(&[gap_um], &[tilt_rad])[0]
+    }
+
+    /// [`FabryPerot::power`] at `K` gaps and tilts, the same bits: the beams of every point
+    /// summed side by side, so that the processor overlaps their chains of products.
+    pub fn powers<const K: usize>(&self, gaps_um: &[f64; K], tilts_rad: &[f64; K]) -> [f64; K] {
+        self.field_sums::<K, false>(gaps_um, tilts_rad).0.map(|e| self.input_power_mw * e.norm_sqr())
     }
 
     /// Unwrapped two-beam fringe phase, rad:
@@ -215,72 +227,114 @@ impl FabryPerot {
         }
     }
 
-    /// Σ_m (1 - r1²)·r^m·(-r1)^(m-1)·c_m·T_m·exp(-i·m·Φ) for one cavity, with every power
-    /// built by recurrence (a_{m+1} - a_m = m² + m + 1, (m+1)² - m² = 2m + 1); with `SLOPE`
-    /// also its derivative along |L| (each term's: -2k·m from Φ, k·θ²·a_m from its tilt phase,
-    /// d ln c_m/d|L| from the Gouy factor), else zero.
-    fn cavity_field<const SLOPE: bool>(
+    /// Σ_m (1 - r1²)·r^m·(-r1)^(m-1)·c_m·T_m·exp(-i·m·Φ) for one cavity at `K` gaps |L| and
+    /// tilts, with every power built by recurrence (a_{m+1} - a_m = m² + m + 1,
+    /// (m+1)² - m² = 2m + 1); with `SLOPE` also its derivative along |L| (each term's: -2k·m
+    /// from Φ, k·θ²·a_m from its tilt phase, d ln c_m/d|L| from the Gouy factor), else zero.
+    /// Each point stops at its first negligible beam, as it would alone.
+    fn cavity_fields<const K: usize, const SLOPE: bool>(
         &self,
         cav: &Cavity,
-        gap_um: f64,
-        tilt_rad: f64,
-    ) -> (Complex<f64>, Complex<f64>) {
+        gaps_um: &[f64; K],
+        tilts_rad: &[f64; K],
+    ) -> ([Complex<f64>; K], [Complex<f64>; K]) {
         let zero = Complex::new(0.0, 0.0);
-        let q = (-self.half_kw0_sq * tilt_rad * tilt_rad).exp(); // |T_1|
-        if q == 0.0 || cav.r == 0.0 {
-            return (zero, zero);
+        let (mut sum, mut slope) = ([zero; K], [zero; K]);
+        if cav.r == 0.0 {
+            return (sum, slope);
         }
+        let mut lanes: [Beams; K] = std::array::from_fn(|k| self.first_beam(cav, gaps_um[k], tilts_rad[k]));
+        let mut coef = self.t1_sq * cav.r; // (1 - r1²)·r^m·(-r1)^(m-1)
+        let coef_step = -self.r1 * cav.r;
+        for m in 1..=self.beams {
+            let mf = f64::from(m);
+            let mut any = false;
+            for ((b, sum), slope) in lanes.iter_mut().zip(&mut sum).zip(&mut slope) {
+                if !b.active {
+                    continue;
+                }
+                let x = mf * b.ell;
+                let inv = 1.0 / (1.0 + x * x);
+                let c_m = if self.gouy_scale == 1.0 {
+                    Complex::new(inv, x * inv)
+                } else if self.gouy_scale == 0.0 {
+                    Complex::new(inv.sqrt(), 0.0)
+                } else {
+                    Complex::from_polar(inv.sqrt(), self.gouy_scale * x.atan())
+                };
+                let weight = coef * b.q_m;
+                let term = c_m * b.phase * weight;
+                *sum += term;
+                if SLOPE {
+                    let a_m = mf * (mf * mf + 2.0) / 3.0;
+                    let d_ln_c = Complex::new(-x, self.gouy_scale) * inv; // d ln c_m / dx
+                    *slope += term
+                        * (Complex::new(0.0, b.k_tilt * a_m - 2.0 * self.k_per_um * mf)
+                            + d_ln_c * (mf / self.rayleigh_um));
+                }
+                if weight.abs() < NEGLIGIBLE_AMPLITUDE {
+                    b.active = false;
+                    continue;
+                }
+                any = true;
+                b.q_m *= b.q_step;
+                b.q_step *= b.q2;
+                b.phase *= b.base * b.z_step;
+                b.z_step *= b.z_grow;
+                b.z_grow *= b.z2;
+            }
+            if !any {
+                break;
+            }
+            coef *= coef_step;
+        }
+        (sum, slope)
+    }
+
+    /// The recurrence of [`FabryPerot::cavity_fields`] at its first beam, at gap |L| `gap_um`
+    /// and tilt `tilt_rad`; inactive when the tilt extinguishes the cavity.
+    #[inline]
+    fn first_beam(&self, cav: &Cavity, gap_um: f64, tilt_rad: f64) -> Beams {
+        let q = (-self.half_kw0_sq * tilt_rad * tilt_rad).exp(); // |T_1|
         let dist = gap_um + cav.extra_reduced_um;
-        let ell = dist / self.rayleigh_um;
         let (s, c) = sin_cos(2.0 * self.k_per_um * gap_um + cav.extra_phase_rad);
         let base = Complex::new(c, -s); // exp(-iΦ)
         let (zs, zc) = sin_cos(self.k_per_um * tilt_rad * tilt_rad * dist);
         let z = Complex::new(zc, zs); // exp(+i·k·θ²·dist)
         let z2 = z * z;
-
-        let mut coef = self.t1_sq * cav.r; // (1 - r1²)·r^m·(-r1)^(m-1)
-        let coef_step = -self.r1 * cav.r;
-        let mut q_m = q; // q^(m²)
-        let mut q_step = q * q * q; // q^(2m+1)
-        let q2 = q * q;
-        let mut phase = base * z; // base^m · z^(a_m)
-        let mut z_step = z2 * z; // z^(m²+m+1)
-        let mut z_grow = z2 * z2; // z^(2m+2)
-
-        let (mut sum, mut slope) = (zero, zero);
-        let k_tilt = self.k_per_um * tilt_rad * tilt_rad;
-        for m in 1..=self.beams {
-            let x = f64::from(m) * ell;
-            let inv = 1.0 / (1.0 + x * x);
-            let c_m = if self.gouy_scale == 1.0 {
-                Complex::new(inv, x * inv)
-            } else if self.gouy_scale == 0.0 {
-                Complex::new(inv.sqrt(), 0.0)
-            } else {
-                Complex::from_polar(inv.sqrt(), self.gouy_scale * x.atan())
-            };
-            let weight = coef * q_m;
-            let term = c_m * phase * weight;
-            sum += term;
-            if SLOPE {
-                let mf = f64::from(m);
-                let a_m = mf * (mf * mf + 2.0) / 3.0;
-                let d_ln_c = Complex::new(-x, self.gouy_scale) * inv; // d ln c_m / dx
-                slope += term
-                    * (Complex::new(0.0, k_tilt * a_m - 2.0 * self.k_per_um * mf) + d_ln_c * (mf / self.rayleigh_um));
-            }
-            if weight.abs() < NEGLIGIBLE_AMPLITUDE {
-                break;
-            }
-            coef *= coef_step;
-            q_m *= q_step;
-            q_step *= q2;
-            phase *= base * z_step;
-            z_step *= z_grow;
-            z_grow *= z2;
+        Beams {
+            active: q != 0.0,
+            ell: dist / self.rayleigh_um,
+            k_tilt: self.k_per_um * tilt_rad * tilt_rad,
+            q_m: q,            // q^(m²)
+            q_step: q * q * q, // q^(2m+1)
+            q2: q * q,
+            base,
+            phase: base * z, // base^m · z^(a_m)
+            z_step: z2 * z,  // z^(m²+m+1)
+            z_grow: z2 * z2, // z^(2m+2)
+            z2,
         }
-        (sum, slope)
     }
+}
+
+/// One point's state in the beam recurrence of [`FabryPerot::cavity_fields`], at beam m.
+#[derive(Clone, Copy)]
+struct Beams {
+    /// Summing: no beam so far was negligible.
+    active: bool,
+    /// (|L| + the cavity's extra distance) / z_R.
+    ell: f64,
+    /// k·θ², rad/µm.
+    k_tilt: f64,
+    q_m: f64,
+    q_step: f64,
+    q2: f64,
+    base: Complex<f64>,
+    phase: Complex<f64>,
+    z_step: Complex<f64>,
+    z_grow: Complex<f64>,
+    z2: Complex<f64>,
 }
 
 /// Reflected power, mW, at one gap, tilt, vacuum wavelength and medium index (builds a

@@ -207,3 +207,21 @@ fn the_field_slope_along_the_gap_is_its_derivative() {
         }
     }
 }
+
+/// Powers at many points at once are each point's power to the bit, whatever the other points
+/// are: tilts that stop the beams' sums at different orders, a tilt that extinguishes the
+/// cavity, both sides of the fiber, every optics variant.
+#[test]
+fn powers_side_by_side_are_each_points_power() {
+    const K: usize = 17;
+    for params in optics_variants() {
+        let fp = bench(&params);
+        let gaps: [f64; K] = std::array::from_fn(|k| -898.83 + 113.7 * k as f64);
+        let tilts: [f64; K] = std::array::from_fn(|k| [0.0, 0.004, -0.0195, 0.07, 0.31, 2.0][k % 6]);
+        let together = fp.powers(&gaps, &tilts);
+        for k in 0..K {
+            assert_eq!(together[k].to_bits(), fp.power(gaps[k], tilts[k]).to_bits(), "{params:?} point {k}");
+        }
+        assert_eq!(together[5], fp.power(1e9, 2.0), "an extinguished cavity: the fiber face alone");
+    }
+}
