@@ -2,7 +2,10 @@
 //! --traces` on the traces it recorded, and `diagnose` on its session, each run as the release
 //! `photorobot` binary with `-v`. Prints each command's wall time, each stage's time as the
 //! command logs it (`stage done stage=<name> elapsed_s=<s>`), and the chain's time over the time
-//! it takes just to read the session's CSV traces.
+//! it takes just to read the session's CSV traces. Each command starts on a settled machine, as
+//! a user's would: the previous command's writes flushed (`sync`) and a few seconds left for the
+//! kernel to write back and reclaim what that command left, so that one command's 470 MB of
+//! traces do not slow the next (as `hyperfine --prepare sync` does).
 //!
 //!     cargo build --release -p photorobot
 //!     cargo run --release -p photorobot-e2e --example wall_time -- [SEED] [--bin PATH]
@@ -21,6 +24,7 @@ struct Timed {
 
 /// Run `bin` with `args` (and `-v`), failing loudly on a non-zero exit except for `ok_codes`.
 fn run(bin: &Path, args: &[&str], ok_codes: &[i32]) -> Timed {
+    settle();
     let t0 = Instant::now();
     let out = Command::new(bin).arg("-v").args(args).output().unwrap_or_else(|e| panic!("cannot run {bin:?}: {e}"));
     let wall_s = t0.elapsed().as_secs_f64();
@@ -29,6 +33,16 @@ fn run(bin: &Path, args: &[&str], ok_codes: &[i32]) -> Timed {
     assert!(ok_codes.contains(&code), "photorobot {} exited with {code}:\n{stderr}", args.join(" "));
     Timed { wall_s, stages: stages(&stderr) }
 }
+
+/// Flush the file system's pending writes and let the kernel finish with them.
+fn settle() {
+    // Best effort: where there is no `sync`, only the pause.
+    let _ = Command::new("sync").status();
+    std::thread::sleep(std::time::Duration::from_secs(SETTLE_S));
+}
+
+/// The pause before each command, s.
+const SETTLE_S: u64 = 5;
 
 /// The `stage done` events of a command's log.
 fn stages(log: &str) -> Vec<(String, f64)> {
@@ -78,6 +92,7 @@ fn main() {
         &[0],
     );
     let diagnose = run(&bin, &["diagnose", s_str], &[0]);
+    settle();
     let (read_s, samples) = read_csvs_s(&traces);
     println!("seed {seed}: {samples} samples in {} traces", std::fs::read_dir(&traces).unwrap().count());
     print("calibrate (virtual bench)", &calibrate);
