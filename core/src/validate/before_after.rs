@@ -8,6 +8,7 @@ use crate::model::phase::PhaseModel;
 use crate::validate::{
     record_validation, Compensation, RecordedValidation, ValidationError, ValidationFigure, ValidationMotion,
 };
+use std::sync::{Mutex, PoisonError};
 
 /// One validation motion, planned before and after calibration.
 #[derive(Debug)]
@@ -22,29 +23,40 @@ pub struct BeforeAndAfter {
 
 /// Every motion of [`ValidationMotion::ALL`] from q = 0, in order, "before" then "after" for
 /// each; `nominal` is the software's model before calibration. The bench runs the motions one
-/// after the other; their fringe analyses then run in parallel (the same figures as measuring
-/// each right after its run: the analysis reads only the recorded trace).
+/// after the other; each run's fringe analysis starts on the compute pool as soon as it is
+/// recorded, beside the bench's next run (the same figures as measuring each right after its
+/// run: the analysis reads only the recorded trace).
 pub fn run_before_and_after(
     bench: &mut dyn Bench,
     nominal: &PhaseModel,
     identified: &Extrinsics,
 ) -> Vec<BeforeAndAfter> {
-    use rayon::prelude::*;
     let analysis = PhaseModel { extrinsics: *identified, ..nominal.clone() };
-    let planned_nominal = nominal.extrinsics;
+    let planned = [nominal.extrinsics, *identified];
     let none = Compensation::default();
-    let mut recorded = Vec::new();
-    for motion in ValidationMotion::ALL {
-        let before = record_validation(bench, &analysis, &planned_nominal, motion, [0.0; 6], &none);
-        let after = record_validation(bench, &analysis, identified, motion, [0.0; 6], &none);
-        recorded.push((motion, before, after));
-    }
-    let measure = |r: Result<RecordedValidation, ValidationError>| r.and_then(|r| r.measure(&analysis));
-    recorded
-        .into_par_iter()
-        .map(|(motion, before, after)| {
-            let (before, after) = rayon::join(|| measure(before), || measure(after));
-            BeforeAndAfter { motion, before, after }
+    type Slot = Mutex<Option<Result<ValidationFigure, ValidationError>>>;
+    let slots: Vec<[Slot; 2]> = ValidationMotion::ALL.iter().map(|_| [Mutex::new(None), Mutex::new(None)]).collect();
+    // In place: the bench stays on this thread, only the analyses go to the pool.
+    rayon::in_place_scope(|scope| {
+        for (motion, pair) in ValidationMotion::ALL.into_iter().zip(&slots) {
+            for (planned_with, slot) in planned.iter().zip(pair) {
+                let recorded = record_validation(bench, &analysis, planned_with, motion, [0.0; 6], &none);
+                let analysis = &analysis;
+                scope.spawn(move |_| {
+                    let figure = recorded.and_then(|r: RecordedValidation| r.measure(analysis));
+                    *slot.lock().unwrap_or_else(PoisonError::into_inner) = Some(figure);
+                });
+            }
+        }
+    });
+    ValidationMotion::ALL
+        .into_iter()
+        .zip(slots)
+        .map(|(motion, [before, after])| {
+            let figure = |slot: Slot| {
+                slot.into_inner().unwrap_or_else(PoisonError::into_inner).expect("every analysis ran in the scope")
+            };
+            BeforeAndAfter { motion, before: figure(before), after: figure(after) }
         })
         .collect()
 }
