@@ -163,7 +163,7 @@ impl Session {
         let origin = dir.join(TRACES_DIR);
         for group in traces.chunks(files::WRITE_AT_ONCE) {
             let bytes: Vec<Vec<u8>> = group.par_iter().map(|t| t.to_csv_bytes(&origin)).collect::<Result<_, _>>()?;
-            self.add_trace_files(dir, group.iter().zip(bytes).collect(), None, true)?;
+            self.add_trace_files(dir, group.iter().zip(bytes).map(|(t, b)| (t, b, None)).collect(), None, true)?;
         }
         Ok(())
     }
@@ -179,20 +179,23 @@ impl Session {
             // Files still as they were read are read again by this thread rather than the
             // compute pool's, which the identification has meanwhile; the other traces are
             // formatted in parallel.
-            let unchanged: Vec<Option<Vec<u8>>> = sources
+            let unchanged: Vec<Option<(Vec<u8>, u32)>> = sources
                 .iter()
                 .map(|file| {
                     let key = file.native?;
                     let bytes = std::fs::read(&file.path).ok()?;
-                    (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some(bytes)
+                    (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some((bytes, key.0))
                 })
                 .collect();
-            let bytes: Vec<Vec<u8>> = traces
+            let files: Vec<(&Trace, Vec<u8>, Option<u32>)> = traces
                 .par_iter()
                 .zip(unchanged)
-                .map(|(trace, unchanged)| unchanged.map_or_else(|| trace.to_csv_bytes(&origin), Ok))
+                .map(|(trace, unchanged)| match unchanged {
+                    Some((bytes, crc32)) => Ok((trace, bytes, Some(crc32))),
+                    None => trace.to_csv_bytes(&origin).map(|bytes| (trace, bytes, None)),
+                })
                 .collect::<Result<_, _>>()?;
-            self.add_trace_files(dir, traces.iter().zip(bytes).collect(), None, true)?;
+            self.add_trace_files(dir, files, None, true)?;
         }
         Ok(())
     }
@@ -207,7 +210,7 @@ impl Session {
     ) -> Result<&TraceRef, SessionError> {
         let file = self.free_trace_files(dir, 1).remove(0);
         let bytes = trace.to_csv_bytes(&dir.join(&file))?;
-        self.add_trace_files(dir, vec![(trace, bytes)], step, complete)?;
+        self.add_trace_files(dir, vec![(trace, bytes, None)], step, complete)?;
         Ok(self.traces.last().expect("just pushed"))
     }
 
@@ -228,21 +231,28 @@ impl Session {
     }
 
     /// Write traces whose CSV text is already formatted into new files of the folder
-    /// ([`files::write_atomic_all`]) and reference them in order.
+    /// ([`files::write_atomic_all`]) and reference them in order; each text's CRC-32 where it is
+    /// already known (a copied file's, checked when it was read again), else computed here.
     fn add_trace_files(
         &mut self,
         dir: &Path,
-        traces: Vec<(&Trace, Vec<u8>)>,
+        traces: Vec<(&Trace, Vec<u8>, Option<u32>)>,
         step: Option<(usize, usize)>,
         complete: bool,
     ) -> Result<(), SessionError> {
         use rayon::prelude::*;
         let names = self.free_trace_files(dir, traces.len());
         create_dir(&dir.join(TRACES_DIR))?;
-        let (traces, bytes): (Vec<&Trace>, Vec<Vec<u8>>) = traces.into_iter().unzip();
+        let (traces, texts): (Vec<&Trace>, Vec<(Vec<u8>, Option<u32>)>) =
+            traces.into_iter().map(|(trace, bytes, crc32)| (trace, (bytes, crc32))).unzip();
+        let (bytes, known): (Vec<Vec<u8>>, Vec<Option<u32>>) = texts.into_iter().unzip();
         let files: Vec<(PathBuf, Vec<u8>)> = names.iter().map(|f| dir.join(f)).zip(bytes).collect();
         files::write_atomic_all(&files)?;
-        let crcs: Vec<u32> = files.par_iter().map(|(_, bytes)| crc32fast::hash(bytes)).collect();
+        let crcs: Vec<u32> = files
+            .par_iter()
+            .zip(known)
+            .map(|((_, bytes), known)| known.unwrap_or_else(|| crc32fast::hash(bytes)))
+            .collect();
         for (((trace, (_, bytes)), file), crc32) in traces.into_iter().zip(&files).zip(names).zip(crcs) {
             self.traces.push(TraceRef {
                 file,
