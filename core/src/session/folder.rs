@@ -243,17 +243,18 @@ impl Session {
         use rayon::prelude::*;
         let names = self.free_trace_files(dir, traces.len());
         create_dir(&dir.join(TRACES_DIR))?;
-        let (traces, texts): (Vec<&Trace>, Vec<(Vec<u8>, Option<u32>)>) =
-            traces.into_iter().map(|(trace, bytes, crc32)| (trace, (bytes, crc32))).unzip();
-        let (bytes, known): (Vec<Vec<u8>>, Vec<Option<u32>>) = texts.into_iter().unzip();
-        let files: Vec<(PathBuf, Vec<u8>)> = names.iter().map(|f| dir.join(f)).zip(bytes).collect();
+        let (mut files, mut known) = (Vec::with_capacity(names.len()), Vec::with_capacity(names.len()));
+        for ((trace, bytes, crc32), name) in traces.into_iter().zip(&names) {
+            files.push((dir.join(name), bytes));
+            known.push((trace, crc32));
+        }
         files::write_atomic_all(&files)?;
         let crcs: Vec<u32> = files
             .par_iter()
-            .zip(known)
-            .map(|((_, bytes), known)| known.unwrap_or_else(|| crc32fast::hash(bytes)))
+            .zip(&known)
+            .map(|((_, bytes), (_, crc32))| crc32.unwrap_or_else(|| crc32fast::hash(bytes)))
             .collect();
-        for (((trace, (_, bytes)), file), crc32) in traces.into_iter().zip(&files).zip(names).zip(crcs) {
+        for ((((trace, _), (_, bytes)), file), crc32) in known.into_iter().zip(&files).zip(names).zip(crcs) {
             self.traces.push(TraceRef {
                 file,
                 label: trace.meta.label.clone(),
