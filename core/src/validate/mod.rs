@@ -376,10 +376,10 @@ pub fn pair_note(
 
 /// Join the recorded traces of a plan run into one.
 fn join(traces: &[Trace]) -> Option<Trace> {
-    let (first, rest) = traces.split_first()?;
+    let first = traces.first()?;
     let mut out = Trace::with_capacity(first.meta.clone(), traces.iter().map(Trace::len).sum());
     out.extra = first.extra.iter().map(|c| ExtraColumn { name: c.name.clone(), values: Vec::new() }).collect();
-    for t in std::iter::once(first).chain(rest) {
+    for t in traces {
         out.append_later(t);
     }
     Some(out)
