@@ -1,8 +1,9 @@
-//! Criterion benchmark of reading a trace CSV (a million rows, the size of a long recording).
+//! Criterion benchmark of reading a trace CSV (a million rows, the size of a long recording):
+//! streamed through the `csv` crate's reader, and from memory (a whole file's bytes, as files are read).
 //! Owns nothing but timings: `cargo bench -p photorobot-core --bench trace_io`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use photorobot_core::trace::{Trace, TraceMeta};
+use photorobot_core::trace::{ReadOptions, Trace, TraceMeta};
 use std::hint::black_box;
 use std::path::Path;
 
@@ -26,6 +27,11 @@ fn read(c: &mut Criterion) {
     group.throughput(criterion::Throughput::Elements(ROWS as u64));
     group.bench_function("read_csv_1M_rows", |b| {
         b.iter(|| Trace::from_csv_reader(black_box(&bytes[..]), Path::new("speed.csv")).unwrap().len())
+    });
+    group.bench_function("read_csv_bytes_1M_rows", |b| {
+        b.iter(|| {
+            Trace::from_csv_bytes(black_box(&bytes), Path::new("speed.csv"), &ReadOptions::default()).unwrap().len()
+        })
     });
     group.finish();
 }

@@ -162,8 +162,8 @@ pub fn to_ron_string<T: Serialize>(value: &T, origin: &Path) -> Result<String, F
 /// itself flushed so the rename survives a power cut. A crash leaves either the old file or the
 /// new one, never half of one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
-    let tmp = flushed_temporary(path, bytes)?;
-    persist(tmp, path)?;
+    let tmp = Temporary::with_bytes(path, bytes)?;
+    persist(tmp.0, path)?;
     sync_dir(&parent_dir(path))
 }
 
@@ -175,19 +175,31 @@ pub const WRITE_AT_ONCE: usize = 16;
 /// for the disk one file after the other is most of the time of many small saves). Each file
 /// is atomic as with [`write_atomic`]; on an error, the files renamed before it stay written.
 pub fn write_atomic_all(files: &[(PathBuf, Vec<u8>)]) -> Result<(), FileError> {
+    write_atomic_with(files, |path, bytes| Ok::<_, FileError>((Temporary::with_bytes(path, bytes)?, ()))).map(|_| ())
+}
+
+/// [`write_atomic_all`] with each file's temporary made by `make` from its target and item
+/// (several at a time, on threads of their own), which also gives what the caller keeps of
+/// each file, returned in order.
+pub fn write_atomic_with<T, X, E>(
+    files: &[(PathBuf, T)],
+    make: impl Fn(&Path, &T) -> Result<(Temporary, X), E> + Sync,
+) -> Result<Vec<X>, E>
+where
+    T: Sync,
+    X: Send,
+    E: From<FileError> + Send,
+{
     let per_thread = files.len().div_ceil(WRITE_AT_ONCE).max(1);
-    let temporaries: Vec<tempfile::NamedTempFile> = if files.len() <= 1 {
-        files.iter().map(|(path, bytes)| flushed_temporary(path, bytes)).collect::<Result<_, _>>()?
+    let made: Vec<(Temporary, X)> = if files.len() <= 1 {
+        files.iter().map(|(path, item)| make(path, item)).collect::<Result<_, _>>()?
     } else {
         // Threads of their own rather than the compute pool's: they mostly wait for the disk.
         std::thread::scope(|scope| {
+            let make = &make;
             let writers: Vec<_> = files
                 .chunks(per_thread)
-                .map(|chunk| {
-                    scope.spawn(move || {
-                        chunk.iter().map(|(path, bytes)| flushed_temporary(path, bytes)).collect::<Vec<_>>()
-                    })
-                })
+                .map(|chunk| scope.spawn(move || chunk.iter().map(|(path, item)| make(path, item)).collect::<Vec<_>>()))
                 .collect();
             writers
                 .into_iter()
@@ -196,14 +208,17 @@ pub fn write_atomic_all(files: &[(PathBuf, Vec<u8>)]) -> Result<(), FileError> {
         })?
     };
     let mut dirs: Vec<PathBuf> = Vec::new();
-    for (tmp, (path, _)) in temporaries.into_iter().zip(files) {
-        persist(tmp, path)?;
+    let mut kept = Vec::with_capacity(made.len());
+    for ((tmp, x), (path, _)) in made.into_iter().zip(files) {
+        persist(tmp.0, path)?;
         let dir = parent_dir(path);
         if !dirs.contains(&dir) {
             dirs.push(dir);
         }
+        kept.push(x);
     }
-    dirs.iter().try_for_each(|d| sync_dir(d))
+    dirs.iter().try_for_each(|d| sync_dir(d))?;
+    Ok(kept)
 }
 
 /// The folder a file is in (`.` for a bare name).
@@ -214,19 +229,55 @@ fn parent_dir(path: &Path) -> PathBuf {
     }
 }
 
-/// A temporary file of a unique name beside `path` (so two saves at once never share one)
-/// holding `bytes`, flushed to disk. Dropping it removes it.
-fn flushed_temporary(path: &Path, bytes: &[u8]) -> Result<tempfile::NamedTempFile, FileError> {
-    let io = |action: &'static str| move |source| FileError::Io { file: path.to_path_buf(), action, source };
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "file".into());
-    let mut tmp = tempfile::Builder::new()
-        .prefix(&format!(".{name}."))
-        .suffix(".tmp")
-        .tempfile_in(parent_dir(path))
-        .map_err(io("cannot create temporary file"))?;
-    tmp.write_all(bytes).map_err(io("cannot write"))?;
-    tmp.as_file().sync_all().map_err(io("cannot flush to disk"))?;
-    Ok(tmp)
+/// A temporary file of a unique name beside its target (so two saves at once never share
+/// one), its content flushed to disk, for [`write_atomic_with`] to rename over the target.
+/// Dropping it removes it.
+pub struct Temporary(tempfile::NamedTempFile);
+
+impl Temporary {
+    /// A temporary beside `path`, empty.
+    fn beside(path: &Path) -> Result<tempfile::NamedTempFile, FileError> {
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "file".into());
+        tempfile::Builder::new().prefix(&format!(".{name}.")).suffix(".tmp").tempfile_in(parent_dir(path)).map_err(
+            |source| FileError::Io { file: path.to_path_buf(), action: "cannot create temporary file", source },
+        )
+    }
+
+    /// A temporary beside `path` holding `bytes`.
+    pub fn with_bytes(path: &Path, bytes: &[u8]) -> Result<Self, FileError> {
+        let io = |action: &'static str| move |source| FileError::Io { file: path.to_path_buf(), action, source };
+        let mut tmp = Self::beside(path)?;
+        tmp.write_all(bytes).map_err(io("cannot write"))?;
+        tmp.as_file().sync_all().map_err(io("cannot flush to disk"))?;
+        Ok(Self(tmp))
+    }
+
+    /// A temporary beside `path` holding a copy of the file `source`, when the copy is
+    /// `size_bytes` long with the CRC-32 `crc32`; `None` when it is not (the source changed
+    /// since it was read, or cannot be read). The kernel copies the file (several times less
+    /// CPU than reading and writing it here); the copy is read back for the check.
+    pub fn copy_of(path: &Path, source: &Path, crc32: u32, size_bytes: u64) -> Result<Option<Self>, FileError> {
+        let io = |action: &'static str| move |source| FileError::Io { file: path.to_path_buf(), action, source };
+        let mut tmp = Self::beside(path)?;
+        let copied = std::fs::File::open(source).and_then(|mut from| std::io::copy(&mut from, tmp.as_file_mut()));
+        if copied.ok() != Some(size_bytes) {
+            return Ok(None);
+        }
+        tmp.as_file().sync_all().map_err(io("cannot flush to disk"))?;
+        let mut back = tmp.reopen().map_err(io("cannot read back"))?;
+        let (mut hasher, mut buf) = (crc32fast::Hasher::new(), vec![0u8; 256 * 1024]);
+        let mut read = 0u64;
+        loop {
+            match back.read(&mut buf).map_err(io("cannot read back"))? {
+                0 => break,
+                n => {
+                    hasher.update(&buf[..n]);
+                    read += n as u64;
+                }
+            }
+        }
+        Ok((read == size_bytes && hasher.finalize() == crc32).then_some(Self(tmp)))
+    }
 }
 
 /// Rename a flushed temporary file over `path`.
@@ -340,6 +391,28 @@ mod tests {
         assert!(err.to_string().contains("bad.txt"), "{err}");
         assert!(!good.exists(), "a file was renamed into place although the batch failed first");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "a temporary file was left");
+    }
+
+    /// A copy is kept only when it holds the bytes that were read (size and CRC-32): a source
+    /// changed in place to as many other bytes, or gone, gives none and leaves no temporary.
+    #[test]
+    fn a_copy_is_kept_only_when_it_holds_the_bytes_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let (source, target) = (dir.path().join("source.csv"), dir.path().join("out").join("000.csv"));
+        std::fs::create_dir(target.parent().unwrap()).unwrap();
+        let bytes: Vec<u8> = (0..700_000u32).map(|k| (k % 251) as u8).collect();
+        std::fs::write(&source, &bytes).unwrap();
+        let (crc, size) = (crc32fast::hash(&bytes), bytes.len() as u64);
+        let copy = Temporary::copy_of(&target, &source, crc, size).unwrap().expect("the source is as read");
+        assert_eq!(std::fs::read(copy.0.path()).unwrap(), bytes);
+        drop(copy);
+        let mut changed = bytes.clone();
+        changed[400_000] ^= 1;
+        std::fs::write(&source, &changed).unwrap();
+        assert!(Temporary::copy_of(&target, &source, crc, size).unwrap().is_none(), "one bit changed");
+        std::fs::remove_file(&source).unwrap();
+        assert!(Temporary::copy_of(&target, &source, crc, size).unwrap().is_none(), "the source is gone");
+        assert_eq!(std::fs::read_dir(target.parent().unwrap()).unwrap().count(), 0, "a temporary file was left");
     }
 
     #[test]

@@ -7,7 +7,7 @@ use super::{
     SESSION_FILE, TRACES_DIR,
 };
 use crate::files::{self, FileError};
-use crate::trace::{import::Sourced, Trace};
+use crate::trace::{import::Sourced, ReadOptions, Trace};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -163,7 +163,8 @@ impl Session {
         let origin = dir.join(TRACES_DIR);
         for group in traces.chunks(files::WRITE_AT_ONCE) {
             let bytes: Vec<Vec<u8>> = group.par_iter().map(|t| t.to_csv_bytes(&origin)).collect::<Result<_, _>>()?;
-            self.add_trace_files(dir, group.iter().zip(bytes).map(|(t, b)| (t, b, None)).collect(), None, true)?;
+            let texts = group.iter().zip(bytes).map(|(t, b)| (t, TraceText::Formatted(b))).collect();
+            self.add_trace_files(dir, texts, None, true)?;
         }
         Ok(())
     }
@@ -172,32 +173,16 @@ impl Session {
     /// still those it was read from is copied as it is (no formatting, the recording's own
     /// text kept); any other trace is written as [`Session::add_trace`] writes it.
     pub fn add_sourced_traces(&mut self, dir: &Path, sourced: &Sourced) -> Result<(), SessionError> {
-        use rayon::prelude::*;
-        let origin = dir.join(TRACES_DIR);
-        let at_once = files::WRITE_AT_ONCE;
-        for (traces, sources) in sourced.traces.chunks(at_once).zip(sourced.files.chunks(at_once)) {
-            // Files still as they were read are read again by this thread rather than the
-            // compute pool's, which the identification has meanwhile; the other traces are
-            // formatted in parallel.
-            let unchanged: Vec<Option<(Vec<u8>, u32)>> = sources
-                .iter()
-                .map(|file| {
-                    let key = file.native?;
-                    let bytes = std::fs::read(&file.path).ok()?;
-                    (crc32fast::hash(&bytes) == key.0 && bytes.len() as u64 == key.1).then_some((bytes, key.0))
-                })
-                .collect();
-            let files: Vec<(&Trace, Vec<u8>, Option<u32>)> = traces
-                .par_iter()
-                .zip(unchanged)
-                .map(|(trace, unchanged)| match unchanged {
-                    Some((bytes, crc32)) => Ok((trace, bytes, Some(crc32))),
-                    None => trace.to_csv_bytes(&origin).map(|bytes| (trace, bytes, None)),
-                })
-                .collect::<Result<_, _>>()?;
-            self.add_trace_files(dir, files, None, true)?;
-        }
-        Ok(())
+        let texts = sourced
+            .traces
+            .iter()
+            .zip(&sourced.files)
+            .map(|(trace, file)| match file.native {
+                Some((crc32, size_bytes)) => (trace, TraceText::File { path: &file.path, crc32, size_bytes }),
+                None => (trace, TraceText::Format),
+            })
+            .collect();
+        self.add_trace_files(dir, texts, None, true)
     }
 
     /// Write a trace into the session folder (a new `traces/NNN.csv`, atomically) and reference it.
@@ -210,7 +195,7 @@ impl Session {
     ) -> Result<&TraceRef, SessionError> {
         let file = self.free_trace_files(dir, 1).remove(0);
         let bytes = trace.to_csv_bytes(&dir.join(&file))?;
-        self.add_trace_files(dir, vec![(trace, bytes, None)], step, complete)?;
+        self.add_trace_files(dir, vec![(trace, TraceText::Formatted(bytes))], step, complete)?;
         Ok(self.traces.last().expect("just pushed"))
     }
 
@@ -230,37 +215,42 @@ impl Session {
         names
     }
 
-    /// Write traces whose CSV text is already formatted into new files of the folder
-    /// ([`files::write_atomic_all`]) and reference them in order; each text's CRC-32 where it is
-    /// already known (a copied file's, checked when it was read again), else computed here.
+    /// Write traces into new files of the folder ([`files::write_atomic_with`]) and reference
+    /// them in order, each with its file's size and CRC-32.
     fn add_trace_files(
         &mut self,
         dir: &Path,
-        traces: Vec<(&Trace, Vec<u8>, Option<u32>)>,
+        traces: Vec<(&Trace, TraceText)>,
         step: Option<(usize, usize)>,
         complete: bool,
     ) -> Result<(), SessionError> {
-        use rayon::prelude::*;
         let names = self.free_trace_files(dir, traces.len());
         create_dir(&dir.join(TRACES_DIR))?;
-        let (mut files, mut known) = (Vec::with_capacity(names.len()), Vec::with_capacity(names.len()));
-        for ((trace, bytes, crc32), name) in traces.into_iter().zip(&names) {
-            files.push((dir.join(name), bytes));
-            known.push((trace, crc32));
-        }
-        files::write_atomic_all(&files)?;
-        let crcs: Vec<u32> = files
-            .par_iter()
-            .zip(&known)
-            .map(|((_, bytes), (_, crc32))| crc32.unwrap_or_else(|| crc32fast::hash(bytes)))
-            .collect();
-        for ((((trace, _), (_, bytes)), file), crc32) in known.into_iter().zip(&files).zip(names).zip(crcs) {
+        let origin = dir.join(TRACES_DIR);
+        let files: Vec<(PathBuf, (&Trace, TraceText))> = names.iter().map(|n| dir.join(n)).zip(traces).collect();
+        let written = files::write_atomic_with(&files, |path, (trace, text)| -> Result<_, SessionError> {
+            if let TraceText::File { path: source, crc32, size_bytes } = *text {
+                if let Some(tmp) = files::Temporary::copy_of(path, source, crc32, size_bytes)? {
+                    return Ok((tmp, (crc32, size_bytes)));
+                }
+            }
+            let formatted;
+            let bytes = match text {
+                TraceText::Formatted(bytes) => bytes,
+                _ => {
+                    formatted = trace.to_csv_bytes(&origin)?;
+                    &formatted
+                }
+            };
+            Ok((files::Temporary::with_bytes(path, bytes)?, (crc32fast::hash(bytes), bytes.len() as u64)))
+        })?;
+        for (((trace, _), file), (crc32, bytes)) in files.iter().map(|(_, t)| t).zip(names).zip(written) {
             self.traces.push(TraceRef {
                 file,
                 label: trace.meta.label.clone(),
                 kind: trace.meta.kind,
                 samples: trace.len(),
-                bytes: bytes.len() as u64,
+                bytes,
                 crc32,
                 step,
                 complete,
@@ -299,7 +289,7 @@ impl Session {
             ))
             .into());
         }
-        let trace = Trace::from_csv_reader(&bytes[..], &path)?;
+        let trace = Trace::from_csv_bytes(&bytes, &path, &ReadOptions::default())?;
         if trace.len() != reference.samples {
             return Err(wrong(format!(
                 "{} samples, expected {} as recorded in {SESSION_FILE}",
@@ -352,4 +342,15 @@ fn create_dir(dir: &Path) -> Result<(), FileError> {
         action: "cannot create the folder",
         source,
     })
+}
+
+/// The text of a trace file to write into a session.
+enum TraceText<'a> {
+    /// Formatted already.
+    Formatted(Vec<u8>),
+    /// The file in our format it was read from, copied when it still has the size and CRC-32
+    /// it was read with; formatted otherwise.
+    File { path: &'a Path, crc32: u32, size_bytes: u64 },
+    /// To be formatted (read through a column mapping).
+    Format,
 }

@@ -402,7 +402,7 @@ fn read_native(path: &Path, options: &ReadOptions) -> Result<(Trace, TraceFile),
         action: "cannot read",
         source,
     })?;
-    let trace = Trace::from_csv_sized(&bytes[..], path, options, Some(bytes.len() as u64))?;
+    let trace = Trace::from_csv_bytes(&bytes, path, options)?;
     let native = Some((crc32fast::hash(&bytes), bytes.len() as u64));
     Ok((trace, TraceFile { path: path.to_path_buf(), native }))
 }

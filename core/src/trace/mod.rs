@@ -35,6 +35,7 @@
 mod csv;
 mod error;
 pub mod import;
+mod plain;
 mod table;
 
 pub use error::TraceError;
@@ -412,13 +413,17 @@ impl Trace {
 
 /// True when the trace is a wavelength sweep: the wavelength varies while the joints stay.
 pub fn is_sweep(trace: &Trace) -> bool {
-    let span = |c: &[f64]| {
-        let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        hi - lo
-    };
-    let wl = span(&trace.wavelength_nm);
-    let joints_still = (0..6).all(|j| span(trace.joint_column(j)) < 0.05);
-    wl > 0.1 && joints_still
+    spans(&trace.wavelength_nm, |s| s > 0.1) && (0..6).all(|j| !spans(trace.joint_column(j), |s| s >= 0.05))
+}
+
+/// Whether a column's span (largest minus smallest value, NaN ignored) is `enough`, read block
+/// by block only as far as it takes to tell (a motion's fixed wavelength whole).
+fn spans(column: &[f64], enough: impl Fn(f64) -> bool) -> bool {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    column.chunks(4096).any(|block| {
+        (lo, hi) = block.iter().fold((lo, hi), |(a, b), &v| (a.min(v), b.max(v)));
+        enough(hi - lo)
+    })
 }
 
 #[cfg(test)]

@@ -72,7 +72,7 @@ impl LastField {
 
 /// Read the metadata lines (and blank lines) before the header. Returns the metadata and the
 /// number of lines consumed.
-fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usize), TraceError> {
+pub(super) fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usize), TraceError> {
     let io_err = |source| TraceError::File(FileError::Io { file: file.to_path_buf(), action: "cannot read", source });
     let mut meta = TraceMeta::default();
     let mut lines = 0usize;
@@ -140,7 +140,7 @@ fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usiz
 }
 
 /// Check the header row's names: UTF-8, non-empty, on one line, unique. Returns them trimmed.
-fn check_names(header: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<String>, TraceError> {
+pub(super) fn check_names(header: &csv::ByteRecord, file: &Path, line: usize) -> Result<Vec<String>, TraceError> {
     let mut names = Vec::with_capacity(header.len());
     for (i, field) in header.iter().enumerate() {
         let name = std::str::from_utf8(field).map_err(|_| TraceError::BadHeader {
@@ -272,67 +272,132 @@ pub(crate) fn read_table_sized<R: Read>(
     };
     let names = check_names(&record, origin, header_line)?;
     let time_column = header(&names, header_line)?;
-    let n_cols = names.len();
-    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); n_cols];
-    let mut sized = size_bytes.is_none();
-    let mut last = vec![LastField::default(); n_cols];
-    let mut rows = 0usize;
-    let mut previous: Option<(usize, f64)> = None;
+    let mut rows = Rows::new(names.len(), time_column, size_bytes);
+    let mut previous_line = header_line;
     while let Some(line) = next_record(&mut record)? {
-        if rows >= options.max_rows {
+        if rows.len() >= options.max_rows {
             return Err(TraceError::TooLarge { file: file(), line, max_rows: options.max_rows });
         }
-        if record.len() != n_cols {
-            return Err(TraceError::FieldCount { file: file(), line, expected: n_cols, found: record.len() });
+        let bad = |bad: BadRow| bad.at(origin, line, previous_line, &names);
+        if record.len() != names.len() {
+            return Err(bad(BadRow::FieldCount { expected: names.len(), found: record.len() }));
         }
-        if !sized {
-            // The rows of a recording are about as long as its first (fields, delimiters, end).
-            let row_bytes = (record.as_slice().len() + n_cols) as u64;
-            let rows_est = size_bytes.unwrap_or(0) / row_bytes + 1;
-            columns.iter_mut().for_each(|c| c.reserve(rows_est.min(options.max_rows as u64) as usize));
-            sized = true;
+        let row_bytes = record.as_slice().len() + record.len();
+        rows.push(record.iter(), row_bytes, options.max_rows).map_err(bad)?;
+        previous_line = line;
+    }
+    if rows.len() == 0 {
+        return Err(TraceError::EmptyTrace { file: file() });
+    }
+    Ok(Table { meta, header_line, names, columns: rows.into_columns() })
+}
+
+/// What is wrong with a data row, before the file and line are known.
+#[derive(Debug)]
+pub(super) enum BadRow {
+    FieldCount { expected: usize, found: usize },
+    NotANumber { column: usize, text: String },
+    NonFinite { column: usize, value: f64 },
+    NonMonotonicTime { column: usize, t: f64, previous_t: f64 },
+}
+
+impl BadRow {
+    /// The error of this row at `line` of `file` (`previous_line`: the row before it).
+    fn at(self, file: &Path, line: usize, previous_line: usize, names: &[String]) -> TraceError {
+        let file = file.to_path_buf();
+        match self {
+            BadRow::FieldCount { expected, found } => TraceError::FieldCount { file, line, expected, found },
+            BadRow::NotANumber { column, text } => {
+                TraceError::NotANumber { file, line, column: names[column].clone(), text }
+            }
+            BadRow::NonFinite { column, value } => {
+                TraceError::NonFinite { file, line, column: names[column].clone(), value }
+            }
+            BadRow::NonMonotonicTime { column, t, previous_t } => {
+                TraceError::NonMonotonicTime { file, line, column: names[column].clone(), t, previous_line, previous_t }
+            }
         }
-        for (column, field) in record.iter().enumerate() {
-            let value = match last[column].value_of(field) {
+    }
+}
+
+/// The columns of a table as its rows arrive: every field parsed, every value finite, the time
+/// column strictly increasing.
+pub(super) struct Rows {
+    columns: Vec<Vec<f64>>,
+    last: Vec<LastField>,
+    time_column: usize,
+    /// Size of the input when known, to reserve the columns from the first row's length.
+    size_bytes: Option<u64>,
+    rows: usize,
+}
+
+impl Rows {
+    pub(super) fn new(n_cols: usize, time_column: usize, size_bytes: Option<u64>) -> Self {
+        Self {
+            columns: vec![Vec::new(); n_cols],
+            last: vec![LastField::default(); n_cols],
+            time_column,
+            size_bytes,
+            rows: 0,
+        }
+    }
+
+    pub(super) fn len(&self) -> usize {
+        self.rows
+    }
+
+    /// Add a row of `fields` (`row_bytes` long in the input, with its delimiters). A wrong
+    /// number of fields is found after the fields before it are parsed: a caller that must
+    /// report it first checks it first.
+    pub(super) fn push<'a>(
+        &mut self,
+        mut fields: impl Iterator<Item = &'a [u8]>,
+        row_bytes: usize,
+        max_rows: usize,
+    ) -> Result<(), BadRow> {
+        let n_cols = self.columns.len();
+        if let Some(size) = self.size_bytes.take() {
+            // The rows of a recording are about as long as its first.
+            let rows_est = size / row_bytes.max(1) as u64 + 1;
+            self.columns.iter_mut().for_each(|c| c.reserve(rows_est.min(max_rows as u64) as usize));
+        }
+        for column in 0..n_cols {
+            let field = fields.next().ok_or(BadRow::FieldCount { expected: n_cols, found: column })?;
+            let value = match self.last[column].value_of(field) {
                 Some(value) => value,
                 None => {
-                    let value = parse_field(field).ok_or_else(|| TraceError::NotANumber {
-                        file: file(),
-                        line,
-                        column: names[column].clone(),
-                        text: field_text(field),
-                    })?;
+                    let value =
+                        parse_field(field).ok_or_else(|| BadRow::NotANumber { column, text: field_text(field) })?;
                     if !value.is_finite() {
-                        return Err(TraceError::NonFinite { file: file(), line, column: names[column].clone(), value });
+                        return Err(BadRow::NonFinite { column, value });
                     }
-                    last[column].keep(field, value);
+                    self.last[column].keep(field, value);
                     value
                 }
             };
-            columns[column].push(value);
+            self.columns[column].push(value);
         }
-        let t = columns[time_column][rows];
-        if let Some((previous_line, previous_t)) = previous {
+        let more = fields.count();
+        if more > 0 {
+            return Err(BadRow::FieldCount { expected: n_cols, found: n_cols + more });
+        }
+        let time = &self.columns[self.time_column];
+        if let [.., previous_t, t] = time[..] {
             if t <= previous_t {
-                return Err(TraceError::NonMonotonicTime {
-                    file: file(),
-                    line,
-                    column: names[time_column].clone(),
-                    t,
-                    previous_line,
-                    previous_t,
-                });
+                return Err(BadRow::NonMonotonicTime { column: self.time_column, t, previous_t });
             }
         }
-        previous = Some((line, t));
-        rows += 1;
+        self.rows += 1;
+        Ok(())
     }
-    if rows == 0 {
-        return Err(TraceError::EmptyTrace { file: file() });
+
+    /// The columns, each as long as the rows read.
+    pub(super) fn into_columns(self) -> Vec<Vec<f64>> {
+        let mut columns = self.columns;
+        // A first row much shorter than the others sized the columns too large.
+        for c in columns.iter_mut().filter(|c| c.capacity() > c.len() + c.len() / 2) {
+            c.shrink_to_fit();
+        }
+        columns
     }
-    // A first row much shorter than the others sized the columns too large.
-    for c in columns.iter_mut().filter(|c| c.capacity() > c.len() + c.len() / 2) {
-        c.shrink_to_fit();
-    }
-    Ok(Table { meta, header_line, names, columns })
 }

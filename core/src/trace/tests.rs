@@ -62,6 +62,30 @@ fn write_then_read_is_bit_identical_with_meta() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
 
+/// The files we write, and plain rows with `\r\n`, blank lines and comments, take the fast
+/// path of reading from memory; a quote anywhere leaves the file to the `csv` crate's reader.
+#[test]
+fn plain_files_take_the_fast_path() {
+    let fast = |bytes: &[u8]| plain::plain_table(bytes, Path::new("f.csv"), &ReadOptions::default(), &|_, _| Ok(0));
+    let mut t = awkward_trace();
+    t.extra.clear();
+    let written = t.to_csv_bytes(Path::new("f.csv")).unwrap();
+    let table = fast(&written).expect("our files are plain");
+    assert_eq!(
+        table.columns[8].iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        t.irradiance.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
+    let crlf = format!(
+        "# label: crlf\r\n\r\n{HEADER}\r\n0,1,2,3,4,5,6,1560,0.5\r\n\r\n# a comment\r\n1,1,2,3,4,5,6,1560,0.25\r\n"
+    );
+    assert_eq!(fast(crlf.as_bytes()).expect("plain rows").columns[0], [0.0, 1.0]);
+    assert!(
+        fast(awkward_trace().to_csv_bytes(Path::new("f.csv")).unwrap().as_slice()).is_none(),
+        "a quoted column name"
+    );
+    assert!(fast(crlf.replace(",0.25", ",x").as_bytes()).is_none(), "a bad row is left to the full reader");
+}
+
 #[test]
 fn crlf_blank_lines_and_comments_are_accepted_and_counted() {
     let text = format!(
@@ -407,14 +431,43 @@ fn apply(bytes: &mut Vec<u8>, m: &Mutation) {
 /// Reading must never panic; whatever it accepts is a valid, non-empty trace, and whatever it
 /// refuses is explained with the file's name.
 fn check_any_input(bytes: &[u8]) {
-    match Trace::from_csv_reader(bytes, Path::new("fuzz.csv")) {
+    let read = Trace::from_csv_reader(bytes, Path::new("fuzz.csv"));
+    match &read {
         Ok(t) => {
             t.validate().unwrap();
             assert!(!t.is_empty());
         }
         Err(e) => assert!(e.to_string().starts_with("fuzz.csv"), "{e}"),
     }
+    assert_same_reading(&read, &Trace::from_csv_bytes(bytes, Path::new("fuzz.csv"), &ReadOptions::default()));
 }
+
+/// Two readings of one input agree: the same trace to the bit, or the same error.
+fn assert_same_reading(a: &Result<Trace, TraceError>, b: &Result<Trace, TraceError>) {
+    match (a, b) {
+        (Ok(a), Ok(b)) => assert_bit_identical(a, b),
+        (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
+        _ => panic!("one reading failed, the other did not: {a:?} vs {b:?}"),
+    }
+}
+
+/// Lines of a trace file, plain and awkward, for the in-memory reader's fast path.
+const LINES: [&str; 14] = [
+    "0,1,2,3,4,5,6,1560,0.5",
+    "0,1,2,3,4,5,6,1560,0.5\r",
+    " 0 , 1,2,3 ,4,5,6,1560 ,0.25 ",
+    "",
+    "\r",
+    "   ",
+    "# a comment, with a comma",
+    "\"0\",1,2,3,4,5,6,1560,0.5",
+    "0,1,2,3,4,5,6,1560",
+    "0,1,2,3,4,5,6,1560,nan",
+    "0,1,2,3,4,5,6,1560,x",
+    "0,1,2,3,4,5,6,1560,0.5,7",
+    " #0,1,2,3,4,5,6,1560,0.5",
+    "0,1,2,3,4,5,6,,0.5",
+];
 
 proptest! {
     #![proptest_config(ProptestConfig { cases: 2000, failure_persistence: None, ..ProptestConfig::default() })]
@@ -473,6 +526,33 @@ proptest! {
         }
     }
 
+    /// Read from memory (the fast path over plain rows) or through the `csv` crate's reader,
+    /// a file gives the same trace or the same error, whatever its lines.
+    #[test]
+    fn reading_from_memory_reads_as_the_csv_reader_does(
+        lines in prop::collection::vec((0usize..LINES.len(), 0u32..3), 0..12),
+        which_header in 0usize..4,
+        end in prop::bool::ANY,
+    ) {
+        let header = [HEADER.to_string(), format!("{HEADER},temperature_C"), format!("{HEADER}\r"), format!(" {HEADER}")];
+        let mut text = format!("# label: l\n\n{}\n", header[which_header]);
+        for (i, (k, step)) in lines.iter().enumerate() {
+            // Times increase by 0, 1 or 2 per line (0: a repeated time).
+            let t = lines[..i].iter().map(|l| l.1).sum::<u32>() + step;
+            text += &LINES[*k].replacen('0', &t.to_string(), 1);
+            text += "\n";
+        }
+        if !end {
+            text.pop();
+        }
+        let bytes = text.as_bytes();
+        let origin = Path::new("m.csv");
+        assert_same_reading(
+            &Trace::from_csv_reader(bytes, origin),
+            &Trace::from_csv_bytes(bytes, origin, &ReadOptions::default()),
+        );
+    }
+
     #[test]
     fn arbitrary_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..600)) {
         check_any_input(&bytes);
@@ -529,5 +609,35 @@ proptest! {
         }
         prop_assert_eq!(&appended, &pushed);
         prop_assert!(appended.validate().is_ok());
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 500, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// A sweep is told from the columns' whole spans: the wavelength's over 0.1 nm, every
+    /// joint's under 0.05, whatever the order and number of the values and however close to
+    /// the limits.
+    #[test]
+    fn sweeps_are_told_by_their_columns_whole_spans(
+        wl in prop::collection::vec(prop::sample::select(vec![1560.0, 1560.05, 1560.1, 1560.1000001, 1560.2, f64::NAN]), 1..12),
+        joint in prop::collection::vec(prop::sample::select(vec![0.0, 0.01, 0.05, 0.0499999, -0.03, f64::NAN]), 1..12),
+        which in 0usize..6,
+        repeat in 1usize..3000,
+    ) {
+        // Each value repeated, so that the spans build up across the blocks they are read in.
+        let n = wl.len().min(joint.len());
+        let mut t = Trace::new(TraceMeta::default());
+        for i in 0..n * repeat {
+            let mut q = [0.0; 6];
+            q[which] = joint[i / repeat];
+            t.push_sample(i as f64, q, wl[i / repeat], 0.5);
+        }
+        let span = |c: &[f64]| {
+            let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+            hi - lo
+        };
+        let whole = span(&t.wavelength_nm) > 0.1 && (0..6).all(|j| span(t.joint_column(j)) < 0.05);
+        prop_assert_eq!(is_sweep(&t), whole);
     }
 }
