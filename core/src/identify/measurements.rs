@@ -1,10 +1,10 @@
 //! Recorded traces → observations for the identifiers: gap changes along motions, absolute gaps
 //! from sweeps, fringe amplitudes along tilt scans. Owns how a trace is cut into observations and what σ each gets.
 
+use crate::identify::approach::{Approach, Readings, APPROACH_MIN_MOVE};
 use crate::identify::{parabola_top, AmplitudeNeighbours, Observation, ObservationKind, VERTEX_WINDOW_HALF_FRINGE};
 use crate::measure::extrema::{detect_extrema, Extremum, ExtremumKind, HysteresisConfig};
 use crate::measure::{self, AnalyseOptions, MeasureError, Measurement, SweepSeed};
-use crate::model::effects::update_approach;
 use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
 use std::borrow::Borrow;
@@ -381,62 +381,6 @@ pub struct Extracted {
     pub skipped: Vec<(String, String)>,
 }
 
-/// Smallest joint motion that sets an approach direction (µm for q1-q3, ° for q4-q6): above
-/// encoder noise (nm, µrad), below any real motion.
-const APPROACH_MIN_MOVE: [f64; 6] = [0.05, 0.05, 0.05, 5e-4, 5e-4, 5e-4];
-
-/// The direction each joint last moved in, carried from trace to trace (recorded in order;
-/// between two traces the stages move from one's last pose to the next one's first).
-#[derive(Debug, Clone, Copy, Default)]
-struct Approach {
-    state: [i8; 6],
-    last_pose: Option<[f64; 6]>,
-}
-
-impl Approach {
-    /// The directions at the start of `trace` (after the move to its first pose); the state
-    /// becomes the directions at its end.
-    fn enter(&mut self, trace: &Trace) -> [i8; 6] {
-        if trace.is_empty() {
-            return self.state;
-        }
-        if let Some(last) = self.last_pose {
-            update_approach(&mut self.state, &last, &trace.joints_display(0), &APPROACH_MIN_MOVE);
-        }
-        let start = self.state;
-        self.state = approach_at(trace, trace.len() - 1, &start);
-        self.last_pose = Some(trace.joints_display(trace.len() - 1));
-        start
-    }
-}
-
-/// The direction each joint last moved in before sample `i` of `trace`: the sign of its
-/// reading at `i` minus the latest earlier reading more than [`APPROACH_MIN_MOVE`] away, or
-/// `start` when it has not moved that much since the trace began.
-fn approach_at(trace: &Trace, i: usize, start: &[i8; 6]) -> [i8; 6] {
-    std::array::from_fn(|j| {
-        let c = trace.joint_column(j);
-        let qi = c[i];
-        c[..i].iter().rev().find(|&&q| (qi - q).abs() > APPROACH_MIN_MOVE[j]).map_or(start[j], |&q| {
-            if qi > q {
-                1
-            } else {
-                -1
-            }
-        })
-    })
-}
-
-/// The direction of each joint's first motion in `trace` (more than [`APPROACH_MIN_MOVE`] from
-/// its first reading), `start` for the joints that do not move.
-fn first_motion(trace: &Trace, start: &[i8; 6]) -> [i8; 6] {
-    std::array::from_fn(|j| {
-        let c = trace.joint_column(j);
-        let q0 = c.first().copied().unwrap_or(0.0);
-        c.iter().find(|&&q| (q - q0).abs() > APPROACH_MIN_MOVE[j]).map_or(start[j], |&q| if q > q0 { 1 } else { -1 })
-    })
-}
-
 /// Observations from many traces; a trace whose analysis fails is listed in
 /// [`Extracted::skipped`] and the others are still used. Motions are tracked with the default
 /// [`AnalyseOptions`] ([`observations_from_traces_with`]).
@@ -519,13 +463,14 @@ fn extract<T: Borrow<Trace> + Sync>(
     let mut group = 0;
     let mut approach = Approach::default();
     for t in earlier {
-        approach.enter(t);
+        approach.enter(&Readings::new(t));
     }
     // The last trace and its phase at the ends, when it was a tracked motion.
     let mut previous: Option<(&Trace, PhaseEnds)> = None;
     for (t, r) in traces.iter().map(Borrow::borrow).zip(results) {
         // Every trace moves the stages, analysed or not.
-        let start = approach.enter(t);
+        let readings = Readings::new(t);
+        let start = approach.enter(&readings);
         let Traced { observations: mut obs, free_start: free, ends } = match r {
             Ok(o) => o,
             Err(e) => {
@@ -538,13 +483,13 @@ fn extract<T: Borrow<Trace> + Sync>(
             out.observations.extend(gap_across_pause((before, &before_ends), (t, after_ends), start, options));
         }
         previous = ends.map(|e| (t, e));
-        let tracked_start = if free { start } else { first_motion(t, &start) };
+        let tracked_start = if free { start } else { readings.first_motion(&start) };
         for o in &mut obs {
             let at = |time_s: f64| t.t_s.partition_point(|&x| x < time_s).min(t.len() - 1);
             o.approach = match o.kind {
-                ObservationKind::GapChange { .. } => [tracked_start, approach_at(t, at(o.time_s[1]), &start)],
+                ObservationKind::GapChange { .. } => [tracked_start, readings.approach_at(at(o.time_s[1]), &start)],
                 ObservationKind::AbsoluteGap { .. } => [start; 2],
-                ObservationKind::FringeAmplitude { .. } => [approach_at(t, at(o.time_s[0]), &start); 2],
+                ObservationKind::FringeAmplitude { .. } => [readings.approach_at(at(o.time_s[0]), &start); 2],
             };
         }
         let mut has_amplitudes = false;

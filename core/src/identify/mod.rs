@@ -5,6 +5,7 @@
 //! ([`crate::model::phase::PhaseModel`]): phase-equivalent gap changes from the fringes, absolute
 //! gaps from sweeps, fringe amplitudes (reflected power) from tilt scans.
 
+mod approach;
 pub mod design;
 pub mod joint;
 pub mod measurements;
