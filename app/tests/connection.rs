@@ -71,12 +71,18 @@ fn start_emulators_and_identify_both(h: &mut Kittest) {
     for (c, (name, address)) in controllers.iter().zip(&emulators) {
         assert_eq!((&c.name, c.address()), (name, address.clone()), "the addresses point at the emulators");
     }
-    for node in h.get_all_by_label("Identify") {
-        node.click();
+    // One row at a time, each reply awaited before the next click: a reply changes its row's
+    // height, which moves the rows below, and a click aimed at a button where the frame before
+    // drew it would miss.
+    let rows = h.get_all_by_label("Identify").count();
+    assert_eq!(rows, 3, "two controllers and the laser");
+    for k in 0..rows {
+        h.get_all_by_label("Identify").nth(k).expect("the row's Identify").click();
+        wait_until(h, &format!("identification {}", k + 1), Duration::from_secs(20), |w| match k {
+            0 | 1 => identified(w, k),
+            _ => w.connection.laser_identity.is_some(),
+        });
     }
-    wait_until(h, "three identifications", Duration::from_secs(20), |w| {
-        identified(w, 0) && identified(w, 1) && w.connection.laser_identity.is_some()
-    });
     let ids = h.state().connection.identities.clone();
     assert!(ids.iter().all(|r| r.as_ref().unwrap().is_ok()), "{ids:?}");
     h.get_by_label_contains("E-712 (emulated)");
