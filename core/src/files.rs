@@ -180,7 +180,8 @@ pub fn write_atomic_all(files: &[(PathBuf, Vec<u8>)]) -> Result<(), FileError> {
 
 /// [`write_atomic_all`] with each file's temporary made by `make` from its target and item
 /// (several at a time, on threads of their own), which also gives what the caller keeps of
-/// each file, returned in order.
+/// each file, returned in order. Every temporary stays open until all are made: many files are
+/// written a group of [`WRITE_AT_ONCE`] at a time.
 pub fn write_atomic_with<T, X, E>(
     files: &[(PathBuf, T)],
     make: impl Fn(&Path, &T) -> Result<(Temporary, X), E> + Sync,

@@ -173,16 +173,21 @@ impl Session {
     /// still those it was read from is copied as it is (no formatting, the recording's own
     /// text kept); any other trace is written as [`Session::add_trace`] writes it.
     pub fn add_sourced_traces(&mut self, dir: &Path, sourced: &Sourced) -> Result<(), SessionError> {
-        let texts = sourced
-            .traces
-            .iter()
-            .zip(&sourced.files)
-            .map(|(trace, file)| match file.native {
-                Some((crc32, size_bytes)) => (trace, TraceText::File { path: &file.path, crc32, size_bytes }),
-                None => (trace, TraceText::Format),
-            })
-            .collect();
-        self.add_trace_files(dir, texts, None, true)
+        // A group at a time: each file's temporary stays open until its group is renamed, and
+        // 128 open files stay well under the usual limit of 1024.
+        let at_once = 8 * files::WRITE_AT_ONCE;
+        for (traces, sources) in sourced.traces.chunks(at_once).zip(sourced.files.chunks(at_once)) {
+            let texts = traces
+                .iter()
+                .zip(sources)
+                .map(|(trace, file)| match file.native {
+                    Some((crc32, size_bytes)) => (trace, TraceText::File { path: &file.path, crc32, size_bytes }),
+                    None => (trace, TraceText::Format),
+                })
+                .collect();
+            self.add_trace_files(dir, texts, None, true)?;
+        }
+        Ok(())
     }
 
     /// Write a trace into the session folder (a new `traces/NNN.csv`, atomically) and reference it.

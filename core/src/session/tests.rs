@@ -202,3 +202,23 @@ fn sourced_traces_are_copied_as_recorded_or_written_when_their_file_changed() {
     assert_eq!(loaded, read.traces);
     assert_eq!(loaded[1].len(), 9, "the trace that was read, not the file as it is now");
 }
+
+/// More files than one group of copies: every file copied, referenced in the order read.
+#[test]
+fn many_sourced_traces_are_copied_in_groups_in_order() {
+    let src = tempfile::tempdir().unwrap();
+    for k in 0..300 {
+        small_trace(&format!("trace {k}"), 3 + k % 5).write_csv(&src.path().join(format!("{k:04}.csv"))).unwrap();
+    }
+    let read = crate::trace::import::read_folder_sourced(src.path(), None).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let bench = BenchInfo { name: "recorded traces".into(), preset: None, description: None, seed: None };
+    let mut s = Session::new(bench, BenchPreset::resolve("table2-ideal").unwrap().robot_description().unwrap());
+    s.add_sourced_traces(out.path(), &read).unwrap();
+    assert_eq!(s.traces.len(), 300);
+    for (k, (reference, file)) in s.traces.iter().zip(&read.files).enumerate() {
+        assert_eq!(reference.label, format!("trace {k}"));
+        assert_eq!(std::fs::read(out.path().join(&reference.file)).unwrap(), std::fs::read(&file.path).unwrap());
+    }
+    assert_eq!(s.load_traces(out.path()).unwrap(), read.traces);
+}
