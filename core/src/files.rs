@@ -167,21 +167,16 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
     sync_dir(&parent_dir(path))
 }
 
-/// How many files [`write_atomic_all`] writes and flushes at once.
+/// How many files [`write_atomic_with`] writes and flushes at once.
 pub const WRITE_AT_ONCE: usize = 16;
 
-/// [`write_atomic`] for many files at once: every temporary file written and flushed, several
-/// at a time, then renamed over its target in order, then each folder flushed once (waiting
-/// for the disk one file after the other is most of the time of many small saves). Each file
-/// is atomic as with [`write_atomic`]; on an error, the files renamed before it stay written.
-pub fn write_atomic_all(files: &[(PathBuf, Vec<u8>)]) -> Result<(), FileError> {
-    write_atomic_with(files, |path, bytes| Ok::<_, FileError>((Temporary::with_bytes(path, bytes)?, ()))).map(|_| ())
-}
-
-/// [`write_atomic_all`] with each file's temporary made by `make` from its target and item
-/// (several at a time, on threads of their own), which also gives what the caller keeps of
-/// each file, returned in order. Every temporary stays open until all are made: many files are
-/// written a group of [`WRITE_AT_ONCE`] at a time.
+/// [`write_atomic`] for many files at once, each file's temporary made by `make` from its
+/// target and item (several at a time, on threads of their own), which also gives what the
+/// caller keeps of each file, returned in order. Every temporary is written and flushed, then
+/// renamed over its target in order, then each folder flushed once (waiting for the disk one
+/// file after the other is most of the time of many small saves). Each file is atomic as with
+/// [`write_atomic`]; on an error, the files renamed before it stay written. Every temporary
+/// stays open until all are made: many files are written a group of [`WRITE_AT_ONCE`] at a time.
 pub fn write_atomic_with<T, X, E>(
     files: &[(PathBuf, T)],
     make: impl Fn(&Path, &T) -> Result<(Temporary, X), E> + Sync,
@@ -362,6 +357,12 @@ mod tests {
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "a temporary file was left");
     }
 
+    /// Bytes written as a batch of atomic saves.
+    fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<(), FileError> {
+        write_atomic_with(files, |path, bytes| Ok::<_, FileError>((Temporary::with_bytes(path, bytes)?, ())))
+            .map(|_| ())
+    }
+
     #[test]
     fn a_batch_of_atomic_saves_writes_every_file_and_leaves_no_temporary() {
         let dir = tempfile::tempdir().unwrap();
@@ -374,7 +375,7 @@ mod tests {
                 (folder.join(format!("{k}.txt")), vec![b'a' + k; 1000 * k as usize])
             })
             .collect();
-        write_atomic_all(&files).unwrap();
+        write_all(&files).unwrap();
         for (path, bytes) in &files {
             assert_eq!(&std::fs::read(path).unwrap(), bytes, "{path:?}");
         }
@@ -388,7 +389,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let good = dir.path().join("good.txt");
         let bad = dir.path().join("no-such-folder").join("bad.txt");
-        let err = write_atomic_all(&[(good.clone(), b"x".to_vec()), (bad.clone(), b"y".to_vec())]).unwrap_err();
+        let err = write_all(&[(good.clone(), b"x".to_vec()), (bad.clone(), b"y".to_vec())]).unwrap_err();
         assert!(err.to_string().contains("bad.txt"), "{err}");
         assert!(!good.exists(), "a file was renamed into place although the batch failed first");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "a temporary file was left");

@@ -46,7 +46,7 @@ pub(super) fn plain_table(
     let mut rows = Rows::new(names.len(), time_column, Some(bytes.len() as u64));
     for line in lines {
         // The lines the full reader skips: empty, a comment, or blank (one field, a `\r`).
-        if line.first().is_none_or(|&b| b == b'#') || line.iter().all(u8::is_ascii_whitespace) {
+        if line.first() == Some(&b'#') || line.iter().all(u8::is_ascii_whitespace) {
             continue;
         }
         if rows.len() >= options.max_rows {
