@@ -2,8 +2,10 @@
 //! strategies through PI GCS 2 and SmarAct MCS compared with the virtual bench, a fault matrix, and
 //! recorded protocol transcripts.
 //!
-//! The emulators run on a scaled clock (strategy 1 at 100× real time, strategy 2 at 10×, faults at
-//! 10×), so a 10-minute plan takes seconds. The drivers' reply timeouts stay in real time. Their photodiode is the virtual bench's optics (the
+//! The emulators run on a scaled clock (strategy 1 at 100× real time, faults at 10×), so a
+//! 10-minute plan takes seconds; strategy 2 runs at real time, because its SmarAct positions are
+//! polled and a poll the host delays errs by the clock's scale. The drivers' reply timeouts stay
+//! in real time. Their photodiode is the virtual bench's optics (the
 //! `table2-ideal` truth) evaluated at the emulated axes' positions and the emulated laser's
 //! wavelength, plus the preset's white detector noise.
 

@@ -513,11 +513,15 @@ fn write_session(a: &CalibrateArgs, session: &mut Session, report: &mut Calibrat
     Ok(json)
 }
 
-/// A fit that fails or a solver that did not converge is not a calibration, though written.
+/// A fit that fails, a solver that did not converge or data that determine no parameter is not
+/// a calibration, though written.
 fn calibration_verdict(a: &CalibrateArgs, report: &CalibrationReport) -> Result<(), CliError> {
     let refused = |problem: String| Err(CliError::NotACalibration { session: a.out.clone(), problem });
     if let Some(fit) = report.fit.as_ref().filter(|fit| fit.verdict != Verdict::Fits) {
         return refused(fit.summary.clone());
+    }
+    if report.parameters.iter().all(|p| !p.determined) {
+        return refused("these data determine none of the parameters (the table says why for each)".into());
     }
     if let Err(e) = report.extrinsics.validate() {
         return refused(format!("the fit ended outside the extrinsics' range: {e}"));

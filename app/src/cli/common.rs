@@ -67,7 +67,8 @@ pub enum CliError {
         resume: String,
     },
     /// The run finished and its session was written, but it is not a calibration (the model does
-    /// not fit the data, branches tie, or the solver did not converge).
+    /// not fit the data, branches tie, the solver did not converge, or the data determine no
+    /// parameter).
     #[error("not a calibration: {problem} (session written to {})", session.display())]
     NotACalibration {
         /// Where the session was written.
