@@ -199,3 +199,36 @@ fn without_sweeps_the_calibration_runs_names_its_cost_and_stays_honest() {
         }
     }
 }
+
+/// `--no-validation`: the designed plan is measured and identified, no validation motion runs,
+/// and the printed report, `report.json` and the HTML report say the validation was not run.
+/// With `--traces` (nothing to validate on) the flag is a wrong command line.
+#[test]
+fn without_validation_the_report_says_it_was_not_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s").display().to_string();
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--seed", "7", "--plan", "optimised"];
+    let argv: Vec<String> = argv.iter().chain(&["--no-validation", "--out", &session]).map(|s| s.to_string()).collect();
+    let mut out = Vec::new();
+    assert_eq!(run(argv, &mut out).unwrap(), Outcome::Done);
+    let text = String::from_utf8_lossy(&out);
+    assert!(text.contains("validation NOT RUN (--no-validation)"), "{text}");
+    assert!(!text.contains("validation (FP cavity variation"), "{text}");
+    let doc: Value = serde_json::from_slice(&std::fs::read(dir.path().join("s/report.json")).unwrap()).unwrap();
+    assert_eq!(doc["validation_not_run"], true);
+    assert_eq!(doc["validation"].as_array().map(Vec::len), Some(0));
+    // The forecast from the extrinsics' uncertainty is still there: it needs no bench.
+    assert!(!doc["validation_forecast"].as_array().unwrap().is_empty());
+
+    let html = dir.path().join("report.html").display().to_string();
+    let argv = ["photorobot", "report", &session, "--out", &html];
+    assert_eq!(run(argv.iter().map(|s| s.to_string()), &mut Vec::new()).unwrap(), Outcome::Done);
+    assert!(std::fs::read_to_string(&html).unwrap().contains("NOT RUN: the calibration was identified without"));
+
+    let traces = dir.path().join("s/traces").display().to_string();
+    let again = dir.path().join("again").display().to_string();
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", &traces, "--no-validation", "--out"];
+    let e = run(argv.iter().chain(&[again.as_str()]).map(|s| s.to_string()), &mut Vec::new()).unwrap_err();
+    assert_eq!(e.exit_code(), 2, "{e}");
+    assert!(e.to_string().contains("--no-validation"), "{e}");
+}

@@ -103,6 +103,11 @@ pub struct CalibrationReport {
     /// identified extrinsics (traces recorded elsewhere, no bench to run on), not measurements.
     #[serde(default)]
     pub validation_predicted: bool,
+    /// True when the validation motions were left out at the user's request (they cost minutes
+    /// of bench time on a real bench; the GUI's Validation view runs them later): `validation`
+    /// is then empty, and nothing says the calibration validates.
+    #[serde(default)]
+    pub validation_not_run: bool,
     /// What the uncertainty of the extrinsics allows each validation motion planned with them
     /// (only when the model fits, with no tie): above a motion's target, no run can meet it.
     #[serde(default)]
@@ -303,6 +308,7 @@ pub fn report_from_identification(
             .collect(),
         validation: Vec::new(),
         validation_predicted: false,
+        validation_not_run: false,
         validation_forecast,
         measurement_duration_s: duration_s,
         plan_durations: Vec::new(),

@@ -83,6 +83,11 @@ pub struct CalibrateArgs {
     /// without one does so by itself); the report says what that costs.
     #[arg(long, conflicts_with = "traces")]
     pub no_sweeps: bool,
+    /// Identify without running the validation motions after it (minutes of bench time on a
+    /// real bench; the GUI's Validation view runs them later on the session). The report says
+    /// they were not run.
+    #[arg(long, conflicts_with = "traces")]
+    pub no_validation: bool,
     /// Continue the measurement autosaved in --out (after a crash) instead of starting anew.
     #[arg(long)]
     pub resume: bool,
@@ -359,9 +364,14 @@ fn measure_identify_validate(
         }
         report.sweep_cost = Some(cost);
     }
-    progress.borrow_mut().stage("validating");
-    report.validation = timed("validate", || validation_rows(bench, nominal, &report.extrinsics));
-    tracing::info!(motions = report.validation.len(), "validation done");
+    if a.no_validation {
+        report.validation_not_run = true;
+        tracing::info!("validation not run (--no-validation)");
+    } else {
+        progress.borrow_mut().stage("validating");
+        report.validation = timed("validate", || validation_rows(bench, nominal, &report.extrinsics));
+        tracing::info!(motions = report.validation.len(), "validation done");
+    }
     progress.borrow_mut().finish();
     Ok((session, report))
 }
@@ -621,6 +631,32 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
         let n = n as f64;
         writeln!(out, "  {:>10.4} {:<3} {:>6.2} σ  {}", (ss / n).sqrt(), unit, (ss_n / n).sqrt(), label)?;
     }
+    print_validation(r, out)?;
+    if !r.validation_forecast.is_empty() {
+        writeln!(out, "\nvalidation forecast (true gap, peak to peak, 95 % from the extrinsics' uncertainty):")?;
+        for f in &r.validation_forecast {
+            let word = if f.within_target() { "within" } else { "ABOVE" };
+            writeln!(out, "  {:<52} {:>8.1} nm  {word} its {:.0} nm target", f.motion, f.expected_nm, f.target_nm)?;
+        }
+    }
+    print_signs(&r.translation_signs, out)?;
+    if let Some(cost) = &r.sweep_cost {
+        writeln!(out, "\nno wavelength sweeps (no tunable laser, or --no-sweeps): what that costs")?;
+        for s in cost.sentences() {
+            writeln!(out, "  {s}")?;
+        }
+    }
+    for w in &r.warnings {
+        writeln!(out, "warning: {w}")?;
+    }
+    Ok(())
+}
+
+/// The validation rows, or why there are none.
+fn print_validation(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Result<()> {
+    if r.validation_not_run {
+        return writeln!(out, "\nvalidation NOT RUN (--no-validation): run its motions in the GUI's Validation view");
+    }
     if r.validation_predicted {
         writeln!(out, "\nvalidation PREDICTED on a virtual bench with the identified extrinsics (no bench was run):")?;
     } else {
@@ -638,23 +674,6 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
             v.paper_nm,
             v.note.as_ref().map_or(String::new(), |n| format!("  ({n})"))
         )?;
-    }
-    if !r.validation_forecast.is_empty() {
-        writeln!(out, "\nvalidation forecast (true gap, peak to peak, 95 % from the extrinsics' uncertainty):")?;
-        for f in &r.validation_forecast {
-            let word = if f.within_target() { "within" } else { "ABOVE" };
-            writeln!(out, "  {:<52} {:>8.1} nm  {word} its {:.0} nm target", f.motion, f.expected_nm, f.target_nm)?;
-        }
-    }
-    print_signs(&r.translation_signs, out)?;
-    if let Some(cost) = &r.sweep_cost {
-        writeln!(out, "\nno wavelength sweeps (no tunable laser, or --no-sweeps): what that costs")?;
-        for s in cost.sentences() {
-            writeln!(out, "  {s}")?;
-        }
-    }
-    for w in &r.warnings {
-        writeln!(out, "warning: {w}")?;
     }
     Ok(())
 }

@@ -248,6 +248,12 @@ fn residual_plot(h: &mut String, c: &CalibrationReport) {
 
 fn validation(h: &mut String, c: &CalibrationReport) {
     h.push_str("<h2>Validation</h2>\n");
+    if c.validation_not_run {
+        h.push_str(
+            "<p class=\"warn\">NOT RUN: the calibration was identified without its validation motions. Run them on the \
+             bench (the GUI's Validation view) before relying on it.</p>\n",
+        );
+    }
     if c.validation_predicted {
         h.push_str(
             "<p class=\"warn\">PREDICTED, not measured: the traces were recorded elsewhere, so the validation motions were run \
