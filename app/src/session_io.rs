@@ -25,8 +25,11 @@ pub struct Snapshot {
     pub robot: photorobot_core::model::robot::RobotDescription,
     /// The wizard's plans, in step order.
     pub plans: Vec<photorobot_core::plan::Plan>,
-    /// Per step: traces and whether the step ran to the end.
-    pub steps: Vec<(Vec<Trace>, bool)>,
+    /// Per step: traces, and how many of them are whole (the others were cut short by a stop).
+    pub steps: Vec<(Vec<Trace>, usize)>,
+    /// Where an unfinished step stands (`plan` its index): the step that runs, else the first
+    /// stopped one that can be resumed.
+    pub progress: Option<photorobot_core::session::Progress>,
     /// Traces imported from files.
     pub imported: Vec<Trace>,
     /// The calibration, when identified.
@@ -44,15 +47,13 @@ impl Snapshot {
     /// ones already on disk as they are, new ones written to new files).
     pub fn write_into(&self, writer: &mut SessionWriter) -> Result<(), String> {
         let mut traces = Vec::new();
-        for (p, (step, complete)) in self.steps.iter().enumerate() {
+        for (p, (step, whole)) in self.steps.iter().enumerate() {
             // The k-th trace of a step is its plan's k-th recorded segment.
             let recorded: Vec<usize> =
                 self.plans[p].segments.iter().enumerate().filter(|(_, g)| g.is_recorded()).map(|(i, _)| i).collect();
             for (k, t) in step.iter().enumerate() {
                 let segment = recorded.get(k).copied().unwrap_or(k);
-                // The last trace of a stopped step may be partial.
-                let whole = *complete || k + 1 < step.len();
-                traces.push((t, Some((p, segment)), whole));
+                traces.push((t, Some((p, segment)), k < *whole));
             }
         }
         traces.extend(self.imported.iter().map(|t| (t, None, true)));
@@ -61,6 +62,7 @@ impl Snapshot {
         session.bench = self.bench.clone();
         session.robot = self.robot.clone();
         session.plans = self.plans.clone();
+        session.progress = self.progress;
         session.notes = self.notes.clone();
         session.lab = self.lab.clone();
         session.calibration = self.calibration.clone();

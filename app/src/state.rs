@@ -17,7 +17,7 @@ use photorobot_core::measure::Measurement;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::kinematics::Chain;
 use photorobot_core::plan::Plan;
-use photorobot_core::session::BenchInfo;
+use photorobot_core::session::{BenchInfo, Progress};
 use photorobot_core::trace::Trace;
 use std::collections::HashMap;
 use std::path::Path;
@@ -593,9 +593,11 @@ impl AppState {
 
     /// A segment of the running step was recorded: keep it and autosave, so that a crash costs
     /// at most the segment being measured.
-    fn segment_done(&mut self, trace: Trace) {
+    fn segment_done(&mut self, trace: Trace, progress: Progress) {
         let Some(step) = self.wizard.running.as_ref().and_then(|r| self.wizard.steps.get_mut(r.step)) else { return };
         step.traces.push(trace);
+        // Where the step stands, autosaved with it: a crash leaves a step that can be resumed.
+        step.resume = Some(Resume { progress, whole_traces: step.traces.len() });
         self.session.mark_dirty();
         let base = &self.session.untitled_base;
         let dir = self.session.dir.get_or_insert_with(|| crate::session_io::untitled_dir_in(base)).clone();
@@ -613,7 +615,14 @@ impl AppState {
             },
             robot: self.chain.description().clone(),
             plans: self.wizard.steps.iter().map(|st| st.plan.clone()).collect(),
-            steps: self.wizard.steps.iter().map(|st| (st.traces.clone(), st.state == StepState::Done)).collect(),
+            steps: self
+                .wizard
+                .steps
+                .iter()
+                .enumerate()
+                .map(|(i, st)| (st.traces.clone(), self.whole_traces(i)))
+                .collect(),
+            progress: self.unfinished_step(),
             imported: self.imported.clone(),
             calibration: self.results.report.as_deref().cloned(),
             diagnosis: match &self.diagnosis.result {
@@ -623,6 +632,31 @@ impl AppState {
             notes: self.session.notes.clone(),
             lab: self.session.lab.clone(),
         }
+    }
+
+    /// How many of step `i`'s traces are whole: all of a finished or running step's (a running
+    /// step's come in whole segment by segment), a stopped step's up to where it resumes, else all
+    /// but the last, which the stop may have cut short.
+    fn whole_traces(&self, i: usize) -> usize {
+        let st = &self.wizard.steps[i];
+        let n = st.traces.len();
+        match (&st.state, st.resume) {
+            (StepState::Done | StepState::Running, _) => n,
+            (_, Some(r)) => r.whole_traces.min(n),
+            _ => n.saturating_sub(1),
+        }
+    }
+
+    /// Where an unfinished step stands, as the session keeps it (`plan` the step's index): the
+    /// running step, else the first stopped one that can be resumed.
+    fn unfinished_step(&self) -> Option<Progress> {
+        let running = self.wizard.running.as_ref().map(|r| r.step);
+        let unfinished =
+            |i: usize, st: &MeasurementStep| Some(i) == running || matches!(st.state, StepState::Stopped(_));
+        let (i, resume) = (self.wizard.steps.iter().enumerate())
+            .filter_map(|(i, st)| st.resume.filter(|_| unfinished(i, st)).map(|r| (i, r)))
+            .min_by_key(|(i, _)| (Some(*i) != running, *i))?;
+        Some(Progress { plan: i, ..resume.progress })
     }
 
     /// The diagnosis as the session keeps it, as `photorobot diagnose` writes it: the result, the
@@ -647,15 +681,26 @@ impl AppState {
             st.resume = None;
         }
         self.imported = loaded.imported;
-        let complete_plans: Vec<bool> = (0..loaded.plans.len())
-            .map(|p| loaded.session.traces.iter().filter(|r| r.step.is_some_and(|(q, _)| q == p)).all(|r| r.complete))
+        // Per plan: its whole traces, and whether they all are.
+        let whole: Vec<(usize, bool)> = (0..loaded.plans.len())
+            .map(|p| {
+                let of_plan = || loaded.session.traces.iter().filter(move |r| r.step.is_some_and(|(q, _)| q == p));
+                (of_plan().filter(|r| r.complete).count(), of_plan().all(|r| r.complete))
+            })
             .collect();
-        for ((name, traces), complete) in loaded.plans.into_iter().zip(complete_plans) {
+        let progress = loaded.session.progress;
+        for (p, ((name, traces), (whole, complete))) in loaded.plans.into_iter().zip(whole).enumerate() {
             match self.wizard.steps.iter_mut().find(|st| st.plan.name == name) {
                 Some(st) if !traces.is_empty() => {
                     st.traces = traces;
-                    st.state =
-                        if complete { StepState::Done } else { StepState::Stopped("recovered: incomplete".into()) };
+                    // The step the session was measuring resumes where it stood.
+                    let stood = progress.filter(|pr| pr.plan == p);
+                    st.state = if complete && stood.is_none() {
+                        StepState::Done
+                    } else {
+                        StepState::Stopped("recovered: incomplete".into())
+                    };
+                    st.resume = stood.map(|pr| Resume { progress: Progress { plan: 0, ..pr }, whole_traces: whole });
                 }
                 Some(_) => {}
                 None => self.imported.extend(traces),
@@ -702,7 +747,13 @@ impl AppState {
                     step.traces.truncate(kept);
                     step.traces.extend(traces);
                     step.duration_s += duration_s;
-                    step.resume = resume.map(|r| Resume { whole_traces: kept + r.whole_traces, ..r });
+                    step.resume = match (&outcome, resume) {
+                        (_, Some(r)) => Some(Resume { whole_traces: kept + r.whole_traces, ..r }),
+                        // A run the worker could not report on (it panicked) resumes after the
+                        // last segment it handed on.
+                        (Err(_), None) => step.resume.filter(|r| r.whole_traces <= step.traces.len()),
+                        (Ok(()), None) => None,
+                    };
                     step.state = match outcome {
                         Ok(()) => StepState::Done,
                         Err(e) => StepState::Stopped(e),
@@ -717,7 +768,7 @@ impl AppState {
                 let dir = self.session.dir.get_or_insert_with(|| crate::session_io::untitled_dir_in(base)).clone();
                 self.save_in_background(dir, true);
             }
-            Event::SegmentDone(trace) => self.segment_done(*trace),
+            Event::SegmentDone(trace, progress) => self.segment_done(*trace, progress),
             Event::Identified(r) => match r {
                 Ok(report) => {
                     self.extrinsics = report.extrinsics;

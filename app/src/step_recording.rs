@@ -1,7 +1,8 @@
 //! A wizard step recorded through the core's recording function (`session::recording::record`,
-//! as `photorobot calibrate` records): each whole segment's trace is handed on at once (the
-//! worker sends it to the UI, to be autosaved by its writer thread), and a stopped step reports
-//! where it stands, to be resumed.
+//! as `photorobot calibrate` records): each whole segment's trace is handed on at once with where
+//! the step stands after it (the worker sends both to the UI, to be autosaved by its writer
+//! thread, so a crash leaves a step that can be resumed), and a stopped step reports where it
+//! stands, to be resumed.
 
 use photorobot_core::bench::{Bench, RunControl};
 use photorobot_core::plan::Plan;
@@ -30,15 +31,17 @@ pub(crate) struct Ran {
 }
 
 /// Record wizard step `plan` on `bench`, from the start or from where a stopped run of it
-/// stands (`from`), each whole segment's trace handed to `on_segment` as soon as it is recorded.
+/// stands (`from`), each whole segment's trace handed to `on_segment` as soon as it is recorded,
+/// with the plan's progress after it.
 pub(crate) fn record_step(
     bench: &mut dyn Bench,
     plan: &Plan,
     from: Option<Progress>,
     control: &mut RunControl<'_>,
-    on_segment: &mut dyn FnMut(&Trace),
+    on_segment: &mut dyn FnMut(&Trace, Progress),
 ) -> Ran {
-    let mut sink = StepRecording { plan: plan.clone(), progress: from, traces: Vec::new(), whole: 0, on_segment };
+    let mut sink =
+        StepRecording { plan: plan.clone(), progress: from, traces: Vec::new(), whole: 0, handed: 0, on_segment };
     let (duration_s, outcome) = match record(bench, &mut sink, control) {
         Ok(r) => (r.duration_s, r.outcome.map_err(|e| e.to_string())),
         Err(e) => (0.0, Err(e.to_string())),
@@ -56,7 +59,9 @@ struct StepRecording<'a> {
     traces: Vec<Trace>,
     /// How many of `traces` are whole.
     whole: usize,
-    on_segment: &'a mut dyn FnMut(&Trace),
+    /// How many of `traces` went to `on_segment` (each once its progress is known).
+    handed: usize,
+    on_segment: &'a mut dyn FnMut(&Trace, Progress),
 }
 
 impl RecordSink for StepRecording<'_> {
@@ -69,16 +74,24 @@ impl RecordSink for StepRecording<'_> {
     }
 
     fn keep_trace(&mut self, trace: &Trace, _at: (usize, usize), complete: bool) -> Result<(), SessionError> {
+        // A partial trace is never handed on: it is measured again on resuming.
         if complete {
             self.whole += 1;
-            (self.on_segment)(trace);
         }
         self.traces.push(trace.clone());
         Ok(())
     }
 
+    /// The core sets the progress after keeping each whole segment's trace: the trace goes on
+    /// with it.
     fn set_progress(&mut self, progress: Progress) -> Result<(), SessionError> {
         self.progress = Some(progress);
+        if self.handed < self.whole {
+            self.handed = self.whole;
+            if let Some(trace) = self.traces.last() {
+                (self.on_segment)(trace, progress);
+            }
+        }
         Ok(())
     }
 }

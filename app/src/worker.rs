@@ -172,8 +172,9 @@ pub enum Event {
         /// Where a plan that did not run to the end stands, to resume it.
         resume: Option<Resume>,
     },
-    /// A segment of the running plan was recorded (its whole trace), before the next one starts.
-    SegmentDone(Box<Trace>),
+    /// A segment of the running plan was recorded (its whole trace), before the next one starts;
+    /// with where the plan stands after it.
+    SegmentDone(Box<Trace>, Progress),
     /// Identification finished.
     Identified(Result<Box<CalibrationReport>, String>),
     /// Validation finished.
@@ -651,8 +652,8 @@ impl Thread {
             // A wizard step records as the command line does, each segment to the UI at once.
             Run::Step(from) => {
                 // Each recorded segment goes to the UI at once, to be autosaved.
-                let mut on_segment = |trace: &Trace| {
-                    let _ = self.tx.send(Event::SegmentDone(Box::new(trace.clone())));
+                let mut on_segment = |trace: &Trace, progress: Progress| {
+                    let _ = self.tx.send(Event::SegmentDone(Box::new(trace.clone()), progress));
                     notify();
                 };
                 record_step(self.bench.as_mut(), plan, from, &mut control, &mut on_segment)

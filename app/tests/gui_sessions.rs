@@ -1,7 +1,7 @@
 //! GUI tests of the session folder's integrity (egui_kittest, headless): every recorded segment
 //! autosaved while the step runs, a step redone after a save leaving the saved session loadable,
-//! a folder open in another photorobot refused with the reason, and the untitled session a crash
-//! left offered for recovery at start.
+//! a folder open in another photorobot refused with the reason, the untitled session a crash
+//! left offered for recovery at start, and a step a crash interrupted resumed from the autosave.
 
 mod common;
 
@@ -148,4 +148,51 @@ fn at_start_the_untitled_session_a_crash_left_is_offered_for_recovery() {
     assert_eq!(recovered, ["crashed A", "crashed B"]);
     assert!(state.session.dirty, "a recovered session still needs a save");
     assert_eq!(state.session.dir.as_deref(), Some(base.join("untitled-200-1").as_path()));
+}
+
+/// A crash while a step runs: the autosave keeps where the step stood, and the recovered session
+/// resumes the step from there: its whole traces kept, the rest measured, one trace per recorded
+/// segment of its plan in the end, in order.
+#[test]
+fn a_step_a_crash_interrupted_resumes_from_the_autosave() {
+    let tmp = tempfile::tempdir().unwrap();
+    let settings = || Settings { speed: 20.0, ..Settings::default() };
+    let mut h = harness(workbench(settings(), ScriptedDialogs::default()));
+    h.state_mut().state.session.untitled_base = tmp.path().to_path_buf();
+    open(&mut h, Tab::Wizard);
+    h.get_by_label("Run step 1 (F5)").click();
+    wait_until(&mut h, "two segments autosaved while the step runs", Duration::from_secs(120), |w| {
+        let dir = w.state.session.dir.as_deref();
+        w.state.wizard.running.is_some()
+            && dir.and_then(photorobot_app::session_io::recoverable).is_some_and(|n| n >= 2)
+    });
+    // The crash: the workbench goes without a save; what is on disk is the last autosave.
+    drop(h);
+    let mut h = harness(workbench(settings(), ScriptedDialogs::default()));
+    h.state_mut().state.session.untitled_base = tmp.path().to_path_buf();
+    h.state_mut().offer_untitled_recovery();
+    h.run_steps(3);
+    h.get_by_label("Recover the autosave").click();
+    h.run_steps(3);
+    let step = &h.state().state.wizard.steps[0];
+    assert!(matches!(&step.state, StepState::Stopped(e) if e.contains("recovered")), "{:?}", step.state);
+    let resume = step.resume.expect("the autosave says where the step stood");
+    assert!(resume.whole_traces >= 2 && resume.whole_traces == step.traces.len(), "{resume:?}");
+    let whole: Vec<Trace> = step.traces.clone();
+    open(&mut h, Tab::Wizard);
+    h.get_by_label("Resume or redo step 1 (F5)").click();
+    // The question opens the frame after the click and shows the frame after its sizing pass.
+    h.run_steps(3);
+    h.get_by_label_contains(&format!("Resume keeps its {} whole trace", resume.whole_traces));
+    screenshot(&mut h, "resume-recovered-step");
+    h.state_mut().state.settings.speed = 0.0;
+    h.get_by_label("Resume").click();
+    wait_until(&mut h, "the rest of step 1", Duration::from_secs(300), |w| {
+        w.state.wizard.steps[0].state == StepState::Done
+    });
+    let step = &h.state().state.wizard.steps[0];
+    assert_eq!(step.traces[..whole.len()], whole[..], "the recovered traces come first, unchanged");
+    let labels: Vec<&str> = step.traces.iter().map(|t| t.meta.label.as_str()).collect();
+    let planned: Vec<&str> = step.plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
+    assert_eq!(labels, planned, "one whole trace per recorded segment, in order");
 }

@@ -2,7 +2,7 @@
 //! diagnosis run (its computing within one model evaluation), an Esc while idle leaves nothing
 //! behind for the next jog or live dither, F5 and Redo on a step with traces ask before discarding
 //! them (F5 on a stopped one resumes it), the shortcuts act on the open tab only, and a panic in
-//! the worker is shown while the traces recorded before it are kept.
+//! the worker is shown while the traces recorded before it are kept and the step resumes after them.
 
 mod common;
 
@@ -291,7 +291,7 @@ impl Bench for PanicsAt {
 }
 
 #[test]
-fn a_worker_panic_is_shown_and_the_traces_recorded_before_it_are_kept() {
+fn a_worker_panic_is_shown_its_traces_kept_and_the_step_resumes_after_them() {
     let dir = tempfile::tempdir().unwrap();
     let mut h = harness(workbench(Settings::default()));
     h.state_mut().state.session.dir = Some(dir.path().join("session"));
@@ -320,10 +320,23 @@ fn a_worker_panic_is_shown_and_the_traces_recorded_before_it_are_kept() {
     assert!(h.query_by_label("The bench worker failed").is_none());
     let session = photorobot_core::session::Session::load(&saved).expect("the saved session loads");
     assert_eq!(session.traces.len(), recorded);
-    // No resume point after a fault: the step's button offers to redo it.
+    assert_eq!(session.progress.map(|p| p.plan), Some(0), "the session keeps where the step stood");
+    // The step resumes after the last segment the worker handed on before the fault: its traces
+    // stay, the rest is measured, one trace per recorded segment in the end.
     open(&mut h, Tab::Wizard);
-    assert!(h.state().state.wizard.steps[0].resume.is_none());
-    h.get_by_label("Redo step 1 (F5)");
+    let resume = h.state().state.wizard.steps[0].resume.expect("where the step stood before the fault");
+    assert_eq!(resume.whole_traces, recorded);
+    h.get_by_label("Resume or redo step 1 (F5)").click();
+    // The question opens the frame after the click and shows the frame after its sizing pass.
+    h.run_steps(3);
+    h.get_by_label("Resume").click();
+    wait_until(&mut h, "the rest of step 1", Duration::from_secs(300), |w| {
+        w.state.wizard.steps[0].state == StepState::Done
+    });
+    let step = &h.state().state.wizard.steps[0];
+    let labels: Vec<&str> = step.traces.iter().map(|t| t.meta.label.as_str()).collect();
+    let planned: Vec<&str> = step.plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
+    assert_eq!(labels, planned, "one whole trace per recorded segment, in order");
     // The worker serves the next command: a jog reaches its targets.
     open(&mut h, Tab::Robot);
     let target = [5.0, 0.0, 0.0, 0.0, 0.0, 0.0];

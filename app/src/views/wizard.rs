@@ -214,7 +214,7 @@ fn confirm_redo(ui: &mut egui::Ui, s: &mut AppState) {
         ui.label(format!("Redo step {} discards its {}: {how}.", i + 1, plural(count, "trace")));
         if let Some(r) = resume {
             ui.label(format!(
-                "Resume keeps its {} and measures the rest, from the start of the segment the stop interrupted ({}).",
+                "Resume keeps its {} and measures the rest, from the start of the segment it had reached ({}).",
                 plural(r.whole_traces, "whole trace"),
                 interrupted.as_deref().unwrap_or("?")
             ));
