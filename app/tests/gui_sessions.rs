@@ -187,12 +187,5 @@ fn a_step_a_crash_interrupted_resumes_from_the_autosave() {
     screenshot(&mut h, "resume-recovered-step");
     h.state_mut().state.settings.speed = 0.0;
     h.get_by_label("Resume").click();
-    wait_until(&mut h, "the rest of step 1", Duration::from_secs(300), |w| {
-        w.state.wizard.steps[0].state == StepState::Done
-    });
-    let step = &h.state().state.wizard.steps[0];
-    assert_eq!(step.traces[..whole.len()], whole[..], "the recovered traces come first, unchanged");
-    let labels: Vec<&str> = step.traces.iter().map(|t| t.meta.label.as_str()).collect();
-    let planned: Vec<&str> = step.plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
-    assert_eq!(labels, planned, "one whole trace per recorded segment, in order");
+    resumed_step_1_ends_whole(&mut h, &whole);
 }

@@ -232,15 +232,7 @@ fn f5_on_a_stopped_step_resumes_it_keeping_its_whole_traces() {
     h.run_steps(2);
     assert_eq!(h.state().state.moving(), Some(Motion::Step));
     assert_eq!(h.state().state.wizard.steps[0].traces, whole, "the whole traces are kept, the cut one dropped");
-    wait_until(&mut h, "the rest of step 1", Duration::from_secs(600), |w| {
-        w.state.wizard.steps[0].state == StepState::Done
-    });
-    let step = &h.state().state.wizard.steps[0];
-    assert_eq!(step.traces[..whole.len()], whole[..], "the traces from before the stop come first, unchanged");
-    let labels: Vec<&str> = step.traces.iter().map(|t| t.meta.label.as_str()).collect();
-    let planned: Vec<&str> = step.plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
-    assert_eq!(labels, planned, "one whole trace per recorded segment, in order");
-    assert!(step.resume.is_none(), "nothing left to resume");
+    resumed_step_1_ends_whole(&mut h, &whole);
 }
 
 /// A bench that panics in its `at`-th segment (from 1), as a driver bug would, and takes at least
@@ -326,17 +318,12 @@ fn a_worker_panic_is_shown_its_traces_kept_and_the_step_resumes_after_them() {
     open(&mut h, Tab::Wizard);
     let resume = h.state().state.wizard.steps[0].resume.expect("where the step stood before the fault");
     assert_eq!(resume.whole_traces, recorded);
+    let kept = h.state().state.wizard.steps[0].traces.clone();
     h.get_by_label("Resume or redo step 1 (F5)").click();
     // The question opens the frame after the click and shows the frame after its sizing pass.
     h.run_steps(3);
     h.get_by_label("Resume").click();
-    wait_until(&mut h, "the rest of step 1", Duration::from_secs(300), |w| {
-        w.state.wizard.steps[0].state == StepState::Done
-    });
-    let step = &h.state().state.wizard.steps[0];
-    let labels: Vec<&str> = step.traces.iter().map(|t| t.meta.label.as_str()).collect();
-    let planned: Vec<&str> = step.plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
-    assert_eq!(labels, planned, "one whole trace per recorded segment, in order");
+    resumed_step_1_ends_whole(&mut h, &kept);
     // The worker serves the next command: a jog reaches its targets.
     open(&mut h, Tab::Robot);
     let target = [5.0, 0.0, 0.0, 0.0, 0.0, 0.0];

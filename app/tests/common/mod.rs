@@ -1,6 +1,6 @@
 //! Shared kittest helpers of the GUI test binaries (`gui.rs`, `connection.rs`): the headless
 //! harness, waiting on the worker, tab switching, screenshots, in-memory eframe storage and a
-//! save through the scripted folder dialog.
+//! save through the scripted folder dialog, and the end of a resumed wizard step.
 #![allow(dead_code)] // each test binary uses its own subset
 
 use egui_kittest::kittest::Queryable;
@@ -36,6 +36,20 @@ pub fn wait_until(h: &mut Harness<'_, Workbench>, what: &str, timeout: Duration,
         );
         std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// Wait for the resumed wizard step 1 to end (the first `kept` of its traces from before), and
+/// check that it holds those first, unchanged, and one whole trace per recorded segment of its
+/// plan, in order, with nothing left to resume.
+pub fn resumed_step_1_ends_whole(h: &mut Harness<'_, Workbench>, kept: &[photorobot_core::trace::Trace]) {
+    use photorobot_app::state::StepState;
+    wait_until(h, "the rest of step 1", Duration::from_secs(600), |w| w.state.wizard.steps[0].state == StepState::Done);
+    let step = &h.state().state.wizard.steps[0];
+    assert_eq!(step.traces[..kept.len()], kept[..], "the traces from before come first, unchanged");
+    let labels: Vec<&str> = step.traces.iter().map(|t| t.meta.label.as_str()).collect();
+    let planned: Vec<&str> = step.plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
+    assert_eq!(labels, planned, "one whole trace per recorded segment, in order");
+    assert!(step.resume.is_none(), "nothing left to resume");
 }
 
 /// Click a tab and check it is shown.
