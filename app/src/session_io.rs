@@ -23,7 +23,8 @@ pub struct Snapshot {
     pub bench: BenchInfo,
     /// The robot description the software uses.
     pub robot: photorobot_core::model::robot::RobotDescription,
-    /// The wizard's plans, in step order.
+    /// The wizard's plans as the bench runs them (without sweeps on a bench without a tunable
+    /// laser), in step order.
     pub plans: Vec<photorobot_core::plan::Plan>,
     /// Per step: traces, and how many of them are whole (the others were cut short by a stop).
     pub steps: Vec<(Vec<Trace>, usize)>,

@@ -423,10 +423,20 @@ impl AppState {
         let (label, kept) = (step.plan.name.clone(), step.traces.len());
         self.wizard.running = Some(RunningStep { step: i, label, fraction: 0.0, kept });
         self.worker.send(Command::SetPace(self.settings.pace()));
-        // A bench without a tunable laser runs the step's motions without its sweeps.
-        let plan = if self.worker.tunable_laser { step.plan.clone() } else { step.plan.without_sweeps() };
+        let plan = self.plan_run(i);
         self.worker.send(Command::Run { job: i, plan, from: from.map(|r| r.progress) });
         self.session.recording_starts(&self.worker.bench_identification);
+    }
+
+    /// Step `i`'s plan as this bench runs it: a bench without a tunable laser runs its motions
+    /// without its sweeps. Its segments are the ones a step's progress and traces count.
+    pub fn plan_run(&self, i: usize) -> Plan {
+        let plan = &self.wizard.steps[i].plan;
+        if self.worker.tunable_laser {
+            plan.clone()
+        } else {
+            plan.without_sweeps()
+        }
     }
 
     /// Cancel what runs (the traces recorded so far are kept); nothing while nothing moves.
@@ -614,7 +624,7 @@ impl AppState {
                 seed: Some(self.settings.seed),
             },
             robot: self.chain.description().clone(),
-            plans: self.wizard.steps.iter().map(|st| st.plan.clone()).collect(),
+            plans: (0..self.wizard.steps.len()).map(|i| self.plan_run(i)).collect(),
             steps: self
                 .wizard
                 .steps

@@ -296,6 +296,15 @@ fn wizard_says_before_step_1_what_a_bench_without_a_tunable_laser_costs() {
     let step = &h.state().state.wizard.steps[0];
     assert!(step.traces.iter().all(|t| !photorobot_core::trace::is_sweep(t)));
     assert_eq!(step.traces.len(), step.plan.recorded_moves());
+    // The session keeps the plans as they ran, and each trace names its segment of them.
+    let session = save_as_and_load(&mut h, &dir.path().join("session"));
+    assert!(session.plans.iter().all(|p| p.sweeps() == 0), "the plans as this bench runs them");
+    let of_step_1: Vec<_> = session.traces.iter().filter(|r| r.step.is_some_and(|(p, _)| p == 0)).collect();
+    assert_eq!(of_step_1.len(), session.plans[0].recorded_moves());
+    for r in of_step_1 {
+        let (p, segment) = r.step.unwrap();
+        assert_eq!(session.plans[p].segments[segment].label(), r.label, "trace `{}`", r.label);
+    }
 }
 
 /// Identify on a bench the model cannot fit: the Results view shows an error, the residual

@@ -197,8 +197,8 @@ fn confirm_redo(ui: &mut egui::Ui, s: &mut AppState) {
         return;
     };
     let (count, state, resume) = (step.traces.len(), step.state.clone(), step.resume);
-    let interrupted =
-        resume.and_then(|r| step.plan.segments.get(r.progress.next_segment)).map(|g| g.label().to_string());
+    let plan = s.plan_run(i);
+    let interrupted = resume.and_then(|r| plan.segments.get(r.progress.next_segment)).map(|g| g.label().to_string());
     let mut answer = None;
     let modal = egui::Modal::new(egui::Id::unique("confirm redo")).show(ui.ctx(), |ui| {
         ui.heading(if resume.is_some() {
