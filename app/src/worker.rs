@@ -534,10 +534,15 @@ impl Thread {
     /// The diagnosis, step by step (each step reported), discriminating motions on this bench;
     /// the result and the library effects of its final model.
     fn diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics) -> Result<(DiagnosisResult, Vec<Effect>), String> {
-        let (mut d, skipped) = Diagnosis::from_traces(&self.nominal, traces, extrinsics).map_err(|e| e.to_string())?;
-        // The stop ends the computing too, within one model evaluation.
+        // The stop ends the computing too: the traces' analysis within one trace, the steps
+        // within one model evaluation.
         let cancel = self.cancel.clone();
-        d.set_stop(StopCheck::new(move || cancel.load(Ordering::Relaxed)));
+        let stop = StopCheck::new(move || cancel.load(Ordering::Relaxed));
+        let (mut d, skipped) = match Diagnosis::from_traces(&self.nominal, traces, extrinsics, stop) {
+            Ok(d) => d,
+            Err(_) if self.cancel.load(Ordering::Relaxed) => return Err(STOPPED.into()),
+            Err(e) => return Err(e.to_string()),
+        };
         if !skipped.is_empty() {
             let _ = self.tx.send(Event::DiagnosisStep(
                 "0. traces".into(),

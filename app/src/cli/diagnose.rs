@@ -11,6 +11,7 @@
 
 use super::common::{json_text, timed, CliError};
 use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
+use photorobot_core::diagnose::fit::StopCheck;
 use photorobot_core::diagnose::motions::{BenchRunner, MotionRunner};
 use photorobot_core::diagnose::validation::{validate_with_effects, EffectValidationRow};
 use photorobot_core::diagnose::{Diagnosis, DiagnosisResult, Step};
@@ -80,8 +81,9 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
         Some(_) => CliError::Argument { argument: "--bench", problem },
         None => invalid(&a.session.join("traces"), "# bench", format!("the model of bench `{named}`: {problem}")),
     })?;
-    let (mut d, skipped) = timed("analyse_traces", || Diagnosis::from_traces(&base, &traces, extrinsics))
-        .map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
+    let (mut d, skipped) =
+        timed("analyse_traces", || Diagnosis::from_traces(&base, &traces, extrinsics, StopCheck::default()))
+            .map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
     let mut bench = preset.as_ref().map(|p| resumed_bench(p, a.seed, &d)).transpose()?;
     let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, 0.0));
     if !a.json {

@@ -392,6 +392,18 @@ pub fn observations_from_traces<T: Borrow<Trace> + Sync>(
     observations_from_traces_with(&[], traces, model, options, &|_| false)
 }
 
+/// [`observations_from_traces`], asking `stopped` before each trace's analysis: `None` once it
+/// answers true, within one trace's analysis per core.
+pub fn observations_from_traces_until<T: Borrow<Trace> + Sync>(
+    traces: &[T],
+    model: &PhaseModel,
+    options: &ExtractOptions,
+    stopped: &(dyn Fn() -> bool + Sync),
+) -> Option<Extracted> {
+    let extracted = extract(&[], traces, &[], model, options, &|_| false, stopped);
+    (!stopped()).then_some(extracted)
+}
+
 /// Observations from `traces`, recorded after `earlier` on the same bench (only their joints
 /// are read: the stages' approach directions carry over). The motions for which `free_start`
 /// holds are tracked with [`AnalyseOptions::free_start`], as are motions shorter than
@@ -406,7 +418,7 @@ pub fn observations_from_traces_with<T: Borrow<Trace> + Sync>(
     options: &ExtractOptions,
     free_start: &(dyn Fn(&Trace) -> bool + Sync),
 ) -> Extracted {
-    extract(earlier, traces, &[], model, options, free_start)
+    extract(earlier, traces, &[], model, options, free_start, &|| false)
 }
 
 /// The extrinsics-free part of the analysis of every sweep among `traces`, in parallel (`None`
@@ -431,10 +443,11 @@ pub fn observations_from_seeded<T: Borrow<Trace> + Sync>(
     model: &PhaseModel,
     options: &ExtractOptions,
 ) -> Extracted {
-    extract(&[], traces, seeds, model, options, &|_| false)
+    extract(&[], traces, seeds, model, options, &|_| false, &|| false)
 }
 
-/// [`observations_from_traces_with`], the sweeps' seeds taken from `seeds` where given.
+/// [`observations_from_traces_with`], the sweeps' seeds taken from `seeds` where given; a trace
+/// is not analysed once `stopped` answers true (the result is then incomplete).
 fn extract<T: Borrow<Trace> + Sync>(
     earlier: &[Trace],
     traces: &[T],
@@ -442,6 +455,7 @@ fn extract<T: Borrow<Trace> + Sync>(
     model: &PhaseModel,
     options: &ExtractOptions,
     free_start: &(dyn Fn(&Trace) -> bool + Sync),
+    stopped: &(dyn Fn() -> bool + Sync),
 ) -> Extracted {
     use rayon::prelude::*;
     // Traces are independent: analyse them in parallel, then number the amplitude groups in
@@ -451,8 +465,9 @@ fn extract<T: Borrow<Trace> + Sync>(
         .enumerate()
         .map(|(k, t)| {
             let t = t.borrow();
-            if !options.sweeps && crate::trace::is_sweep(t) {
-                // What an analysed sweep gives besides its absolute gap: no phase at its ends.
+            // A stopped run's traces give nothing; a sweep without its absolute gap gives what an
+            // analysed sweep gives besides: no phase at its ends.
+            if stopped() || (!options.sweeps && crate::trace::is_sweep(t)) {
                 return Ok(Traced { observations: Vec::new(), free_start: false, ends: None });
             }
             let analyse = AnalyseOptions { free_start: free_start(t), shaped: options.shaped, ..Default::default() };
@@ -576,6 +591,47 @@ mod tests {
         // The refinement does depend on the model: the nominal one reads another gap.
         let nominal_obs = observations_from_seeded(&run.traces, &seeds, &nominal, &options).observations;
         assert_ne!(nominal_obs[0].value(), fresh[0].value());
+    }
+
+    /// The stoppable extraction gives what the plain one gives while nothing stops it, and
+    /// nothing once its stop answers true, whether from the start or after some traces; a
+    /// diagnosis of the traces then stops.
+    #[test]
+    fn a_stop_asked_during_the_extraction_gives_nothing() {
+        use crate::bench::{run_plan, RunControl, VirtualBench};
+        use crate::model::extrinsics::Extrinsics;
+        use crate::plan::{JointTarget, Plan, Segment};
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let preset = crate::bench::BenchPreset::resolve("table2-ideal").unwrap();
+        let mut bench = VirtualBench::new(&preset, Some(4)).unwrap();
+        let to =
+            |q: [f64; 6], label: &str| Segment::Move { to: JointTarget::all(q), record: true, label: label.into() };
+        let segments = vec![
+            to([5.0, 0.0, 0.0, 0.0, 0.0, 0.0], "q1 +5 µm"),
+            to([5.0, 4.0, 0.0, 0.0, 0.0, 0.0], "q2 +4 µm"),
+            to([5.0, 4.0, 3.0, 0.0, 0.0, 0.0], "q3 +3 µm"),
+            to([5.0, 4.0, 3.0, 0.5, 0.0, 0.0], "q4 +0.5°"),
+        ];
+        let plan = Plan { name: "moves".into(), description: String::new(), segments };
+        let cancel = std::sync::atomic::AtomicBool::new(false);
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        let run = run_plan(&mut bench, &plan, &mut control);
+        run.outcome.unwrap();
+        let model = PhaseModel::of_preset(&preset, Extrinsics::table2()).unwrap();
+        let options = ExtractOptions::default();
+        let plain = observations_from_traces(&run.traces, &model, &options).observations;
+        assert!(plain.len() >= 4, "{} observations", plain.len());
+        let never = observations_from_traces_until(&run.traces, &model, &options, &|| false).expect("not stopped");
+        assert_eq!(never.observations, plain);
+        assert!(observations_from_traces_until(&run.traces, &model, &options, &|| true).is_none());
+        // Stopped at its second check: the traces analysed before it do not make a result.
+        let checks = AtomicUsize::new(0);
+        let after_one = || checks.fetch_add(1, Ordering::SeqCst) >= 1;
+        assert!(observations_from_traces_until(&run.traces, &model, &options, &after_one).is_none());
+        // The diagnosis of recorded traces says so.
+        use crate::diagnose::{fit::StopCheck, DiagnoseError, Diagnosis};
+        let stopped = Diagnosis::from_traces(&model, &run.traces, Extrinsics::table2(), StopCheck::new(|| true));
+        assert_eq!(stopped.err(), Some(DiagnoseError::Stopped));
     }
 
     /// The fringe amplitudes of a trace.

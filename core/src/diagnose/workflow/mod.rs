@@ -134,16 +134,20 @@ impl Diagnosis {
 
     /// A diagnosis of recorded traces: observations extracted with the calibrated model (the
     /// fringe analysis' motion hint), then [`Diagnosis::new`]. Traces that cannot be analysed
-    /// are returned with why.
+    /// are returned with why. `stop` is asked during the analysis (within one trace's per core)
+    /// and by every step after it ([`Diagnosis::set_stop`]).
     pub fn from_traces(
         base: &PhaseModel,
         traces: &[crate::trace::Trace],
         extrinsics: Extrinsics,
+        stop: fit::StopCheck,
     ) -> Result<(Self, Vec<(String, String)>), DiagnoseError> {
-        use crate::identify::measurements::observations_from_traces;
+        use crate::identify::measurements::observations_from_traces_until;
         let model = PhaseModel { extrinsics, ..base.clone() };
-        let extracted = observations_from_traces(traces, &model, &EXTRACT_OPTIONS);
+        let extracted = observations_from_traces_until(traces, &model, &EXTRACT_OPTIONS, &|| stop.stopped())
+            .ok_or(DiagnoseError::Stopped)?;
         let mut d = Self::new(base, extracted.observations, extrinsics)?;
+        d.set_stop(stop);
         d.session_traces = traces.to_vec();
         // The fringe analysis fits the fringe's harmonics, so a cyclic error of the phase (what
         // a pure-cosine analysis leaves) does not reach the gap changes it measures: on
