@@ -699,18 +699,23 @@ impl AppState {
             })
             .collect();
         let progress = loaded.session.progress;
+        let runs: Vec<Plan> = (0..self.wizard.steps.len()).map(|i| self.plan_run(i)).collect();
         for (p, ((name, traces), (whole, complete))) in loaded.plans.into_iter().zip(whole).enumerate() {
-            match self.wizard.steps.iter_mut().find(|st| st.plan.name == name) {
-                Some(st) if !traces.is_empty() => {
+            match self.wizard.steps.iter_mut().zip(&runs).find(|(st, _)| st.plan.name == name) {
+                Some((st, run)) if !traces.is_empty() => {
                     st.traces = traces;
-                    // The step the session was measuring resumes where it stood.
+                    // The step the session was measuring resumes where it stood, when this
+                    // bench runs the plan it ran (its progress counts that plan's segments).
                     let stood = progress.filter(|pr| pr.plan == p);
+                    let same_plan = loaded.session.plans.get(p) == Some(run);
                     st.state = if complete && stood.is_none() {
                         StepState::Done
                     } else {
                         StepState::Stopped("recovered: incomplete".into())
                     };
-                    st.resume = stood.map(|pr| Resume { progress: Progress { plan: 0, ..pr }, whole_traces: whole });
+                    st.resume = stood
+                        .filter(|_| same_plan)
+                        .map(|pr| Resume { progress: Progress { plan: 0, ..pr }, whole_traces: whole });
                 }
                 Some(_) => {}
                 None => self.imported.extend(traces),

@@ -1,7 +1,8 @@
 //! GUI tests of the session folder's integrity (egui_kittest, headless): every recorded segment
 //! autosaved while the step runs, a step redone after a save leaving the saved session loadable,
 //! a folder open in another photorobot refused with the reason, the untitled session a crash
-//! left offered for recovery at start, and a step a crash interrupted resumed from the autosave.
+//! left offered for recovery at start, and a step a crash interrupted resumed from the autosave
+//! (on a bench that runs the plan it ran).
 
 mod common;
 
@@ -188,4 +189,55 @@ fn a_step_a_crash_interrupted_resumes_from_the_autosave() {
     h.state_mut().state.settings.speed = 0.0;
     h.get_by_label("Resume").click();
     resumed_step_1_ends_whole(&mut h, &whole);
+}
+
+/// A step's resume point counts the segments of the plan its bench ran: a recovered session
+/// offers Resume on a bench that runs the same plan, and only Redo on one that runs another (here
+/// a bench without a tunable laser, whose steps leave their sweeps out).
+#[test]
+fn a_recovered_step_resumes_only_where_its_plan_runs_the_same() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/benches/table2-ideal.ron"))
+        .unwrap()
+        .replace(
+            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0)",
+            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0, tunable: false)",
+        );
+    assert!(text.contains("tunable: false"));
+    let fixed = tmp.path().join("fixed-laser.ron");
+    std::fs::write(&fixed, text).unwrap();
+    for (preset, resumable) in [("table2-ideal".to_string(), true), (fixed.display().to_string(), false)] {
+        let base = tempfile::tempdir().unwrap();
+        let settings = Settings { preset, ..Settings::default() };
+        let mut h = harness(workbench(settings, ScriptedDialogs::default()));
+        // A session a tunable bench was measuring: step 1's first two recorded segments done.
+        let plans: Vec<_> = h.state().state.wizard.steps.iter().map(|s| s.plan.clone()).collect();
+        let recorded: Vec<usize> =
+            plans[0].segments.iter().enumerate().filter(|(_, g)| g.is_recorded()).map(|(i, _)| i).take(2).collect();
+        let info = BenchInfo { name: "virtual bench".into(), preset: None, description: None, seed: None };
+        let mut session = Session::new(info, h.state().state.chain.description().clone());
+        session.plans = plans;
+        session.progress = Some(photorobot_core::session::Progress {
+            plan: 0,
+            next_segment: recorded[1] + 1,
+            plan_start_display: [0.0; 6],
+        });
+        let dir = base.path().join("untitled-100-1");
+        let mut w = SessionWriter::new(&dir, session);
+        let traces = [trace("first", 0.0), trace("second", 1.0)];
+        w.set_traces(traces.iter().zip(&recorded).map(|(t, &k)| (t, Some((0, k)), true))).unwrap();
+        w.autosave().unwrap();
+        h.state_mut().state.session.untitled_base = base.path().to_path_buf();
+        h.state_mut().offer_untitled_recovery();
+        h.run_steps(3);
+        h.get_by_label("Recover the autosave").click();
+        h.run_steps(3);
+        let step = &h.state().state.wizard.steps[0];
+        assert_eq!(step.traces.len(), 2);
+        assert!(matches!(&step.state, StepState::Stopped(e) if e.contains("recovered")), "{:?}", step.state);
+        assert_eq!(step.resume.is_some(), resumable, "tunable laser: {}", h.state().state.worker.tunable_laser);
+        if let Some(r) = step.resume {
+            assert_eq!((r.whole_traces, r.progress.next_segment), (2, recorded[1] + 1));
+        }
+    }
 }
