@@ -264,17 +264,7 @@ fn off_pivot_preset(dir: &std::path::Path) -> String {
 #[test]
 fn wizard_says_before_step_1_what_a_bench_without_a_tunable_laser_costs() {
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/benches/table2-ideal.ron"))
-        .unwrap()
-        .replace("name: \"table2-ideal\"", "name: \"fixed-laser\"")
-        .replace(
-            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0)",
-            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0, tunable: false)",
-        );
-    assert!(text.contains("tunable: false"));
-    let preset = dir.path().join("fixed-laser.ron");
-    std::fs::write(&preset, text).unwrap();
-    let settings = Settings { preset: preset.display().to_string(), ..Settings::default() };
+    let settings = Settings { preset: fixed_laser_preset(dir.path()), ..Settings::default() };
     let mut h = harness(workbench(settings, ScriptedDialogs::default()));
     open(&mut h, Tab::Wizard);
     h.get_by_label("No tunable laser on this bench");

@@ -170,11 +170,7 @@ fn a_step_a_crash_interrupted_resumes_from_the_autosave() {
     // The crash: the workbench goes without a save; what is on disk is the last autosave.
     drop(h);
     let mut h = harness(workbench(settings(), ScriptedDialogs::default()));
-    h.state_mut().state.session.untitled_base = tmp.path().to_path_buf();
-    h.state_mut().offer_untitled_recovery();
-    h.run_steps(3);
-    h.get_by_label("Recover the autosave").click();
-    h.run_steps(3);
+    recover_untitled(&mut h, tmp.path());
     let step = &h.state().state.wizard.steps[0];
     assert!(matches!(&step.state, StepState::Stopped(e) if e.contains("recovered")), "{:?}", step.state);
     let resume = step.resume.expect("the autosave says where the step stood");
@@ -197,16 +193,8 @@ fn a_step_a_crash_interrupted_resumes_from_the_autosave() {
 #[test]
 fn a_recovered_step_resumes_only_where_its_plan_runs_the_same() {
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/benches/table2-ideal.ron"))
-        .unwrap()
-        .replace(
-            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0)",
-            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0, tunable: false)",
-        );
-    assert!(text.contains("tunable: false"));
-    let fixed = tmp.path().join("fixed-laser.ron");
-    std::fs::write(&fixed, text).unwrap();
-    for (preset, resumable) in [("table2-ideal".to_string(), true), (fixed.display().to_string(), false)] {
+    let fixed = fixed_laser_preset(tmp.path());
+    for (preset, resumable) in [("table2-ideal".to_string(), true), (fixed, false)] {
         let base = tempfile::tempdir().unwrap();
         let settings = Settings { preset, ..Settings::default() };
         let mut h = harness(workbench(settings, ScriptedDialogs::default()));
@@ -227,11 +215,7 @@ fn a_recovered_step_resumes_only_where_its_plan_runs_the_same() {
         let traces = [trace("first", 0.0), trace("second", 1.0)];
         w.set_traces(traces.iter().zip(&recorded).map(|(t, &k)| (t, Some((0, k)), true))).unwrap();
         w.autosave().unwrap();
-        h.state_mut().state.session.untitled_base = base.path().to_path_buf();
-        h.state_mut().offer_untitled_recovery();
-        h.run_steps(3);
-        h.get_by_label("Recover the autosave").click();
-        h.run_steps(3);
+        recover_untitled(&mut h, base.path());
         let step = &h.state().state.wizard.steps[0];
         assert_eq!(step.traces.len(), 2);
         assert!(matches!(&step.state, StepState::Stopped(e) if e.contains("recovered")), "{:?}", step.state);

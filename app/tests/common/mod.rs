@@ -1,6 +1,7 @@
 //! Shared kittest helpers of the GUI test binaries (`gui.rs`, `connection.rs`): the headless
 //! harness, waiting on the worker, tab switching, screenshots, in-memory eframe storage and a
-//! save through the scripted folder dialog, and the end of a resumed wizard step.
+//! save through the scripted folder dialog, the end of a resumed wizard step, a bench preset
+//! without a tunable laser and the recovery of a crashed untitled session.
 #![allow(dead_code)] // each test binary uses its own subset
 
 use egui_kittest::kittest::Queryable;
@@ -50,6 +51,31 @@ pub fn resumed_step_1_ends_whole(h: &mut Harness<'_, Workbench>, kept: &[photoro
     let planned: Vec<&str> = step.plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
     assert_eq!(labels, planned, "one whole trace per recorded segment, in order");
     assert!(step.resume.is_none(), "nothing left to resume");
+}
+
+/// A copy of the `table2-ideal` preset named `fixed-laser` whose laser is not tunable, written
+/// into `dir`: its path.
+pub fn fixed_laser_preset(dir: &Path) -> String {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/benches/table2-ideal.ron"))
+        .unwrap()
+        .replace("name: \"table2-ideal\"", "name: \"fixed-laser\"")
+        .replace(
+            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0)",
+            "laser: (wavelength_nm: 1560.0, rin_rel: 0.0, tunable: false)",
+        );
+    assert!(text.contains("tunable: false"));
+    let preset = dir.join("fixed-laser.ron");
+    std::fs::write(&preset, text).unwrap();
+    preset.display().to_string()
+}
+
+/// Recover the newest untitled session a crash left in `base`, as offered at start.
+pub fn recover_untitled(h: &mut Harness<'_, Workbench>, base: &Path) {
+    h.state_mut().state.session.untitled_base = base.to_path_buf();
+    h.state_mut().offer_untitled_recovery();
+    h.run_steps(3);
+    h.get_by_label("Recover the autosave").click();
+    h.run_steps(3);
 }
 
 /// Click a tab and check it is shown.
