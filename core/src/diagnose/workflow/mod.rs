@@ -134,7 +134,7 @@ impl Diagnosis {
 
     /// A diagnosis of recorded traces: observations extracted with the calibrated model (the
     /// fringe analysis' motion hint), then [`Diagnosis::new`]. Traces that cannot be analysed
-    /// are returned with why. `stop` is asked during the analysis (within one trace's per core)
+    /// are returned with why. `stop` is asked during the analysis (it ends within one trace per core)
     /// and by every step after it ([`Diagnosis::set_stop`]).
     pub fn from_traces(
         base: &PhaseModel,
