@@ -93,14 +93,11 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
 }
 
 /// Emulated seconds per real second of the calibration below. The SmarAct positions are polled,
-/// so a poll's latency becomes a timing error that grows with the scale: at 4× on a loaded 2-core
-/// host the short designed plan came out ambiguous once (two branches tied). At 2×, with the
+/// so a poll's latency becomes a timing error that grows with the scale. At 2×, with the
 /// machine's two cores kept busy by another calibration, every parameter landed within 0.3σ of
 /// the truth (93 s with the validation motions, 79 s of it theirs; 14 s without them, as here).
-/// (An ambiguous verdict seen
-/// at real time on a busy host came from the analysis, not the timing: the last fringe amplitude
-/// of a tilt scan, its window cut short by the trace's end depending on where the stage stopped;
-/// such extrema now give no amplitude.)
+/// Such runs also end a start's first pass 0.04° and more from its branch's final estimate,
+/// which the identification must not take for a second branch.
 const TIME_SCALE: f64 = 2.0;
 
 /// The experiment design's plan (`--plan optimised`: 26.5 s of bench time) through TCP on the
