@@ -260,3 +260,64 @@ fn session_round_trip_import_and_report() {
     assert_report_is_self_contained(root.path(), &traces_session_dir, &calibration);
     eprintln!("total: {:.1} s", started.elapsed().as_secs_f64());
 }
+
+/// `calibrate --resume` on a folder the workbench autosaved with its first step not measured
+/// and its second measured whole: the second is skipped, its traces kept as they are, and the
+/// calibration equals the one measured in one run (the virtual bench's noise starts anew with
+/// its seed). With the second step measured in part, the folder is refused, the plan named:
+/// it would be measured again from its start and its traces counted twice.
+#[test]
+fn resume_skips_a_step_the_workbench_measured_and_refuses_one_it_stopped() {
+    use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
+    use photorobot_core::session::{Progress, TraceRef};
+    let root = tempfile::tempdir().unwrap();
+    let full_dir = root.path().join("full");
+    let full = calibrate(&[], &full_dir);
+    let measured = Session::load(&full_dir).unwrap();
+    let second: Vec<TraceRef> = measured.traces.iter().filter(|t| t.step.is_some_and(|s| s.0 == 1)).cloned().collect();
+    assert!(second.len() >= 2 && second.len() < measured.traces.len());
+    let start = VirtualBench::new(&BenchPreset::resolve("table2-ideal").unwrap(), Some(7)).unwrap().position_display();
+    let workbench_folder = |name: &str, traces: &[TraceRef]| -> PathBuf {
+        let dir = root.path().join(name);
+        std::fs::create_dir_all(dir.join("traces")).unwrap();
+        for t in traces {
+            std::fs::copy(full_dir.join(&t.file), dir.join(&t.file)).unwrap();
+        }
+        let mut autosaved = measured.clone();
+        autosaved.calibration = None;
+        autosaved.traces = traces.to_vec();
+        autosaved.progress = Some(Progress { plan: 0, next_segment: 0, plan_start_display: start });
+        autosaved.autosave(&dir).unwrap();
+        dir
+    };
+
+    let dir = workbench_folder("second-whole", &second);
+    let resumed = calibrate(&["--resume"], &dir);
+    let session = Session::load(&dir).unwrap();
+    let kept: Vec<&TraceRef> = session.traces.iter().filter(|t| t.step.is_some_and(|s| s.0 == 1)).collect();
+    let files = |refs: &[&TraceRef]| refs.iter().map(|t| t.file.clone()).collect::<Vec<_>>();
+    assert_eq!(files(&kept), files(&second.iter().collect::<Vec<_>>()), "the second step, not measured again");
+    assert!(kept.iter().zip(&second).all(|(a, b)| *a == b), "its references as they were");
+    assert_eq!(session.traces.len(), measured.traces.len(), "the first step measured once");
+    // As measured in one run, to rounding (the traces are identified in another order).
+    for (p, q) in resumed["parameters"].as_array().unwrap().iter().zip(full["parameters"].as_array().unwrap()) {
+        let (a, b) = (p["value"].as_f64().unwrap(), q["value"].as_f64().unwrap());
+        let sigma = q["sigma"].as_f64().unwrap_or(1.0);
+        assert!((a - b).abs() < 1e-3 * sigma, "{}: {a} resumed, {b} in one run (σ {sigma})", p["name"]);
+    }
+
+    let dir = workbench_folder("second-stopped", &second[..second.len() - 1]);
+    let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--seed", "7", "--mode", "paper", "--resume"];
+    let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
+    argv.extend(["--out".to_string(), dir.display().to_string()]);
+    let err = run(argv, &mut Vec::new()).unwrap_err();
+    let expected = format!(
+        "session.autosave.ron: field `traces`: plan 2 ({}) has whole traces for {} of its {} recorded segments",
+        measured.plans[1].name,
+        second.len() - 1,
+        second.len()
+    );
+    assert!(err.to_string().contains(&expected), "{err}");
+    assert_eq!(err.exit_code(), 3);
+    assert_eq!(Session::recover(&dir).unwrap().traces.len(), second.len() - 1, "the autosave as it was");
+}

@@ -18,7 +18,7 @@ use photorobot_core::calibration::{
     identify, plan_durations, plans, predicted_validation_rows, report_from_identification, report_from_traces,
     validation_rows, CalibrationReport, Mode,
 };
-use photorobot_core::files::{save_ron, write_atomic};
+use photorobot_core::files::{save_ron, write_atomic, FileError};
 use photorobot_core::hardware::emulator::EmuClock;
 use photorobot_core::hardware::HardwareConfig;
 use photorobot_core::identify::signs::{SignSource, TranslationSign};
@@ -28,8 +28,8 @@ use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::Plan;
 use photorobot_core::session::{
-    self as lab, find_recovery, recording::record_with, BenchInfo, ControllerIdentity, FolderLock, LabRecord, Session,
-    SessionWriter, AUTOSAVE_FILE,
+    self as lab, autosave_path, find_recovery, recording::record_with, BenchInfo, ControllerIdentity, FolderLock,
+    LabRecord, Session, SessionWriter, AUTOSAVE_FILE,
 };
 use photorobot_core::trace::import::{read_folder_sourced, ColumnMapping};
 use photorobot_core::trace::Trace;
@@ -321,7 +321,7 @@ fn measure_identify_validate(
     bench: &mut dyn Bench,
     identity: (Option<u64>, &[(String, String)]),
 ) -> Result<(Session, CalibrationReport), CliError> {
-    let session = if a.resume { Session::recover(&a.out)? } else { new_session(a, preset, &*bench, mode, identity)? };
+    let session = if a.resume { recover(&a.out)? } else { new_session(a, preset, &*bench, mode, identity)? };
     // Each plan's bench time from the timing model, every plan from the start (q = 0).
     let durations = plan_durations(&session.plans, &session.robot, &preset.motion, [0.0; 6])
         .map_err(|problem| plan_error(a, problem))?;
@@ -374,6 +374,22 @@ fn measure_identify_validate(
     }
     progress.borrow_mut().finish();
     Ok((session, report))
+}
+
+/// The session autosaved in `dir`, refused when a plan after the one it resumes was measured
+/// in part by the workbench (it would be measured again from its start).
+fn recover(dir: &Path) -> Result<Session, CliError> {
+    let session = Session::recover(dir)?;
+    if let Some((p, whole, recorded)) = session.partly_measured_after_progress() {
+        let problem = format!(
+            "plan {} ({}) has whole traces for {whole} of its {recorded} recorded segments and no resume point \
+             here: --resume would measure it again from its start; resume or redo that step in the workbench",
+            p + 1,
+            session.plans[p].name
+        );
+        return Err(FileError::Invalid { file: autosave_path(dir), field: "traces".into(), problem }.into());
+    }
+    Ok(session)
 }
 
 /// Plans that cannot run on the bench: `--plan`'s when given, else the mode's or the resumed

@@ -200,6 +200,28 @@ impl Session {
     pub fn measured(&self) -> bool {
         self.progress.is_some_and(|p| p.plan >= self.plans.len())
     }
+
+    /// How far plan `p` is measured: its recorded segments that have a whole trace, and its
+    /// recorded segments. The workbench measures its steps in any order, so a plan after the
+    /// session's progress may be measured already.
+    pub fn plan_coverage(&self, p: usize) -> (usize, usize) {
+        let Some(plan) = self.plans.get(p) else { return (0, 0) };
+        let recorded: Vec<usize> = (0..plan.segments.len()).filter(|&i| plan.segments[i].is_recorded()).collect();
+        let whole = recorded.iter().filter(|&&i| self.traces.iter().any(|t| t.complete && t.step == Some((p, i))));
+        (whole.count(), recorded.len())
+    }
+
+    /// The first plan after the progress's that is measured in part (some of its recorded
+    /// segments have a whole trace, not all), as (plan, whole, recorded): the workbench stopped
+    /// it and keeps no resume point for it here, so a run over the plans would measure it again
+    /// from its start and count its earlier traces twice.
+    pub fn partly_measured_after_progress(&self) -> Option<(usize, usize, usize)> {
+        let from = self.progress.map_or(0, |p| p.plan + 1);
+        (from..self.plans.len())
+            .map(|p| (p, self.plan_coverage(p)))
+            .find(|(_, (whole, recorded))| *whole > 0 && whole < recorded)
+            .map(|(p, (whole, recorded))| (p, whole, recorded))
+    }
 }
 
 /// `photorobot-core <version>`.

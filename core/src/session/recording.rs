@@ -26,6 +26,11 @@ pub trait RecordSink {
     fn keep_trace(&mut self, trace: &Trace, at: (usize, usize), complete: bool) -> Result<(), SessionError>;
     /// Where the measurement stands now, every trace before it kept.
     fn set_progress(&mut self, progress: Progress) -> Result<(), SessionError>;
+    /// Whether plan `p` was measured whole already, after the plan the progress names (the
+    /// workbench measures its steps in any order): the run skips it.
+    fn measured(&self, _p: usize) -> bool {
+        false
+    }
 }
 
 /// The session folder: each trace to a new file, each progress to the autosave.
@@ -45,6 +50,11 @@ impl RecordSink for SessionWriter {
     fn set_progress(&mut self, progress: Progress) -> Result<(), SessionError> {
         self.session_mut().progress = Some(progress);
         self.autosave()
+    }
+
+    fn measured(&self, p: usize) -> bool {
+        let (whole, recorded) = self.session().plan_coverage(p);
+        recorded > 0 && whole == recorded
     }
 }
 
@@ -81,6 +91,11 @@ pub fn record_with(
     let first = sink.progress().map_or(0, |p| p.plan);
     let plans = sink.plans();
     for (p, plan) in plans.iter().enumerate().skip(first) {
+        if p > first && sink.measured(p) {
+            tracing::info!(plan = %plan.name, "plan {} of {} already measured: skipped", p + 1, plans.len());
+            on_segment(p, plan.segments.len());
+            continue;
+        }
         // A recovered session goes back to where its plan started (recorded in the autosave).
         let resuming = sink.progress().filter(|pr| pr.plan == p);
         let progress =
