@@ -568,10 +568,9 @@ mod tests {
             column_names: vec![],
             column_parameter: vec![],
         };
-        let none = vec![];
         Identification {
             estimate,
-            observations: none,
+            observations: vec![],
             step_a: None,
             skipped: vec![],
             branches: vec![],
