@@ -12,6 +12,7 @@ use photorobot_app::gui::{App, Tab, Workbench};
 use photorobot_app::settings::Settings;
 use photorobot_app::state::StepState;
 use photorobot_app::worker::EffectValidation;
+use photorobot_core::identify::verdict::Standing;
 use std::time::{Duration, Instant};
 
 fn workbench(settings: Settings, dialogs: ScriptedDialogs) -> Workbench {
@@ -324,7 +325,31 @@ fn results_view_refuses_a_fit_the_model_cannot_explain() {
     h.get_by_label(&fit.worst_traces[0].label);
     assert!(h.query_all_by_label("yes").next().is_none(), "no parameter shown as determined");
     assert!(h.query_all_by_label("β_et").next().is_none(), "no table of numbers");
+    // Each start tried says how it stands: a start that ended in the kept branch is that
+    // branch, not a worse one.
+    h.get_by_label("kept");
+    let standing = |k: usize| match fit.standing(k) {
+        Standing::Chosen => "kept",
+        Standing::Tied => "TIED",
+        Standing::SameBranch => "same branch",
+        Standing::Worse => "worse",
+    };
+    let shown = |h: &Harness<'_, Workbench>, word: &str| h.query_all_by_label(word).count();
+    for word in ["same branch", "worse"] {
+        let expected = (0..fit.branches.len()).filter(|&k| standing(k) == word).count();
+        assert_eq!(shown(&h, word), expected, "{word}: {:?}", fit.branches);
+    }
     screenshot(&mut h, "results-does-not-fit");
+    // The kept branch found again from one more start.
+    let mut again = report.clone();
+    let listed = &mut again.fit.as_mut().unwrap().branches;
+    listed.push(photorobot_core::identify::verdict::BranchSummary {
+        start: "one more start".into(),
+        ..listed[0].clone()
+    });
+    h.state_mut().state.results.report = Some(again);
+    h.run_steps(2);
+    assert_eq!(shown(&h, "same branch"), 1 + (0..fit.branches.len()).filter(|&k| standing(k) == "same branch").count());
 }
 
 /// The discrepancy workflow from the GUI on strategy 2's traces: every step is shown, then the

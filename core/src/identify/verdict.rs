@@ -96,6 +96,38 @@ pub struct FitCheck {
     pub summary: String,
 }
 
+/// How a listed branch stands against the chosen one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Standing {
+    /// The branch the identification keeps.
+    Chosen,
+    /// It ties with the chosen one.
+    Tied,
+    /// A branch listed before it, found again from another start.
+    SameBranch,
+    /// A distinct branch that fits worse.
+    Worse,
+}
+
+impl FitCheck {
+    /// How branch `k` of [`FitCheck::branches`] stands.
+    pub fn standing(&self, k: usize) -> Standing {
+        let same = |j: usize| match (self.branches.get(j), self.branches.get(k)) {
+            (Some(a), Some(b)) => crate::identify::start::same_branch(&a.extrinsics, &b.extrinsics),
+            _ => false,
+        };
+        if k == 0 {
+            Standing::Chosen
+        } else if self.tied_branches.contains(&k) {
+            Standing::Tied
+        } else if (0..k).any(same) {
+            Standing::SameBranch
+        } else {
+            Standing::Worse
+        }
+    }
+}
+
 /// Traces listed in [`FitCheck::worst_traces`].
 pub const WORST_TRACES: usize = 5;
 
@@ -258,6 +290,41 @@ mod tests {
         }
         let formal = ((j.transpose() * &j).try_inverse().unwrap()[(1, 1)] * 1e-4).sqrt();
         assert!(jack[1] > 10.0 * formal, "jackknife {} vs formal {formal}", jack[1]);
+    }
+
+    /// The chosen branch, a tie, the chosen branch found again from another start, a distinct
+    /// worse branch and that one found again.
+    #[test]
+    fn each_listed_branch_says_how_it_stands() {
+        let e = Extrinsics::nominal_design();
+        let branch = |start: &str, extrinsics: Extrinsics, chi2: f64| BranchSummary {
+            start: start.into(),
+            extrinsics,
+            chi2,
+            rms_sigma: 0.1,
+            skipped_traces: 0,
+        };
+        let mirrored = Extrinsics { beta_et_deg: -e.beta_et_deg, ..e };
+        let far = Extrinsics { theta_et_deg: e.theta_et_deg + 1.0, ..e };
+        let fit = FitCheck {
+            verdict: Verdict::Ambiguous,
+            rms_sigma: 0.1,
+            threshold_sigma: 2.8,
+            worst_traces: vec![],
+            branches: vec![
+                branch("absolute gaps", e, 2.1),
+                branch("fringe travel 1", mirrored, 4.0),
+                branch("fringe travel 2", e, 2.1),
+                branch("fringe travel 3", far, 90.0),
+                branch("fringe travel 4", far, 90.0),
+            ],
+            tied_branches: vec![1],
+            ambiguous_parameters: vec![],
+            summary: String::new(),
+        };
+        let standings: Vec<Standing> = (0..5).map(|k| fit.standing(k)).collect();
+        use Standing::*;
+        assert_eq!(standings, [Chosen, Tied, SameBranch, Worse, SameBranch]);
     }
 
     #[test]
