@@ -264,8 +264,9 @@ fn session_round_trip_import_and_report() {
 /// `calibrate --resume` on a folder the workbench autosaved with its first step not measured
 /// and its second measured whole: the second is skipped, its traces kept as they are, and the
 /// calibration equals the one measured in one run (the virtual bench's noise starts anew with
-/// its seed). With the second step measured in part, the folder is refused, the plan named:
-/// it would be measured again from its start and its traces counted twice.
+/// its seed). With the second step begun and the first not: both measured, the second first.
+/// With the second step measured in part, the folder is refused, the plan named: it would be
+/// measured again from its start and its traces counted twice.
 #[test]
 fn resume_skips_a_step_the_workbench_measured_and_refuses_one_it_stopped() {
     use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
@@ -304,6 +305,28 @@ fn resume_skips_a_step_the_workbench_measured_and_refuses_one_it_stopped() {
         let (a, b) = (p["value"].as_f64().unwrap(), q["value"].as_f64().unwrap());
         let sigma = q["sigma"].as_f64().unwrap_or(1.0);
         assert!((a - b).abs() < 1e-3 * sigma, "{}: {a} resumed, {b} in one run (σ {sigma})", p["name"]);
+    }
+
+    // The second step begun (its progress autosaved, no segment done), the first not at all:
+    // the second is measured, then the first, each recorded segment once.
+    let dir = workbench_folder("first-unmeasured", &[]);
+    let mut autosaved = Session::recover(&dir).unwrap();
+    autosaved.progress = Some(Progress { plan: 1, next_segment: 0, plan_start_display: start });
+    autosaved.autosave(&dir).unwrap();
+    let resumed = calibrate(&["--resume"], &dir);
+    let session = Session::load(&dir).unwrap();
+    let steps: Vec<(usize, usize)> = session.traces.iter().map(|t| t.step.unwrap()).collect();
+    let mut in_plan_order = steps.clone();
+    in_plan_order.sort();
+    let expected: Vec<(usize, usize)> = measured.traces.iter().map(|t| t.step.unwrap()).collect();
+    assert_eq!(in_plan_order, expected, "every recorded segment once");
+    assert_eq!(steps[0].0, 1, "the step the progress names first");
+    let truth = BenchPreset::resolve("table2-ideal").unwrap().truth.to_array();
+    for (p, truth) in resumed["parameters"].as_array().unwrap().iter().zip(truth) {
+        if p["determined"] == true {
+            let (value, sigma) = (p["value"].as_f64().unwrap(), p["sigma"].as_f64().unwrap());
+            assert!((value - truth).abs() < 3.0 * sigma, "{}: {value}, truth {truth}, σ {sigma}", p["name"]);
+        }
     }
 
     let dir = workbench_folder("second-stopped", &second[..second.len() - 1]);

@@ -376,11 +376,11 @@ fn measure_identify_validate(
     Ok((session, report))
 }
 
-/// The session autosaved in `dir`, refused when a plan after the one it resumes was measured
-/// in part by the workbench (it would be measured again from its start).
+/// The session autosaved in `dir`, refused when a plan other than the one it resumes was
+/// measured in part by the workbench (it would be measured again from its start).
 fn recover(dir: &Path) -> Result<Session, CliError> {
     let session = Session::recover(dir)?;
-    if let Some((p, whole, recorded)) = session.partly_measured_after_progress() {
+    if let Some((p, whole, recorded)) = session.partly_measured_besides_progress() {
         let problem = format!(
             "plan {} ({}) has whole traces for {whole} of its {recorded} recorded segments and no resume point \
              here: --resume would measure it again from its start; resume or redo that step in the workbench",

@@ -211,13 +211,14 @@ impl Session {
         (whole.count(), recorded.len())
     }
 
-    /// The first plan after the progress's that is measured in part (some of its recorded
+    /// The first plan other than the progress's that is measured in part (some of its recorded
     /// segments have a whole trace, not all), as (plan, whole, recorded): the workbench stopped
     /// it and keeps no resume point for it here, so a run over the plans would measure it again
     /// from its start and count its earlier traces twice.
-    pub fn partly_measured_after_progress(&self) -> Option<(usize, usize, usize)> {
-        let from = self.progress.map_or(0, |p| p.plan + 1);
-        (from..self.plans.len())
+    pub fn partly_measured_besides_progress(&self) -> Option<(usize, usize, usize)> {
+        let resumed = self.progress.map(|p| p.plan);
+        (0..self.plans.len())
+            .filter(|&p| Some(p) != resumed)
             .map(|p| (p, self.plan_coverage(p)))
             .find(|(_, (whole, recorded))| *whole > 0 && whole < recorded)
             .map(|(p, (whole, recorded))| (p, whole, recorded))

@@ -26,10 +26,12 @@ pub trait RecordSink {
     fn keep_trace(&mut self, trace: &Trace, at: (usize, usize), complete: bool) -> Result<(), SessionError>;
     /// Where the measurement stands now, every trace before it kept.
     fn set_progress(&mut self, progress: Progress) -> Result<(), SessionError>;
-    /// Whether plan `p` was measured whole already, after the plan the progress names (the
-    /// workbench measures its steps in any order): the run skips it.
-    fn measured(&self, _p: usize) -> bool {
-        false
+    /// How far plan `p` is measured, when the sink knows: its recorded segments with a whole
+    /// trace, and its recorded segments. The workbench measures its steps in any order, so a
+    /// plan after the one the progress names may be measured already and one before it not at
+    /// all.
+    fn coverage(&self, _p: usize) -> Option<(usize, usize)> {
+        None
     }
 }
 
@@ -52,10 +54,27 @@ impl RecordSink for SessionWriter {
         self.autosave()
     }
 
-    fn measured(&self, p: usize) -> bool {
-        let (whole, recorded) = self.session().plan_coverage(p);
-        recorded > 0 && whole == recorded
+    fn coverage(&self, p: usize) -> Option<(usize, usize)> {
+        Some(self.session().plan_coverage(p))
     }
+}
+
+/// The plans [`record_with`] measures, in order: from the one the progress resumes (the first
+/// without a progress) to the last, but for those measured whole already, then those before it
+/// not measured at all. A workbench session's steps run in any order; in one the command line
+/// measured, the plans before the progress's are whole and those after it not begun.
+fn plans_to_measure(sink: &dyn RecordSink, count: usize) -> Vec<usize> {
+    let resumed = sink.progress().map(|p| p.plan);
+    let first = resumed.unwrap_or(0);
+    let whole = |p: usize| sink.coverage(p).is_some_and(|(whole, recorded)| recorded > 0 && whole == recorded);
+    let unmeasured = |p: usize| sink.coverage(p).is_some_and(|(whole, recorded)| recorded > 0 && whole == 0);
+    let after = (first..count).filter(|&p| Some(p) == resumed || !whole(p));
+    let before = (0..first.min(count)).filter(|&p| unmeasured(p));
+    let order: Vec<usize> = after.chain(before).collect();
+    for p in (0..count).filter(|p| !order.contains(p) && *p >= first) {
+        tracing::info!("plan {} of {count} already measured: skipped", p + 1);
+    }
+    order
 }
 
 /// How a [`record`] call ended.
@@ -88,14 +107,9 @@ pub fn record_with(
     on_segment: &mut dyn FnMut(usize, usize),
 ) -> Result<Recorded, SessionError> {
     let start_s = bench.clock_s();
-    let first = sink.progress().map_or(0, |p| p.plan);
     let plans = sink.plans();
-    for (p, plan) in plans.iter().enumerate().skip(first) {
-        if p > first && sink.measured(p) {
-            tracing::info!(plan = %plan.name, "plan {} of {} already measured: skipped", p + 1, plans.len());
-            on_segment(p, plan.segments.len());
-            continue;
-        }
+    for p in plans_to_measure(&*sink, plans.len()) {
+        let plan = &plans[p];
         // A recovered session goes back to where its plan started (recorded in the autosave).
         let resuming = sink.progress().filter(|pr| pr.plan == p);
         let progress =
