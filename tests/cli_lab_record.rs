@@ -43,6 +43,15 @@ fn calibrate_records_the_lab_record_in_the_session_and_the_report() {
     assert!(session.lab.controllers[0].identification.contains("virtual bench table2-ideal"));
     let text = std::fs::read_to_string(dir.join("session.ron")).unwrap();
     assert!(text.contains("operator: Some(\"Ada Lovelace\")"), "{text}");
+    // The printed fit lists every start tried with how it stands, as the session's verdict says.
+    let printed = String::from_utf8(printed).unwrap();
+    let fit = session.calibration.as_ref().and_then(|c| c.fit.clone()).expect("a verdict");
+    let lines: Vec<&str> = printed.lines().filter(|l| l.trim_start().starts_with("branch from")).collect();
+    assert_eq!(lines.len(), fit.branches.len(), "{printed}");
+    for (k, line) in lines.iter().enumerate() {
+        assert!(line.contains(&format!(" σ  {} ", fit.standing(k).word())), "{line}");
+    }
+    assert!(lines[0].contains(" σ  chosen "), "{printed}");
 
     let html = root.path().join("report.html");
     let argv = ["photorobot", "report", &out, "--out", &html.display().to_string()];

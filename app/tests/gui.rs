@@ -12,7 +12,6 @@ use photorobot_app::gui::{App, Tab, Workbench};
 use photorobot_app::settings::Settings;
 use photorobot_app::state::StepState;
 use photorobot_app::worker::EffectValidation;
-use photorobot_core::identify::verdict::Standing;
 use std::time::{Duration, Instant};
 
 fn workbench(settings: Settings, dialogs: ScriptedDialogs) -> Workbench {
@@ -327,13 +326,8 @@ fn results_view_refuses_a_fit_the_model_cannot_explain() {
     assert!(h.query_all_by_label("β_et").next().is_none(), "no table of numbers");
     // Each start tried says how it stands: a start that ended in the kept branch is that
     // branch, not a worse one.
-    h.get_by_label("kept");
-    let standing = |k: usize| match fit.standing(k) {
-        Standing::Chosen => "kept",
-        Standing::Tied => "TIED",
-        Standing::SameBranch => "same branch",
-        Standing::Worse => "worse",
-    };
+    h.get_by_label("chosen");
+    let standing = |k: usize| fit.standing(k).word();
     let shown = |h: &Harness<'_, Workbench>, word: &str| h.query_all_by_label(word).count();
     for word in ["same branch", "worse"] {
         let expected = (0..fit.branches.len()).filter(|&k| standing(k) == word).count();

@@ -6,7 +6,7 @@ use crate::state::AppState;
 use egui::{Color32, RichText};
 use egui_plot::{Legend, Plot, PlotPoints, Points};
 use photorobot_core::calibration::CalibrationReport;
-use photorobot_core::identify::verdict::{FitCheck, Standing, Verdict};
+use photorobot_core::identify::verdict::{FitCheck, Verdict};
 
 /// The equation (measurement kind) a residual belongs to, from its unit and trace label: an
 /// absolute gap, a fringe amplitude, or the gap change of a motion of joint q1..q6 (the joint
@@ -162,12 +162,7 @@ fn branches(ui: &mut egui::Ui, fit: &FitCheck) {
             ui.label(&b.start);
             ui.monospace(format!("{:.1}", b.chi2));
             ui.monospace(format!("{:.2}", b.rms_sigma));
-            ui.label(match fit.standing(k) {
-                Standing::Chosen => "kept",
-                Standing::Tied => "TIED",
-                Standing::SameBranch => "same branch",
-                Standing::Worse => "worse",
-            });
+            ui.label(fit.standing(k).word());
             ui.end_row();
         }
     });

@@ -109,6 +109,18 @@ pub enum Standing {
     Worse,
 }
 
+impl Standing {
+    /// The word the report lists the branch with.
+    pub fn word(self) -> &'static str {
+        match self {
+            Standing::Chosen => "chosen",
+            Standing::Tied => "TIED",
+            Standing::SameBranch => "same branch",
+            Standing::Worse => "worse",
+        }
+    }
+}
+
 impl FitCheck {
     /// How branch `k` of [`FitCheck::branches`] stands.
     pub fn standing(&self, k: usize) -> Standing {
@@ -325,6 +337,8 @@ mod tests {
         let standings: Vec<Standing> = (0..5).map(|k| fit.standing(k)).collect();
         use Standing::*;
         assert_eq!(standings, [Chosen, Tied, SameBranch, Worse, SameBranch]);
+        let words: Vec<&str> = standings.iter().map(|s| s.word()).collect();
+        assert_eq!(words, ["chosen", "TIED", "same branch", "worse", "same branch"]);
     }
 
     #[test]
