@@ -12,7 +12,7 @@ use crate::identify::joint::{self, JointEstimate, JointOptions};
 use crate::identify::measurements::{
     observations_from_seeded, observations_from_traces, sweep_seeds, ExtractOptions, Extracted,
 };
-use crate::identify::start::{same_branch, start_branches, travels};
+use crate::identify::start::{found_before, same_branch, start_branches, travels};
 use crate::identify::verdict::{BranchSummary, TIE_DELTA_CHI2};
 use crate::identify::{paper, Observation, ObservationKind};
 use crate::model::extrinsics::Extrinsics;
@@ -227,13 +227,9 @@ pub fn identify(traces: &[Trace], nominal: &PhaseModel, mode: Mode) -> Result<Id
     // its full second pass. The paper's steps read only the translations, each branch with
     // its own model: there two χ² of different branches are not comparable on their own.
     // A branch found from several starts counts once.
-    let repeat: Vec<bool> = (0..runs.len())
-        .map(|k| {
-            let e = &runs[k].1.estimate.extrinsics;
-            same_branch(e, &best.estimate.extrinsics)
-                || runs[..k].iter().any(|r| same_branch(&r.1.estimate.extrinsics, e))
-        })
-        .collect();
+    let listed: Vec<Extrinsics> =
+        std::iter::once(&best).chain(runs.iter().map(|r| &r.1)).map(|id| id.estimate.extrinsics).collect();
+    let repeat: Vec<bool> = (1..listed.len()).map(|k| found_before(&listed, k).is_some()).collect();
     let rivals: Vec<Option<BranchSummary>> = runs
         .par_iter()
         .zip(repeat)
@@ -280,11 +276,10 @@ where
     F: Fn(Extrinsics) -> Identification + Sync,
 {
     use rayon::prelude::*;
+    let firsts: Vec<Extrinsics> = runs.iter().map(|r| r.1.estimate.extrinsics).collect();
     let mut twin: Vec<Option<usize>> = Vec::with_capacity(runs.len());
     for k in 0..runs.len() {
-        let e = &runs[k].1.estimate.extrinsics;
-        let first_found = runs[..k].iter().position(|r| same_branch(&r.1.estimate.extrinsics, e));
-        twin.push(first_found.map(|j| twin[j].unwrap_or(j)));
+        twin.push(found_before(&firsts, k).map(|j| twin[j].unwrap_or(j)));
     }
     let finals: Vec<Option<Identification>> = runs
         .par_iter()

@@ -244,6 +244,12 @@ pub fn start_branches(
     distinct
 }
 
+/// The first of `estimates[..k]` in the same branch as `estimates[k]`: a branch found again.
+pub fn found_before(estimates: &[Extrinsics], k: usize) -> Option<usize> {
+    let e = estimates.get(k)?;
+    estimates[..k].iter().position(|b| same_branch(b, e))
+}
+
 /// Whether two estimates are the same branch ([`SAME_BRANCH`]).
 pub fn same_branch(a: &Extrinsics, b: &Extrinsics) -> bool {
     let (a, b) = (a.to_array(), b.to_array());

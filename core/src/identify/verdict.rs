@@ -124,15 +124,12 @@ impl Standing {
 impl FitCheck {
     /// How branch `k` of [`FitCheck::branches`] stands.
     pub fn standing(&self, k: usize) -> Standing {
-        let same = |j: usize| match (self.branches.get(j), self.branches.get(k)) {
-            (Some(a), Some(b)) => crate::identify::start::same_branch(&a.extrinsics, &b.extrinsics),
-            _ => false,
-        };
+        let listed: Vec<Extrinsics> = self.branches.iter().map(|b| b.extrinsics).collect();
         if k == 0 {
             Standing::Chosen
         } else if self.tied_branches.contains(&k) {
             Standing::Tied
-        } else if (0..k).any(same) {
+        } else if crate::identify::start::found_before(&listed, k).is_some() {
             Standing::SameBranch
         } else {
             Standing::Worse
