@@ -103,9 +103,9 @@ fn expr_attrs(expr: &Expr) -> &[Attribute] {
         };
     }
     attrs_of!(
-        Array, Assign, Async, Await, Binary, Block, Break, Call, Cast, Closure, Const, Continue, Field, ForLoop,
-        Group, If, Index, Infer, Let, Lit, Loop, Macro, Match, MethodCall, Paren, Path, Range, RawAddr, Reference,
-        Repeat, Return, Struct, Try, TryBlock, Tuple, Unary, Unsafe, While, Yield
+        Array, Assign, Async, Await, Binary, Block, Break, Call, Cast, Closure, Const, Continue, Field, ForLoop, Group,
+        If, Index, Infer, Let, Lit, Loop, Macro, Match, MethodCall, Paren, Path, Range, RawAddr, Reference, Repeat,
+        Return, Struct, Try, TryBlock, Tuple, Unary, Unsafe, While, Yield
     )
 }
 
@@ -495,7 +495,8 @@ fn every_arrow_between_core_stages_points_down_the_data_flow() {
 #[test]
 fn every_production_file_of_the_core_is_read_and_no_test_file() {
     let files: BTreeSet<&Path> = core().0.values().map(|m| m.file.as_path()).collect();
-    for probe in ["bench/virtual_bench/mod.rs", "measure/track/kernel.rs", "measure/sweep/mod.rs", "session/writer.rs"] {
+    for probe in ["bench/virtual_bench/mod.rs", "measure/track/kernel.rs", "measure/sweep/mod.rs", "session/writer.rs"]
+    {
         assert!(files.contains(workspace().join("core/src").join(probe).as_path()), "{probe} is not read");
     }
     for test_file in ["measure/track/tests.rs", "measure/track/reference.rs", "session/tests.rs"] {
@@ -576,7 +577,10 @@ fn the_checker_sees_an_upward_arrow_after_an_early_test_module() {
 fn the_checker_sees_an_upward_arrow_in_a_braced_import() {
     let low = "pub struct L;\nuse crate::{low::L as _L2, mid::{a::A, b}};\n";
     let (up, _) = check(&with(clean_tree(), &[("low.rs", low)]));
-    assert!(up.iter().any(|a| a.starts_with("low -> mid::a")) && up.iter().any(|a| a.starts_with("low -> mid::b")), "{up:?}");
+    assert!(
+        up.iter().any(|a| a.starts_with("low -> mid::a")) && up.iter().any(|a| a.starts_with("low -> mid::b")),
+        "{up:?}"
+    );
     // Through a name an import brought in.
     let low = "pub struct L;\nuse crate::mid as m;\npub fn l() { m::f(); }\n";
     let (up, _) = check(&with(clean_tree(), &[("low.rs", low)]));
@@ -598,7 +602,8 @@ fn the_checker_sees_a_circle_through_submodules() {
     let b = "pub struct B;\nuse self::inner::I;\nmod inner { pub struct I; fn i() { crate::mid::a::f(); } }\n";
     let (up, circles) = check(&with(clean_tree(), &[("mid/b.rs", b)]));
     assert!(up.is_empty(), "{up:?}");
-    let expected = ["between subtrees: mid::a -> mid::b", "between subtrees: mid::b -> mid::a (mid::b::inner -> mid::a"];
+    let expected =
+        ["between subtrees: mid::a -> mid::b", "between subtrees: mid::b -> mid::a (mid::b::inner -> mid::a"];
     for arrow in expected {
         assert!(circles.iter().any(|c| c.starts_with(arrow)), "no {arrow} in {circles:?}");
     }
