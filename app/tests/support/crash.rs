@@ -13,7 +13,8 @@
 //! the noise: the irradiance of a segment measured after a resume differs from the
 //! uninterrupted run's by the detector's white noise alone (RMS √2·σ within 15 %, no offset), and
 //! each identified parameter by less than [`PARAMETER_TOLERANCE_SIGMA`] of its σ, with the same
-//! parameters determined and the same verdict.
+//! parameters determined and the same verdict; when no trace was measured anew, the calibration
+//! is the same to the last bit.
 
 #![allow(dead_code)]
 
@@ -29,10 +30,11 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// A finished session's parameters differ from the uninterrupted run's by less than this many
-/// of their σ. Two runs share the noise of the segments measured before the first kill and
-/// draw the rest anew: the difference is that of two estimates from partly independent data,
-/// √(2·f)·σ for a fraction f of the data drawn again (at most √2·σ), and under 3σ of it.
-pub const PARAMETER_TOLERANCE_SIGMA: f64 = 3.0 * std::f64::consts::SQRT_2;
+/// of their σ. The two runs share the noise of the segments measured before the first kill and
+/// draw the rest anew: two calibrations of one bench from data that differ by noise alone, which
+/// must agree within the uncertainty each states (a resumed session that moved a parameter by
+/// its σ would make that σ a false statement). Seen: at most 0.35 σ over 60 kills.
+pub const PARAMETER_TOLERANCE_SIGMA: f64 = 1.0;
 
 /// `photorobot calibrate` with its arguments (all but `--out` and `--resume`).
 #[derive(Debug, Clone)]
@@ -114,13 +116,13 @@ pub struct Moment {
 }
 
 /// `count` kill moments within the measurement drawn from `seed`: after 0 to 2 more segments,
-/// then up to 80 ms (about one segment); the first, at times, within 40 ms of the start.
+/// then up to 80 ms (about one segment); the first, at times, within 15 ms of the start.
 pub fn moments(seed: u64, count: usize) -> Vec<Moment> {
     let mut rng = StdRng::seed_from_u64(seed);
     (0..count)
         .map(|k| {
             if k == 0 && rng.random_bool(0.5) {
-                return Moment { after: After::Segments(0), delay: Duration::from_millis(rng.random_range(0..40)) };
+                return Moment { after: After::Segments(0), delay: Duration::from_millis(rng.random_range(0..15)) };
             }
             let after = After::Segments(rng.random_range(0..=2));
             Moment { after, delay: Duration::from_millis(rng.random_range(0..80)) }
