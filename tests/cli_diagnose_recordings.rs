@@ -8,7 +8,6 @@
 use photorobot_app::cli::diagnose::PROPOSED_PLAN_FILE;
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::files::save_ron;
-use photorobot_core::identify::design::candidate_pool;
 use photorobot_core::model::effects::Effect;
 use photorobot_core::plan::random::{random_plan, Family};
 use photorobot_e2e::recordings::{add_traces, assert_named, cli, diagnose_without_bench as diagnose};
@@ -39,9 +38,8 @@ fn from_recordings(effects: Vec<Effect>, family: Family, plan_seed: u64) -> Outc
     let bench_file = dir.path().join("bench.ron");
     save_ron(&bench_file, &preset).unwrap();
     let bench = bench_file.to_str().unwrap();
-    let pool = candidate_pool(&preset.robot_description().unwrap(), &preset.motion);
     let plan_file = dir.path().join("plan.ron");
-    random_plan(family, plan_seed, &pool).save(&plan_file).unwrap();
+    random_plan(family, plan_seed).save(&plan_file).unwrap();
     let traces = dir.path().join("recorded");
     simulate(bench, &plan_file, 5, &traces);
     let session = dir.path().join("session");

@@ -5,7 +5,6 @@
 
 use photorobot_app::cli::run;
 use photorobot_core::bench::{BenchPreset, VirtualBench};
-use photorobot_core::identify::design::candidate_pool;
 use photorobot_core::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::random::{random_plan, Family};
@@ -90,9 +89,7 @@ pub fn preset(name: &str) -> BenchPreset {
 /// motions planned with the result on the true bench.
 pub fn run_random_plan(bench: &str, family: Family, plan_seed: u64, bench_seed: u64, validate: bool) -> PlanOutcome {
     let preset = preset(bench);
-    let robot = preset.robot_description().expect("the preset's robot");
-    let pool = candidate_pool(&robot, &preset.motion);
-    let plan = random_plan(family, plan_seed, &pool);
+    let plan = random_plan(family, plan_seed);
     let dir = tempfile::tempdir().expect("a temporary folder");
     let plan_file = dir.path().join("plan.ron");
     plan.save(&plan_file).expect("the plan saved");

@@ -162,7 +162,36 @@ pub fn to_ron_string<T: Serialize>(value: &T, origin: &Path) -> Result<String, F
 /// itself flushed so the rename survives a power cut. A crash leaves either the old file or the
 /// new one, never half of one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
-    let tmp = Temporary::with_bytes(path, bytes)?;
+    write_atomic_on(path, bytes, &mut SystemDisk)
+}
+
+/// The two steps of an atomic save that a full or failing disk refuses: writing the temporary
+/// file's bytes, and flushing them to the device. [`SystemDisk`] does them; a stand-in that fails as
+/// a disk does shows what a full disk does to a save ([`write_atomic_on`]).
+pub trait Medium {
+    /// Write all of `bytes` to `file`.
+    fn write(&mut self, file: &mut std::fs::File, bytes: &[u8]) -> std::io::Result<()>;
+    /// Flush `file`'s content to the device.
+    fn sync(&mut self, file: &std::fs::File) -> std::io::Result<()>;
+}
+
+/// The disk itself, through the operating system.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct SystemDisk;
+
+impl Medium for SystemDisk {
+    fn write(&mut self, file: &mut std::fs::File, bytes: &[u8]) -> std::io::Result<()> {
+        file.write_all(bytes)
+    }
+    fn sync(&mut self, file: &std::fs::File) -> std::io::Result<()> {
+        file.sync_all()
+    }
+}
+
+/// [`write_atomic`] through `medium`. A write or a flush that fails leaves the target as it was
+/// and removes the temporary.
+pub fn write_atomic_on(path: &Path, bytes: &[u8], medium: &mut dyn Medium) -> Result<(), FileError> {
+    let tmp = Temporary::with_bytes_on(path, bytes, medium)?;
     persist(tmp.0, path)?;
     sync_dir(&parent_dir(path))
 }
@@ -241,10 +270,15 @@ impl Temporary {
 
     /// A temporary beside `path` holding `bytes`.
     pub fn with_bytes(path: &Path, bytes: &[u8]) -> Result<Self, FileError> {
+        Self::with_bytes_on(path, bytes, &mut SystemDisk)
+    }
+
+    /// [`Temporary::with_bytes`] through `medium`.
+    fn with_bytes_on(path: &Path, bytes: &[u8], medium: &mut dyn Medium) -> Result<Self, FileError> {
         let io = |action: &'static str| move |source| FileError::Io { file: path.to_path_buf(), action, source };
         let mut tmp = Self::beside(path)?;
-        tmp.write_all(bytes).map_err(io("cannot write"))?;
-        tmp.as_file().sync_all().map_err(io("cannot flush to disk"))?;
+        medium.write(tmp.as_file_mut(), bytes).map_err(io("cannot write"))?;
+        medium.sync(tmp.as_file()).map_err(io("cannot flush to disk"))?;
         Ok(Self(tmp))
     }
 

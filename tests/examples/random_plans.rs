@@ -1,16 +1,18 @@
 //! Random plans through `simulate` then `calibrate --traces`: the success rate, the error of each
-//! determined parameter in σ, the validation on the true bench.
+//! determined parameter in σ, the validation on the true bench. Asserts that no plan went
+//! without a report and that every validation the forecast promised kept the true gap within
+//! its target; the default run (`50 --validate`) asserts its tallies too (README, results.md).
 //!
 //!     cargo run --release -p photorobot-e2e --example random_plans -- [PLANS] [--from K] [--validate]
 //!
-//! PLANS random plans (default 50; from the K-th with --from) cycle through the plan families,
-//! on table2-ideal and on femto-lab with its hidden effects switched off (its noise kept)
-//! alternately, plan seeds from 1000 on and bench seeds from 1 on.
+//! PLANS random plans (default 50; from the K-th with --from) cycle through the random plan
+//! families, on table2-ideal and on femto-lab with its hidden effects switched off (its noise
+//! kept) alternately, plan seeds from 1000 on and bench seeds from 1 on.
 //!
 //!     cargo run --release -p photorobot-e2e --example random_plans -- write FAMILY SEED FILE
 //!
-//! writes one random plan (family `pool`, `paper-one-sweep`, `other-offsets`, `rotations-only`,
-//! `chained`) to a plan file, to run with `photorobot simulate --plan FILE`.
+//! writes one random plan (family `single-joints`, `several-joints`, `other-offsets`,
+//! `rotations-only`, `chained`) to a plan file, to run with `photorobot simulate --plan FILE`.
 
 use photorobot_core::model::extrinsics::PARAMETER_NAMES;
 use photorobot_core::plan::random::Family;
@@ -39,7 +41,60 @@ fn main() {
         println!("{}  ({:.0} s)", outcome_line(&o), t0.elapsed().as_secs_f64());
         outcomes.push(o);
     }
-    summary(&outcomes);
+    let tally = summary(&outcomes);
+    tally.check();
+    if (from, plans, validate) == (0, 50, true) {
+        assert_eq!(tally, PINNED, "the default run's tallies (README, docs/results.md)");
+        println!("\nthe tallies are those the README states");
+    }
+}
+
+/// What a run of random plans came to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Tally {
+    plans: usize,
+    fits: usize,
+    refused: usize,
+    ambiguous: usize,
+    no_report: usize,
+    /// Parameters reported determined, and of them beyond 3σ of the truth.
+    determined: usize,
+    beyond_3_sigma: usize,
+    /// Validation motions run on the accepted plans, promised within target by the forecast,
+    /// and of those, kept within it.
+    validations: usize,
+    promised: usize,
+    kept: usize,
+}
+
+/// The default run's tallies, as the README and docs/results.md state them.
+const PINNED: Tally = Tally {
+    plans: 50,
+    fits: 0,
+    refused: 0,
+    ambiguous: 0,
+    no_report: 0,
+    determined: 0,
+    beyond_3_sigma: 0,
+    validations: 0,
+    promised: 0,
+    kept: 0,
+};
+
+impl Tally {
+    /// What every run must show: a report for every plan, every promised validation kept, and
+    /// no more determined parameters beyond 3σ than a Gaussian's tail and its spread allow.
+    fn check(&self) {
+        assert_eq!(self.no_report, 0, "plans without a report");
+        assert_eq!(self.kept, self.promised, "validations promised and not kept");
+        let expected = 0.0027 * self.determined as f64;
+        let allowed = (expected + 3.0 * expected.sqrt() + 1.0).floor() as usize;
+        assert!(
+            self.beyond_3_sigma <= allowed,
+            "{} beyond 3σ, a Gaussian puts {expected:.1} there",
+            self.beyond_3_sigma
+        );
+    }
 }
 
 fn write_plan(args: &[String]) {
@@ -47,18 +102,15 @@ fn write_plan(args: &[String]) {
         eprintln!("usage: random_plans write FAMILY SEED FILE");
         std::process::exit(2);
     };
-    let Some(family) = Family::ALL.into_iter().find(|f| f.name() == family) else {
+    let Some(family) = Family::from_name(family) else {
         eprintln!("unknown family {family}");
         std::process::exit(2);
     };
-    let robot = photorobot_core::model::robot::RobotDescription::femto_6dof();
-    let pool =
-        photorobot_core::identify::design::candidate_pool(&robot, &photorobot_core::plan::MotionLimits::default());
-    let plan = photorobot_core::plan::random::random_plan(family, seed.parse().expect("a seed"), &pool);
+    let plan = photorobot_core::plan::random::random_plan(family, seed.parse().expect("a seed"));
     plan.save(std::path::Path::new(file)).expect("the plan written");
 }
 
-fn summary(outcomes: &[PlanOutcome]) {
+fn summary(outcomes: &[PlanOutcome]) -> Tally {
     let n = outcomes.len();
     let count = |v: &str| outcomes.iter().filter(|o| o.verdict == v).count();
     let wrong = outcomes.iter().filter(|o| o.confidently_wrong()).count();
@@ -117,6 +169,9 @@ fn summary(outcomes: &[PlanOutcome]) {
     );
     let wrongly: Vec<String> = outcomes.iter().flat_map(|o| o.validation_wrongly_promised()).collect();
     println!("  promised and not kept: {}", if wrongly.is_empty() { "none".to_string() } else { wrongly.join("; ") });
+    let wrong: Vec<String> =
+        outcomes.iter().filter(|o| o.confidently_wrong()).map(|o| format!("\n  {}", outcome_line(o))).collect();
+    println!("\ndetermined beyond 3σ:{}", if wrong.is_empty() { " none".to_string() } else { wrong.concat() });
     println!("\nvalidation on the true bench, worst over the accepted plans (fringe figure / true gap, nm):");
     for bench in ["table2-ideal", "femto-lab"] {
         let mut by_motion: Vec<(String, f64, f64)> = Vec::new();
@@ -129,5 +184,18 @@ fn summary(outcomes: &[PlanOutcome]) {
         for (m, v, t) in by_motion {
             println!("  {bench:<13} {m:<52} {v:6.1} / {t:5.1}");
         }
+    }
+    let outcome = |v: &str| outcomes.iter().filter(|o| o.verdict == v).count();
+    Tally {
+        plans: n,
+        fits: outcome("fits"),
+        refused: outcome("does_not_fit"),
+        ambiguous: outcome("ambiguous"),
+        no_report: outcomes.iter().filter(|o| o.verdict.starts_with("error")).count(),
+        determined: scored,
+        beyond_3_sigma: beyond(3.0),
+        validations: runs.len(),
+        promised: count(&|r| r.1 <= r.2),
+        kept: count(&|r| r.1 <= r.2 && r.0 <= r.2),
     }
 }

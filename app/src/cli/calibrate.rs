@@ -168,7 +168,7 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         },
     };
     a.lab.apply(&mut session.lab);
-    let json = timed("write_session", || write_session(a, &mut session, &mut report))?;
+    let json = timed("write_session", || write_session(a, session, &mut report))?;
     tracing::info!(session = %a.out.display(), converged = report.converged, "session written");
     if a.json {
         writeln!(out, "{json}")?;
@@ -379,6 +379,18 @@ fn measure_identify_validate(
 /// The session autosaved in `dir`, refused when a plan other than the one it resumes was
 /// measured in part by the workbench (it would be measured again from its start).
 fn recover(dir: &Path) -> Result<Session, CliError> {
+    if !autosave_path(dir).exists() {
+        let problem = if photorobot_core::session::session_path(dir).exists() {
+            format!("{} holds a finished session (session.ron) and nothing to resume", dir.display())
+        } else {
+            format!(
+                "{} holds no measurement to resume (no {AUTOSAVE_FILE}: nothing was measured); run the command \
+                 without --resume",
+                dir.display()
+            )
+        };
+        return Err(CliError::Argument { argument: "--resume", problem });
+    }
     let session = Session::recover(dir)?;
     if let Some((p, whole, recorded)) = session.partly_measured_besides_progress() {
         let problem = format!(
@@ -521,21 +533,23 @@ fn sweep_cost(
     sweep_cost::measured(preset, &with, measured, report.fit.as_ref()).map_err(calibration_failed)
 }
 
-/// Write the session with its calibration, the identified extrinsics and the report; the
-/// report's JSON text is returned for printing.
-fn write_session(a: &CalibrateArgs, session: &mut Session, report: &mut CalibrationReport) -> Result<String, CliError> {
-    // The session keeps the report without its traces (they are its trace files): set aside
-    // while the rest is copied, rather than copied and dropped.
-    let traces = std::mem::take(&mut report.traces);
-    session.calibration = Some(report.clone());
-    report.traces = traces;
-    session.save(&a.out)?;
+/// Write the identified extrinsics, the report and, last, the session with its calibration
+/// (which removes the autosave and the trace files of segments a crash left unreferenced); the
+/// report's JSON text is returned for printing. Until `session.ron` is written the autosave
+/// stays, so a run killed in here is resumed like any other.
+fn write_session(a: &CalibrateArgs, mut session: Session, report: &mut CalibrationReport) -> Result<String, CliError> {
     // Extrinsics beyond ±90° feed no inverse model: kept in the session's record only.
     if report.extrinsics.validate().is_ok() {
         save_ron(&a.out.join("extrinsics.ron"), &report.extrinsics)?;
     }
     let json = json_text(report)?;
     write_atomic(&a.out.join("report.json"), json.as_bytes())?;
+    // The session keeps the report without its traces (they are its trace files): set aside
+    // while the rest is copied, rather than copied and dropped.
+    let traces = std::mem::take(&mut report.traces);
+    session.calibration = Some(report.clone());
+    report.traces = traces;
+    SessionWriter::new(&a.out, session).save()?;
     Ok(json)
 }
 

@@ -10,7 +10,7 @@
 //! [`record`] starts where the sink's progress says, so the same call measures a new session and
 //! resumes a recovered or stopped one ([`super::Session::recover`]).
 
-use super::{Progress, SessionError, SessionWriter};
+use super::{Progress, SessionError, SessionWriter, TraceRef};
 use crate::bench::{resume_plan_with, run_plan_with, Bench, RunControl, RunError, StepDone};
 use crate::plan::Plan;
 use crate::trace::Trace;
@@ -31,6 +31,11 @@ pub trait RecordSink {
     /// plan after the one the progress names may be measured already and one before it not at
     /// all.
     fn coverage(&self, _p: usize) -> Option<(usize, usize)> {
+        None
+    }
+    /// The file the last trace kept went to, when the sink writes files: named in the log's
+    /// line for each completed segment.
+    fn last_file(&self) -> Option<&TraceRef> {
         None
     }
 }
@@ -56,6 +61,10 @@ impl RecordSink for SessionWriter {
 
     fn coverage(&self, p: usize) -> Option<(usize, usize)> {
         Some(self.session().plan_coverage(p))
+    }
+
+    fn last_file(&self) -> Option<&TraceRef> {
+        self.session().traces.last()
     }
 }
 
@@ -122,7 +131,15 @@ pub fn record_with(
                 sink.keep_trace(t, (p, step.segment), true).map_err(|e| e.to_string())?;
             }
             sink.set_progress(Progress { next_segment: step.segment + 1, ..progress }).map_err(|e| e.to_string())?;
-            tracing::debug!(plan = %plans[p].name, segment = step.segment, label = step.label, recorded = step.trace.is_some(), "segment done, autosaved");
+            // Written once the segment is kept for good: every segment this line names is in
+            // the session, its trace in the file named with that size and CRC-32.
+            let file = step.trace.and(sink.last_file());
+            tracing::debug!(
+                plan = %plans[p].name, plan_index = p, segment = step.segment, label = step.label,
+                recorded = step.trace.is_some(), file = file.map(|r| r.file.as_str()),
+                bytes = file.map(|r| r.bytes), crc32 = file.map(|r| r.crc32),
+                "segment done, autosaved"
+            );
             on_segment(p, step.segment + 1);
             Ok(())
         };

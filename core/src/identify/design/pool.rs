@@ -43,15 +43,6 @@ impl Candidate {
     }
 }
 
-impl crate::plan::random::PoolMotion for Candidate {
-    fn start_display(&self) -> [f64; 6] {
-        self.start_display
-    }
-    fn segment(&self) -> &Segment {
-        &self.segment
-    }
-}
-
 /// A candidate before timing: label, kind, start joints (µm, °) and recorded segment.
 type UntimedCandidate = (String, CandidateKind, [f64; 6], Segment);
 
