@@ -23,6 +23,7 @@ const CORE_LAYERS: &[&str] = &[
     "validate",
     "calibration",
     "diagnose",
+    "position",
     "session",
     "report",
 ];
