@@ -114,3 +114,103 @@ fn random_targets_reach_the_true_gap_within_the_forecast() {
     }
     assert_eq!(Session::load(&session).unwrap().moves.len(), targets.len());
 }
+
+/// Planned with the nominal design's extrinsics instead of a calibration, the lamella misses its
+/// gap by micrometres (as the validation "before" shows 3.3 µm on the circle), and the sweep at
+/// the end, which does not use the extrinsics, sees it: the move is off, and the measured error is
+/// the true one.
+#[test]
+fn with_the_nominal_extrinsics_the_sweep_shows_the_move_off_by_micrometres() {
+    let nominal = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/extrinsics/nominal.ron");
+    let (r, text) = cli(&[
+        "move", "--bench", "table2-ideal", "--extrinsics", nominal, "--gap-um", "880", "--tilt-deg", "0.5,-0.5",
+        "--lateral-um", "-60,-90", "--json",
+    ]);
+    assert_eq!(r.unwrap_err().exit_code(), 1, "an off move is no result");
+    let doc: Value = serde_json::from_str(&text).unwrap();
+    let m = &doc["moves"][0];
+    assert_eq!(m["verdict"], "off", "{m}");
+    let (gap_um, tilt) = true_gap_and_tilt(&truth(), m);
+    let true_error_nm = (gap_um - 880.0) * 1e3;
+    let measured_nm = m["gap_error_nm"].as_f64().unwrap();
+    let sigma_nm = m["measurement"]["sigma_nm"].as_f64().unwrap();
+    eprintln!("nominal extrinsics: true gap error {true_error_nm:+.1} nm, measured {measured_nm:+.1} ± {sigma_nm:.2} nm; true tilt {tilt:?}");
+    assert!(true_error_nm.abs() > 1000.0, "{true_error_nm} nm");
+    assert!((measured_nm - true_error_nm).abs() < 3.0 * sigma_nm.max(0.3), "{measured_nm} vs {true_error_nm}");
+    assert!(m["forecast"].is_null(), "an extrinsics file has no forecast");
+}
+
+/// A target the stages cannot reach and a tilt beyond the goniometers are refused with the joint
+/// and its limit (exit 2), before anything moves: the session records no move.
+#[test]
+fn a_target_out_of_reach_is_refused_and_nothing_is_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = session_copy(dir.path());
+    let s = session.to_str().unwrap();
+    let (r, _) = cli(&["move", "--bench", "table2-ideal", "--session", s, "--gap-um", "50"]);
+    let e = r.unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    let text = e.to_string();
+    assert!(text.contains("joint q2") && text.contains("upper limit 150.000 µm") && text.contains("nothing moved"), "{text}");
+    let (r, _) = cli(&["move", "--bench", "table2-ideal", "--session", s, "--gap-um", "900", "--tilt-deg", "14,0"]);
+    let text = r.unwrap_err().to_string();
+    assert!(text.contains("joint q4") || text.contains("goniometers cannot reach"), "{text}");
+    assert!(Session::load(&session).unwrap().moves.is_empty(), "no move recorded");
+}
+
+/// A recipe whose second step is out of reach stops there (exit 3, naming the step); its first
+/// move is in the session. Fixed, `--resume` goes on from the second step only.
+#[test]
+fn a_recipe_stops_at_a_bad_step_and_resumes_after_its_confirmed_steps() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = session_copy(dir.path());
+    let recipe = dir.path().join("recipe.ron");
+    let text = r#"Recipe(name: "two", steps: [
+        (label: "approach", target: (gap_um: 950.0, tilt_deg: (0.0, 0.0), lateral_um: (-100.0, -100.0))),
+        (label: "place", target: (gap_um: GAP, tilt_deg: (0.2, 0.0), lateral_um: (-80.0, -90.0)), keep_gap: true),
+    ])"#;
+    std::fs::write(&recipe, text.replace("GAP", "40.0")).unwrap();
+    let args = |resume: bool| {
+        let mut a = vec!["move", "--bench", "table2-ideal", "--session", session.to_str().unwrap(), "--recipe", recipe.to_str().unwrap()];
+        if resume {
+            a.push("--resume");
+        }
+        a
+    };
+    let (r, out) = cli(&args(false));
+    let e = r.unwrap_err();
+    assert_eq!(e.exit_code(), 3, "{e}");
+    assert!(e.to_string().contains("steps[1].target") && e.to_string().contains("joint q2"), "{e}");
+    assert!(out.contains("move (approach)") && out.contains("CONFIRMED"), "{out}");
+    assert_eq!(Session::load(&session).unwrap().moves.len(), 1);
+    std::fs::write(&recipe, text.replace("GAP", "870.0")).unwrap();
+    let (r, out) = cli(&args(true));
+    r.unwrap();
+    assert!(!out.contains("move (approach)") && out.contains("move (place)"), "only the step not confirmed: {out}");
+    let moves = Session::load(&session).unwrap().moves;
+    assert_eq!(moves.len(), 2);
+    assert_eq!(moves[1].recipe, Some(("two".to_string(), 1)));
+    assert!(moves[1].keep_gap);
+}
+
+/// Without the sweep at the end (`--no-sweeps`, as on a bench without a tunable laser), the path
+/// starts at a pose the calibration's sweeps measured and the fringes along it give the gap: the
+/// move is confirmed and the true gap is within the bound.
+#[test]
+fn without_sweeps_the_fringes_from_a_calibration_sweep_prove_the_move() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = session_copy(dir.path());
+    let (r, text) = cli(&[
+        "move", "--bench", "table2-ideal", "--session", session.to_str().unwrap(), "--gap-um", "890", "--tilt-deg",
+        "0.3,0.2", "--lateral-um", "-90,-95", "--no-sweeps", "--json",
+    ]);
+    r.unwrap();
+    let doc: Value = serde_json::from_str(&text).unwrap();
+    let m = &doc["moves"][0];
+    assert_eq!(m["verdict"], "confirmed", "{m}");
+    assert!(m["measurement"]["method"].as_str().unwrap().starts_with("fringes along the path"), "{m}");
+    let (gap_um, _) = true_gap_and_tilt(&truth(), m);
+    let error_nm = (gap_um - 890.0) * 1e3;
+    eprintln!("fringes: true gap error {error_nm:+.2} nm, measured {:+.2} nm, bound {:.2} nm", m["gap_error_nm"], m["bound_nm"]);
+    assert!(error_nm.abs() <= 10.0 && error_nm.abs() <= m["bound_nm"].as_f64().unwrap());
+}

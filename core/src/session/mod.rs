@@ -39,6 +39,7 @@ pub use lab::{
     TEMPERATURE_RANGE_C,
 };
 pub use lock::{FolderLock, LOCK_FILE};
+pub use moves::{placement_of, references_from};
 pub use writer::SessionWriter;
 
 use crate::bench::BenchPreset;
