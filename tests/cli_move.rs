@@ -123,8 +123,18 @@ fn random_targets_reach_the_true_gap_within_the_forecast() {
 fn with_the_nominal_extrinsics_the_sweep_shows_the_move_off_by_micrometres() {
     let nominal = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/extrinsics/nominal.ron");
     let (r, text) = cli(&[
-        "move", "--bench", "table2-ideal", "--extrinsics", nominal, "--gap-um", "880", "--tilt-deg", "0.5,-0.5",
-        "--lateral-um", "-60,-90", "--json",
+        "move",
+        "--bench",
+        "table2-ideal",
+        "--extrinsics",
+        nominal,
+        "--gap-um",
+        "880",
+        "--tilt-deg",
+        "0.5,-0.5",
+        "--lateral-um",
+        "-60,-90",
+        "--json",
     ]);
     assert_eq!(r.unwrap_err().exit_code(), 1, "an off move is no result");
     let doc: Value = serde_json::from_str(&text).unwrap();
@@ -151,7 +161,10 @@ fn a_target_out_of_reach_is_refused_and_nothing_is_recorded() {
     let e = r.unwrap_err();
     assert_eq!(e.exit_code(), 2);
     let text = e.to_string();
-    assert!(text.contains("joint q2") && text.contains("upper limit 150.000 µm") && text.contains("nothing moved"), "{text}");
+    assert!(
+        text.contains("joint q2") && text.contains("upper limit 150.000 µm") && text.contains("nothing moved"),
+        "{text}"
+    );
     let (r, _) = cli(&["move", "--bench", "table2-ideal", "--session", s, "--gap-um", "900", "--tilt-deg", "14,0"]);
     let text = r.unwrap_err().to_string();
     assert!(text.contains("joint q4") || text.contains("goniometers cannot reach"), "{text}");
@@ -171,7 +184,15 @@ fn a_recipe_stops_at_a_bad_step_and_resumes_after_its_confirmed_steps() {
     ])"#;
     std::fs::write(&recipe, text.replace("GAP", "40.0")).unwrap();
     let args = |resume: bool| {
-        let mut a = vec!["move", "--bench", "table2-ideal", "--session", session.to_str().unwrap(), "--recipe", recipe.to_str().unwrap()];
+        let mut a = vec![
+            "move",
+            "--bench",
+            "table2-ideal",
+            "--session",
+            session.to_str().unwrap(),
+            "--recipe",
+            recipe.to_str().unwrap(),
+        ];
         if resume {
             a.push("--resume");
         }
@@ -201,8 +222,19 @@ fn without_sweeps_the_fringes_from_a_calibration_sweep_prove_the_move() {
     let dir = tempfile::tempdir().unwrap();
     let session = session_copy(dir.path());
     let (r, text) = cli(&[
-        "move", "--bench", "table2-ideal", "--session", session.to_str().unwrap(), "--gap-um", "890", "--tilt-deg",
-        "0.3,0.2", "--lateral-um", "-90,-95", "--no-sweeps", "--json",
+        "move",
+        "--bench",
+        "table2-ideal",
+        "--session",
+        session.to_str().unwrap(),
+        "--gap-um",
+        "890",
+        "--tilt-deg",
+        "0.3,0.2",
+        "--lateral-um",
+        "-90,-95",
+        "--no-sweeps",
+        "--json",
     ]);
     r.unwrap();
     let doc: Value = serde_json::from_str(&text).unwrap();
@@ -211,6 +243,9 @@ fn without_sweeps_the_fringes_from_a_calibration_sweep_prove_the_move() {
     assert!(m["measurement"]["method"].as_str().unwrap().starts_with("fringes along the path"), "{m}");
     let (gap_um, _) = true_gap_and_tilt(&truth(), m);
     let error_nm = (gap_um - 890.0) * 1e3;
-    eprintln!("fringes: true gap error {error_nm:+.2} nm, measured {:+.2} nm, bound {:.2} nm", m["gap_error_nm"], m["bound_nm"]);
+    eprintln!(
+        "fringes: true gap error {error_nm:+.2} nm, measured {:+.2} nm, bound {:.2} nm",
+        m["gap_error_nm"], m["bound_nm"]
+    );
     assert!(error_nm.abs() <= 10.0 && error_nm.abs() <= m["bound_nm"].as_f64().unwrap());
 }

@@ -180,7 +180,7 @@ impl Workbench {
                 ui.label(format!("session: {name}{}", if self.state.session.dirty { " (unsaved)" } else { "" }));
                 ui.separator();
                 for t in Tab::ALL {
-                    ui.selectable_value(&mut self.tab, t, RichText::new(t.title()).size(16.0));
+                    ui.selectable_value(&mut self.tab, t, RichText::new(t.title()).size(15.0));
                 }
                 ui.separator();
                 // Settings… is in the File menu: with it here the bar overflowed 1400 px and

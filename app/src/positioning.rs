@@ -36,9 +36,12 @@ impl AppState {
             let proof = if self.worker.tunable_laser {
                 ProofKind::Sweep
             } else {
-                ProofKind::None("the fringes from the nearest pose a sweep measured (chosen when the move starts)".into())
+                ProofKind::None(
+                    "the fringes from the nearest pose a sweep measured (chosen when the move starts)".into(),
+                )
             };
-            let planned = plan_move(&placement, self.q_display, &key.target, key.keep_gap, proof).map_err(|e| e.to_string());
+            let planned =
+                plan_move(&placement, self.q_display, &key.target, key.keep_gap, proof).map_err(|e| e.to_string());
             self.position.preview = Some((key, planned));
         }
         self.position.preview.as_ref().map(|(_, r)| r)

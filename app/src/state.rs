@@ -528,7 +528,9 @@ impl AppState {
 
     /// The steps the chosen plan and identifier need, and whether they are all done.
     pub fn ready_to_identify(&self) -> bool {
-        (0..self.wizard.steps.len()).filter(|&i| self.step_used(i)).all(|i| self.wizard.steps[i].state == StepState::Done)
+        (0..self.wizard.steps.len())
+            .filter(|&i| self.step_used(i))
+            .all(|i| self.wizard.steps[i].state == StepState::Done)
     }
 
     /// The plans of the steps the chosen plan and identifier use.

@@ -14,7 +14,7 @@ use photorobot_app::settings::Settings;
 use photorobot_app::state::StepState;
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::model::phase::PhaseModel;
-use photorobot_core::position::{TaskFrame, Target, Verdict};
+use photorobot_core::position::{Target, TaskFrame, Verdict};
 use std::time::Duration;
 
 fn workbench() -> Workbench {
@@ -40,7 +40,7 @@ fn the_quick_calibration_then_a_confirmed_move_in_the_position_view() {
     let mut h = harness(workbench());
     h.state_mut().state.session.dir = Some(dir.path().join("session"));
     open(&mut h, Tab::Wizard);
-    h.get_by_label_contains("The paper's strategies 1 and 2 and the extra measurements: 12.9 min of bench time");
+    h.get_by_label_contains("The paper's strategies 1 and 2 and the extra measurements: 13.0 min of bench time");
     h.get_by_label_contains("The designed plan (shipped, designed for table2-ideal): 0.44 min of bench time").click();
     h.run_steps(3);
     assert!(h.state().state.wizard.quick);
@@ -49,8 +49,12 @@ fn the_quick_calibration_then_a_confirmed_move_in_the_position_view() {
     wait_until(&mut h, "the designed plan", Duration::from_secs(300), |w| {
         w.state.wizard.steps.iter().any(|s| s.designed && s.state == StepState::Done)
     });
-    assert!(h.state().state.wizard.steps.iter().all(|s| s.designed || s.traces.is_empty()), "only the designed step ran");
-    h.get_by_label("Identify").click();
+    assert!(
+        h.state().state.wizard.steps.iter().all(|s| s.designed || s.traces.is_empty()),
+        "only the designed step ran"
+    );
+    // Below the steps, out of view: clicked the way a screen reader does.
+    h.get_by_label("Identify").click_accesskit();
     wait_until(&mut h, "the identification", Duration::from_secs(300), |w| {
         w.state.results.report.is_some() || w.state.results.identify_error.is_some()
     });
@@ -70,9 +74,18 @@ fn the_quick_calibration_then_a_confirmed_move_in_the_position_view() {
     h.get_by_label_contains("measured gap 860.0");
     let truth = truth_at(&r.joints_end.to_array());
     let error_nm = (truth.gap_um - target.gap_um) * 1e3;
-    eprintln!("true gap error {error_nm:+.2} nm, measured {:+.2} nm ± bound {:.2} nm", r.gap_error_nm.unwrap(), r.bound_nm.unwrap());
+    eprintln!(
+        "true gap error {error_nm:+.2} nm, measured {:+.2} nm ± bound {:.2} nm",
+        r.gap_error_nm.unwrap(),
+        r.bound_nm.unwrap()
+    );
     assert!(error_nm.abs() <= 10.0 && error_nm.abs() <= r.bound_nm.unwrap(), "true gap error {error_nm} nm");
     assert_eq!(h.state().state.q_display, r.joints_end.to_array(), "the bench stands at the target");
+    // The next target typed: its path planned beside the confirmed move.
+    h.state_mut().state.position.target = Target { gap_um: 900.0, lateral_um: [-110.0, -40.0], ..target };
+    h.state_mut().state.position.keep_gap = true;
+    h.run_steps(3);
+    h.get_by_label("CONFIRMED");
     screenshot(&mut h, "position");
 
     // Out of reach: refused as it is typed, Go disabled, nothing moves.
@@ -112,7 +125,11 @@ fn the_wizard_designs_a_plan_for_the_bench_at_hand() {
     let (preset, d) = h.state().state.wizard.design.result.clone().unwrap();
     let d = d.expect("a design");
     assert_eq!(preset, "table2-ideal");
-    h.get_by_label_contains(&format!("Designed for table2-ideal: {} motions, {:.2} min", d.chosen.len(), d.total_s / 60.0));
+    h.get_by_label_contains(&format!(
+        "Designed for table2-ideal: {} motions, {:.2} min",
+        d.chosen.len(),
+        d.total_s / 60.0
+    ));
     h.get_by_label_contains("The designed plan (designed here for table2-ideal)");
     let step = h.state().state.wizard.steps.iter().find(|s| s.designed).unwrap().plan.clone();
     assert_eq!(step, d.plan, "the designed step measures the plan designed here");

@@ -36,7 +36,9 @@ fn main() {
     let session = dir.path().join("session");
     let s = session.to_str().unwrap().to_string();
     let mut calibrate: Vec<String> =
-        ["calibrate", "--bench", "table2-ideal", "--seed", "7", "--no-validation", "--out", &s].map(String::from).to_vec();
+        ["calibrate", "--bench", "table2-ideal", "--seed", "7", "--no-validation", "--out", &s]
+            .map(String::from)
+            .to_vec();
     if plan != "joint" {
         calibrate.extend(["--plan".to_string(), plan.clone()]);
     }
@@ -46,16 +48,18 @@ fn main() {
     let recipe = dir.path().join("recipe.ron");
     let targets = random_recipe(&session, n, seed, &recipe);
     let t0 = std::time::Instant::now();
-    let (ok, text) = cli(&[
-        "move", "--bench", "table2-ideal", "--session", &s, "--recipe", recipe.to_str().unwrap(), "--json",
-    ]
-    .map(String::from));
+    let (ok, text) =
+        cli(&["move", "--bench", "table2-ideal", "--session", &s, "--recipe", recipe.to_str().unwrap(), "--json"]
+            .map(String::from));
     println!("{n} moves in {:.1} s", t0.elapsed().as_secs_f64());
     let doc: Value = serde_json::from_str(&text).unwrap();
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
     let truth = PhaseModel::of_preset(&preset, preset.truth).unwrap();
     let (mut worst, mut confirmed, mut within) = (0.0f64, 0, 0);
-    println!("{:>3} {:>11} {:>12} {:>12} {:>10} {:>10}  verdict", "#", "gap µm", "true err nm", "measured nm", "σ fc nm", "bound nm");
+    println!(
+        "{:>3} {:>11} {:>12} {:>12} {:>10} {:>10}  verdict",
+        "#", "gap µm", "true err nm", "measured nm", "σ fc nm", "bound nm"
+    );
     for (k, (m, t)) in doc["moves"].as_array().unwrap().iter().zip(&targets).enumerate() {
         let (gap_um, _) = true_gap_and_tilt(&truth, m);
         let error_nm = (gap_um - t.gap_um) * 1e3;
@@ -76,10 +80,20 @@ fn main() {
     let nominal = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/extrinsics/nominal.ron");
     for t in &targets {
         let (_, text) = cli(&[
-            "move".into(), "--bench".into(), "table2-ideal".into(), "--extrinsics".into(), nominal.into(),
-            "--gap-um".into(), t.gap_um.to_string(), "--tilt-deg".into(), format!("{},{}", t.tilt_deg[0], t.tilt_deg[1]),
-            "--lateral-um".into(), format!("{},{}", t.lateral_um[0], t.lateral_um[1]),
-            "--rotation-deg".into(), t.rotation_deg.to_string(), "--json".into(),
+            "move".into(),
+            "--bench".into(),
+            "table2-ideal".into(),
+            "--extrinsics".into(),
+            nominal.into(),
+            "--gap-um".into(),
+            t.gap_um.to_string(),
+            "--tilt-deg".into(),
+            format!("{},{}", t.tilt_deg[0], t.tilt_deg[1]),
+            "--lateral-um".into(),
+            format!("{},{}", t.lateral_um[0], t.lateral_um[1]),
+            "--rotation-deg".into(),
+            t.rotation_deg.to_string(),
+            "--json".into(),
         ]);
         let doc: Value = serde_json::from_str(&text).unwrap();
         let m = &doc["moves"][0];

@@ -75,21 +75,12 @@ pub struct MoveArgs {
     pub json: bool,
 }
 
-/// One move as `--json` prints it.
-#[derive(Serialize)]
-struct JsonMove<'a> {
-    #[serde(flatten)]
-    record: &'a MoveRecord,
-    /// The verdict as a word.
-    verdict_word: &'static str,
-}
-
 /// The document `--json` prints.
 #[derive(Serialize)]
 struct JsonOut<'a> {
     bench: String,
     recipe: Option<&'a str>,
-    moves: Vec<JsonMove<'a>>,
+    moves: &'a [MoveRecord],
 }
 
 /// Where the moves come from: a single target, or a recipe's steps from one on.
@@ -163,7 +154,7 @@ pub fn move_lamella(a: &MoveArgs, out: &mut dyn Write) -> Result<(), CliError> {
         let doc = JsonOut {
             bench: bench.name(),
             recipe: steps.recipe.as_ref().map(|(r, _)| r.name.as_str()),
-            moves: records.iter().map(|r| JsonMove { record: r, verdict_word: r.verdict.word() }).collect(),
+            moves: &records,
         };
         writeln!(out, "{}", json_text(&doc)?)?;
     }

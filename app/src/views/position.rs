@@ -4,49 +4,61 @@
 
 use crate::state::AppState;
 use egui::{Color32, RichText};
-use egui_plot::{Legend, Line, Plot, PlotPoints};
+use egui_plot::{Line, Plot, PlotPoints};
 use photorobot_core::position::{MovePlan, MoveRecord, Verdict};
 
-/// Draw the Position view.
+/// Draw the Position view: the target and its planned move on the left, the last move and the
+/// session's moves on the right.
 pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
-    egui::ScrollArea::vertical().id_salt("position").show(ui, |ui| {
-        ui.heading("Position the lamella");
-        let placement = s.placement();
-        match &placement {
-            Ok(p) => ui.label(format!(
-                "Planned with {}: the identified extrinsics and their uncertainty{}.",
-                p.source,
-                if p.play.iter().any(|w| *w != 0.0) { ", the stages' play compensated" } else { "" }
-            )),
-            Err(e) => ui.colored_label(ui.visuals().warn_fg_color, format!("No move yet: {e}.")),
-        };
-        ui.separator();
-        target_fields(ui, s);
-        ui.separator();
-        let idle = s.busy.is_none() && s.wizard.running.is_none();
-        let planned_ok = preview(ui, s);
-        ui.horizontal(|ui| {
-            let go = egui::Button::new(RichText::new("Go (F5)").size(18.0));
-            if ui.add_enabled(idle && planned_ok && placement.is_ok(), go).clicked() {
-                s.go_position();
+    ui.heading("Position the lamella");
+    let placement = s.placement();
+    match &placement {
+        Ok(p) => ui.label(format!(
+            "Planned with {}: the identified extrinsics and their uncertainty{}.",
+            p.source,
+            if p.play.iter().any(|w| *w != 0.0) { ", the stages' play compensated" } else { "" }
+        )),
+        Err(e) => ui.colored_label(ui.visuals().warn_fg_color, format!("No move yet: {e}.")),
+    };
+    ui.separator();
+    ui.columns(2, |cols| {
+        egui::ScrollArea::vertical().id_salt("position target").show(&mut cols[0], |ui| {
+            target_fields(ui, s);
+            ui.separator();
+            let planned_ok = preview(ui, s);
+            go(ui, s, planned_ok && placement.is_ok());
+        });
+        egui::ScrollArea::vertical().id_salt("position moves").show(&mut cols[1], |ui| {
+            match s.position.moves.last() {
+                Some(r) => result(ui, r),
+                None => {
+                    ui.label("No move yet in this session.");
+                }
             }
-            if s.moving() == Some(crate::motion::Motion::Position) {
-                ui.spinner();
-                ui.label("moving, then measuring the gap: the red Stop (or Esc) stops it");
+            if !s.position.moves.is_empty() {
+                ui.separator();
+                history(ui, &s.position.moves);
             }
         });
-        if let Some(e) = &s.position.refused {
-            ui.colored_label(ui.visuals().error_fg_color, format!("refused, nothing moved: {e}"));
+    });
+}
+
+/// Go, and what runs.
+fn go(ui: &mut egui::Ui, s: &mut AppState, ready: bool) {
+    let idle = s.busy.is_none() && s.wizard.running.is_none();
+    ui.horizontal(|ui| {
+        let go = egui::Button::new(RichText::new("Go (F5)").size(18.0));
+        if ui.add_enabled(idle && ready, go).clicked() {
+            s.go_position();
         }
-        if let Some(r) = s.position.moves.last() {
-            ui.separator();
-            result(ui, r);
-        }
-        if !s.position.moves.is_empty() {
-            ui.separator();
-            history(ui, &s.position.moves);
+        if s.moving() == Some(crate::motion::Motion::Position) {
+            ui.spinner();
+            ui.label("moving, then measuring the gap: the red Stop (or Esc) stops it");
         }
     });
+    if let Some(e) = &s.position.refused {
+        ui.colored_label(ui.visuals().error_fg_color, format!("refused, nothing moved: {e}"));
+    }
 }
 
 /// The target's fields, each with its unit.
@@ -56,28 +68,32 @@ fn target_fields(ui: &mut egui::Ui, s: &mut AppState) {
     egui::Grid::new("target").num_columns(3).show(ui, |ui| {
         ui.label("gap along the beam");
         ui.add(egui::DragValue::new(&mut t.gap_um).speed(0.1).max_decimals(4).suffix(" µm"));
-        ui.label("|L|, from the fiber's end to the lamella");
+        ui.label("|L|: fiber end to lamella");
         ui.end_row();
         ui.label("tilt β, θ");
         ui.horizontal(|ui| {
             ui.add(egui::DragValue::new(&mut t.tilt_deg[0]).speed(0.01).max_decimals(4).suffix(" °"));
             ui.add(egui::DragValue::new(&mut t.tilt_deg[1]).speed(0.01).max_decimals(4).suffix(" °"));
         });
-        ui.label("the lamella normal against the beam, about X_f then Z_f; 0, 0 is parallel to the fiber's end face");
+        ui.label("normal vs beam; 0, 0: parallel to the fiber end").on_hover_text(
+            "the lamella normal against the beam, about X_f then Z_f; 0, 0 is parallel to the fiber's end face",
+        );
         ui.end_row();
         ui.label("lateral x, z");
         ui.horizontal(|ui| {
             ui.add(egui::DragValue::new(&mut t.lateral_um[0]).speed(0.5).max_decimals(3).suffix(" µm"));
             ui.add(egui::DragValue::new(&mut t.lateral_um[1]).speed(0.5).max_decimals(3).suffix(" µm"));
         });
-        ui.label("the lamella's origin from the beam, along X_f and Z_f");
+        ui.label("lamella origin from the beam");
         ui.end_row();
         ui.label("rotation about the beam");
         ui.add(egui::DragValue::new(&mut t.rotation_deg).speed(0.1).max_decimals(3).suffix(" °"));
-        ui.label("about the beam through the reflection point");
+        ui.label("about the beam, through P_r");
         ui.end_row();
     });
-    ui.checkbox(&mut s.position.keep_gap, "keep the gap on the way (held at the larger of start and end)");
+    ui.checkbox(&mut s.position.keep_gap, "keep the gap on the way").on_hover_text(
+        "the gap is held at the larger of start and end while the rest moves, then changed along the beam",
+    );
 }
 
 /// The move planned from where the bench stands: joints, path, forecast and proof; whether Go
@@ -123,11 +139,20 @@ fn planned(ui: &mut egui::Ui, plan: &MovePlan, from: &[f64; 6]) {
     match &plan.forecast {
         Some(f) => ui.label(format!(
             "forecast σ at the target: gap {:.2} nm, tilt ({:.5}°, {:.5}°), lateral ({:.4}, {:.4}) µm, rotation {:.5}°",
-            f.gap_sigma_nm, f.tilt_sigma_deg[0], f.tilt_sigma_deg[1], f.lateral_sigma_um[0], f.lateral_sigma_um[1], f.rotation_sigma_deg
+            f.gap_sigma_nm,
+            f.tilt_sigma_deg[0],
+            f.tilt_sigma_deg[1],
+            f.lateral_sigma_um[0],
+            f.lateral_sigma_um[1],
+            f.rotation_sigma_deg
         )),
         None => ui.label("no forecast: the extrinsics are taken as exact"),
     };
-    path_plots(ui, plan);
+    if plan.path.targets.first() != plan.path.targets.last() {
+        path_plots(ui, plan);
+    } else {
+        ui.label("the lamella is at the target already");
+    }
 }
 
 /// The path in task space: the gap along the waypoints, and the lamella across the beam.
@@ -136,13 +161,12 @@ fn path_plots(ui: &mut egui::Ui, plan: &MovePlan) {
     let gap: Vec<[f64; 2]> = t.iter().enumerate().map(|(k, p)| [k as f64, p.gap_um]).collect();
     let lateral: Vec<[f64; 2]> = t.iter().map(|p| [p.lateral_um[0], p.lateral_um[1]]).collect();
     ui.columns(2, |cols| {
-        Plot::new("path gap").height(160.0).x_axis_label("waypoint").y_axis_label("gap (µm)").show(&mut cols[0], |p| {
+        Plot::new("path gap").height(150.0).x_axis_label("waypoint").y_axis_label("gap (µm)").show(&mut cols[0], |p| {
             p.line(Line::new("gap", PlotPoints::from(gap)));
         });
         Plot::new("path lateral")
-            .height(160.0)
+            .height(150.0)
             .data_aspect(1.0)
-            .legend(Legend::default())
             .x_axis_label("x along X_f (µm)")
             .y_axis_label("z along Z_f (µm)")
             .show(&mut cols[1], |p| {

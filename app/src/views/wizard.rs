@@ -72,9 +72,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
 /// Bench time of steps (min), from their plans' timing model from q = 0.
 fn minutes(s: &AppState, steps: impl Iterator<Item = usize>) -> f64 {
     let limits = photorobot_core::plan::MotionLimits::default();
-    steps
-        .filter_map(|i| s.wizard.steps[i].plan.duration_s(s.chain.description(), [0.0; 6], &limits).ok())
-        .sum::<f64>()
+    steps.filter_map(|i| s.wizard.steps[i].plan.duration_s(s.chain.description(), [0.0; 6], &limits).ok()).sum::<f64>()
         / 60.0
 }
 
@@ -102,7 +100,11 @@ fn plan_choice(ui: &mut egui::Ui, s: &mut AppState) {
             Some((preset, Ok(_))) => format!("designed here for {preset}"),
             _ => "shipped, designed for table2-ideal".into(),
         };
-        ui.radio_value(&mut s.wizard.quick, true, format!("The designed plan ({source}): {designed:.2} min of bench time"));
+        ui.radio_value(
+            &mut s.wizard.quick,
+            true,
+            format!("The designed plan ({source}): {designed:.2} min of bench time"),
+        );
         ui.label(
             "    The joint identifier's required σ and no more: β_et, θ_et ≤ 0.005°, β_wf, θ_wf ≤ 0.01°, x_wf, z_wf ≤ \
              0.2 µm, the gap y_wf − Z_et ≤ 0.017 µm (on table2-ideal: 0.0017-0.0029°, 0.0023-0.0034°, 0.04-0.06 µm; \
@@ -140,7 +142,10 @@ fn design_for_this_bench(ui: &mut egui::Ui, s: &mut AppState) {
                 d.total_s / 60.0
             ));
             for t in &d.targets {
-                ui.monospace(format!("    {:<36} {:>10.5} {} ({:.4})", t.name, t.predicted_sigma, t.unit, t.required_sigma));
+                ui.monospace(format!(
+                    "    {:<36} {:>10.5} {} ({:.4})",
+                    t.name, t.predicted_sigma, t.unit, t.required_sigma
+                ));
             }
         }
         Some((preset, Err(e))) => {
