@@ -34,6 +34,7 @@ const CORE_LAYERS: &[&str] = &[
     "validate",
     "calibration",
     "diagnose",
+    "position",
     "session",
     "report",
 ];

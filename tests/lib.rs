@@ -82,3 +82,60 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
 pub mod independent;
 pub mod random;
 pub mod recordings;
+
+/// Random targets for the moves of the lamella and their truth on the virtual bench.
+pub mod moves {
+    use photorobot_core::bench::BenchPreset;
+    use photorobot_core::model::extrinsics::Extrinsics;
+    use photorobot_core::model::phase::PhaseModel;
+    use photorobot_core::position::recipe::{Recipe, RecipeStep};
+    use photorobot_core::position::{plan_move, ProofKind, Target, TaskFrame};
+    use photorobot_core::session::Session;
+    use rand::{Rng, SeedableRng};
+    use std::path::Path;
+
+    /// `n` random targets within the workspace of the calibrated `session` (table2-ideal),
+    /// each reachable from the one before (from q = 0 first), written as a recipe to `file`:
+    /// gap 780-1020 µm, tilts ±2°, the lamella's origin −200..20 µm from the beam along X_f and
+    /// Z_f, rotation ±20°.
+    pub fn random_recipe(session: &Path, n: usize, seed: u64, file: &Path) -> Vec<Target> {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let base = PhaseModel::of_preset(&preset, Extrinsics::nominal_design()).unwrap();
+        let placement = Session::load(session).unwrap().placement(&base, "test").unwrap();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let (mut from, mut targets) = ([0.0; 6], Vec::new());
+        while targets.len() < n {
+            let t = Target {
+                gap_um: rng.random_range(780.0..1020.0),
+                tilt_deg: [rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0)],
+                lateral_um: [rng.random_range(-200.0..20.0), rng.random_range(-200.0..20.0)],
+                rotation_deg: rng.random_range(-20.0..20.0),
+            };
+            if let Ok(plan) = plan_move(&placement, from, &t, false, ProofKind::Sweep) {
+                from = plan.path.end();
+                targets.push(t);
+            }
+        }
+        let steps = targets
+            .iter()
+            .enumerate()
+            .map(|(i, t)| RecipeStep { label: format!("random {i}"), target: *t, keep_gap: false })
+            .collect();
+        let recipe = Recipe { name: format!("random targets, seed {seed}"), description: String::new(), steps };
+        photorobot_core::files::save_ron(file, &recipe).unwrap();
+        targets
+    }
+
+    /// The true target (the bench's hidden extrinsics) at the joints a move's JSON ended at:
+    /// its gap (µm) and tilt (°).
+    pub fn true_gap_and_tilt(truth: &PhaseModel, m: &serde_json::Value) -> (f64, [f64; 2]) {
+        let j = &m["joints_end"];
+        let q: [f64; 6] = std::array::from_fn(|i| {
+            let key = ["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"][i];
+            j[key].as_f64().unwrap()
+        });
+        let frame = TaskFrame::at(truth, &truth.extrinsics, &q).unwrap();
+        let t = frame.target_at(truth, &q).unwrap();
+        (t.gap_um, t.tilt_deg)
+    }
+}

@@ -33,13 +33,15 @@ pub enum Tab {
     Validation,
     /// Discrepancy workflow.
     Diagnosis,
+    /// Moves of the lamella to a target with the calibration.
+    Position,
     /// Bench choice, controllers, axis mapping and status.
     Connection,
 }
 
 impl Tab {
     /// Every tab in display order.
-    pub const ALL: [Tab; 9] = [
+    pub const ALL: [Tab; 10] = [
         Tab::Live,
         Tab::Align,
         Tab::Robot,
@@ -48,6 +50,7 @@ impl Tab {
         Tab::Results,
         Tab::Validation,
         Tab::Diagnosis,
+        Tab::Position,
         Tab::Connection,
     ];
 
@@ -62,6 +65,7 @@ impl Tab {
             Tab::Results => "Results",
             Tab::Validation => "Validation",
             Tab::Diagnosis => "Diagnosis",
+            Tab::Position => "Position",
             Tab::Connection => "Connection",
         }
     }
@@ -74,6 +78,7 @@ impl Tab {
             Tab::Wizard => Some(Motion::Step),
             Tab::Validation => Some(Motion::Validation),
             Tab::Diagnosis => Some(Motion::Diagnosis),
+            Tab::Position => Some(Motion::Position),
             Tab::Traces | Tab::Results | Tab::Connection => None,
         }
     }
@@ -175,7 +180,7 @@ impl Workbench {
                 ui.label(format!("session: {name}{}", if self.state.session.dirty { " (unsaved)" } else { "" }));
                 ui.separator();
                 for t in Tab::ALL {
-                    ui.selectable_value(&mut self.tab, t, RichText::new(t.title()).size(16.0));
+                    ui.selectable_value(&mut self.tab, t, RichText::new(t.title()).size(15.0));
                 }
                 ui.separator();
                 // Settings… is in the File menu: with it here the bar overflowed 1400 px and
@@ -224,6 +229,7 @@ impl Workbench {
             Tab::Results => views::results::ui(ui, &mut self.state),
             Tab::Validation => views::validation::ui(ui, &mut self.state),
             Tab::Diagnosis => views::diagnosis::ui(ui, &mut self.state),
+            Tab::Position => views::position::ui(ui, &mut self.state),
             Tab::Connection => views::connection::ui(ui, &mut self.state, &mut self.connection),
         });
         if go_to_align {
@@ -474,12 +480,13 @@ impl Workbench {
         // F5 and Esc act on the open tab only; a modal question takes the keys while it is up.
         let asking = self.state.wizard.confirm_redo.is_some() || self.state.worker_failure.is_some();
         if f5 && self.tab == Tab::Wizard && !asking {
-            let joint = self.state.settings.joint_mode;
-            if let Some(i) =
-                self.state.wizard.steps.iter().position(|s| s.state != StepState::Done && (joint || !s.joint_only))
-            {
+            let steps = &self.state.wizard.steps;
+            if let Some(i) = (0..steps.len()).find(|&i| steps[i].state != StepState::Done && self.state.step_used(i)) {
                 self.state.request_step(i);
             }
+        }
+        if f5 && self.tab == Tab::Position && !asking && !typing {
+            self.state.go_position();
         }
         if esc && !asking {
             if let Some(motion) = self.tab.motion() {

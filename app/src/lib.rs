@@ -10,6 +10,8 @@ pub mod hardware_bench;
 pub mod log;
 pub mod messages;
 pub mod motion;
+pub mod plan_design;
+pub mod positioning;
 pub mod session_io;
 pub mod settings;
 pub mod state;

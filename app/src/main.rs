@@ -12,7 +12,7 @@ fn main() -> ExitCode {
     };
     photorobot_app::log::init(cli.verbose, cli.quiet);
     // Commands that record stop cleanly on Ctrl-C; the others keep its default (quit at once).
-    if matches!(cli.command, Some(Command::Calibrate(_) | Command::Simulate(_))) {
+    if matches!(cli.command, Some(Command::Calibrate(_) | Command::Simulate(_) | Command::Move(_))) {
         progress::install_ctrl_c();
     }
     let mut stdout = std::io::stdout().lock();

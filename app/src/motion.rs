@@ -3,7 +3,7 @@
 //! moves), and starting a wizard step without losing the traces of an earlier run.
 
 use crate::state::AppState;
-use crate::worker::{BUSY_DIAGNOSING, BUSY_EFFECT_VALIDATION, BUSY_JOGGING, BUSY_VALIDATING};
+use crate::worker::{BUSY_DIAGNOSING, BUSY_EFFECT_VALIDATION, BUSY_JOGGING, BUSY_MOVING, BUSY_VALIDATING};
 use std::sync::atomic::Ordering;
 
 /// A motion of the bench, by the view that starts it.
@@ -19,6 +19,8 @@ pub enum Motion {
     Jog,
     /// The live dither (the Live and Align views).
     Live,
+    /// A move of the lamella to a target (the Position view).
+    Position,
 }
 
 impl AppState {
@@ -31,6 +33,7 @@ impl AppState {
             Some(BUSY_VALIDATING) => return Some(Motion::Validation),
             Some(BUSY_DIAGNOSING | BUSY_EFFECT_VALIDATION) => return Some(Motion::Diagnosis),
             Some(BUSY_JOGGING) => return Some(Motion::Jog),
+            Some(BUSY_MOVING) => return Some(Motion::Position),
             _ => {}
         }
         self.worker.live.load(Ordering::Relaxed).then_some(Motion::Live)

@@ -41,6 +41,8 @@ pub struct Snapshot {
     pub notes: String,
     /// The lab record.
     pub lab: photorobot_core::session::LabRecord,
+    /// The moves of the lamella made with the calibration.
+    pub moves: Vec<photorobot_core::position::MoveRecord>,
 }
 
 impl Snapshot {
@@ -68,6 +70,7 @@ impl Snapshot {
         session.lab = self.lab.clone();
         session.calibration = self.calibration.clone();
         session.diagnosis = self.diagnosis.clone();
+        session.moves = self.moves.clone();
         Ok(())
     }
 
@@ -79,6 +82,7 @@ impl Snapshot {
         session.diagnosis = self.diagnosis;
         session.notes = self.notes;
         session.lab = self.lab;
+        session.moves = self.moves;
         let html = photorobot_core::report::render_html(&session);
         photorobot_core::files::write_atomic(path, html.as_bytes()).map_err(|e| e.to_string())
     }

@@ -17,6 +17,7 @@ use photorobot_core::measure::Measurement;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::kinematics::Chain;
 use photorobot_core::plan::Plan;
+use photorobot_core::position::{MovePlan, MoveRecord, Target};
 use photorobot_core::session::{BenchInfo, Progress};
 use photorobot_core::trace::Trace;
 use std::collections::HashMap;
@@ -99,6 +100,8 @@ pub struct MeasurementStep {
     pub plan: Plan,
     /// Only the joint identifier uses it.
     pub joint_only: bool,
+    /// The designed plan (the quick calibration), used instead of the paper's strategies.
+    pub designed: bool,
     /// Where it is.
     pub state: StepState,
     /// Its recorded traces.
@@ -116,6 +119,7 @@ pub fn measurement_steps() -> Vec<MeasurementStep> {
         explanation,
         plan,
         joint_only,
+        designed: false,
         state: StepState::Pending,
         traces: vec![],
         duration_s: 0.0,
@@ -147,6 +151,18 @@ pub fn measurement_steps() -> Vec<MeasurementStep> {
             Plan::joint_extras(),
             true,
         ),
+        MeasurementStep {
+            designed: true,
+            ..step(
+                "The designed plan",
+                "Motions chosen by the experiment design (photorobot design) to reach every required σ of the \
+                 joint estimate in the least bench time: absolute-gap sweeps at lateral poses, and q4/q5 tilt \
+                 scans at lateral offsets read for their phase and their fringe amplitude. It replaces the \
+                 steps above; the joint identifier only.",
+                Plan::optimised(),
+                true,
+            )
+        },
     ]
 }
 
@@ -154,6 +170,10 @@ pub fn measurement_steps() -> Vec<MeasurementStep> {
 pub struct Wizard {
     /// The measurement steps.
     pub steps: Vec<MeasurementStep>,
+    /// The quick calibration: the designed plan instead of the paper's strategies.
+    pub quick: bool,
+    /// A plan being designed for the bench at hand, or designed.
+    pub design: crate::plan_design::PlanDesign,
     /// The step running, if one is.
     pub running: Option<RunningStep>,
     /// The step whose redo waits for the technician's answer (it holds traces).
@@ -199,6 +219,48 @@ pub struct DiagnosisState {
     pub validation: Option<EffectValidation>,
     /// The diagnosis record of an opened session, kept so that saving it again keeps it.
     pub loaded_record: Option<photorobot_core::session::DiagnosisRecord>,
+}
+
+/// What a Position preview was planned for: it is planned again when any of it changes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PreviewKey {
+    /// The target.
+    pub target: Target,
+    /// Hold the gap.
+    pub keep_gap: bool,
+    /// The bench's joints (µm, °).
+    pub from: [f64; 6],
+    /// The extrinsics planned with.
+    pub extrinsics: [f64; 8],
+}
+
+/// The Position view: the target being edited, the move planned for it, the moves made in the
+/// session (saved with it) and why the last Go was refused.
+pub struct PositionState {
+    /// The target being edited.
+    pub target: Target,
+    /// Hold the gap while the rest moves.
+    pub keep_gap: bool,
+    /// The move planned for the target from the bench's joints, or why it is refused.
+    pub preview: Option<(PreviewKey, Result<MovePlan, String>)>,
+    /// The moves made in this session, in order.
+    pub moves: Vec<MoveRecord>,
+    /// Why the last Go was refused before anything moved.
+    pub refused: Option<String>,
+}
+
+impl Default for PositionState {
+    /// Parallel, 880 µm from the fiber, the beam about 100 µm from the lamella's origin along
+    /// X_f and Z_f (near where q = 0 puts it on the reference bench).
+    fn default() -> Self {
+        Self {
+            target: Target { gap_um: 880.0, tilt_deg: [0.0, 0.0], lateral_um: [-100.0, -100.0], rotation_deg: 0.0 },
+            keep_gap: false,
+            preview: None,
+            moves: Vec::new(),
+            refused: None,
+        }
+    }
 }
 
 /// The orbit camera of the robot view.
@@ -351,6 +413,8 @@ pub struct AppState {
     pub messages: crate::messages::Messages,
     /// What leaving the sweeps out costs, forecast for a bench without a tunable laser.
     pub sweep_forecast: crate::sweep_forecast::SweepForecast,
+    /// The Position view: the target, its planned move and the moves made.
+    pub position: PositionState,
 }
 
 impl AppState {
@@ -367,7 +431,13 @@ impl AppState {
             busy: None,
             status: String::new(),
             live: LiveSignal { wavelength_nm: 1550.0, ..Default::default() },
-            wizard: Wizard { steps: measurement_steps(), running: None, confirm_redo: None },
+            wizard: Wizard {
+                steps: measurement_steps(),
+                quick: false,
+                design: Default::default(),
+                running: None,
+                confirm_redo: None,
+            },
             results: Results::default(),
             diagnosis: DiagnosisState::default(),
             robot_view: RobotView::default(),
@@ -380,6 +450,7 @@ impl AppState {
             worker_failure: None,
             messages: Default::default(),
             sweep_forecast: Default::default(),
+            position: Default::default(),
         }
     }
 
@@ -444,18 +515,27 @@ impl AppState {
         self.stop_all();
     }
 
-    /// The steps the chosen identifier needs, and whether they are all done.
-    pub fn ready_to_identify(&self) -> bool {
-        self.wizard
-            .steps
-            .iter()
-            .filter(|s| self.settings.joint_mode || !s.joint_only)
-            .all(|s| s.state == StepState::Done)
+    /// Whether step `i` is measured for the chosen plan (the paper's strategies or the designed
+    /// plan) and identifier (the designed plan is the joint identifier's).
+    pub fn step_used(&self, i: usize) -> bool {
+        let Some(st) = self.wizard.steps.get(i) else { return false };
+        if self.wizard.quick {
+            st.designed
+        } else {
+            !st.designed && (self.settings.joint_mode || !st.joint_only)
+        }
     }
 
-    /// The plans of the steps the chosen identifier uses.
+    /// The steps the chosen plan and identifier need, and whether they are all done.
+    pub fn ready_to_identify(&self) -> bool {
+        (0..self.wizard.steps.len())
+            .filter(|&i| self.step_used(i))
+            .all(|i| self.wizard.steps[i].state == StepState::Done)
+    }
+
+    /// The plans of the steps the chosen plan and identifier use.
     pub fn identifier_plans(&self) -> Vec<Plan> {
-        self.wizard.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).map(|s| s.plan.clone()).collect()
+        (0..self.wizard.steps.len()).filter(|&i| self.step_used(i)).map(|i| self.wizard.steps[i].plan.clone()).collect()
     }
 
     /// On a bench without a tunable laser: what leaving the sweeps out costs, forecast for the
@@ -471,9 +551,9 @@ impl AppState {
 
     /// Identify from the recorded steps.
     pub fn identify(&mut self) {
-        let mode = if self.settings.joint_mode { Mode::Joint } else { Mode::Paper };
+        let mode = if self.settings.joint_mode || self.wizard.quick { Mode::Joint } else { Mode::Paper };
         let used: Vec<&MeasurementStep> =
-            self.wizard.steps.iter().filter(|s| self.settings.joint_mode || !s.joint_only).collect();
+            (0..self.wizard.steps.len()).filter(|&i| self.step_used(i)).map(|i| &self.wizard.steps[i]).collect();
         let traces = used.iter().flat_map(|s| s.traces.iter().cloned()).collect();
         let duration_s = used.iter().map(|s| s.duration_s).sum();
         self.results.identify_error = None;
@@ -486,6 +566,19 @@ impl AppState {
         self.clear_diagnosis();
         self.diagnosis.from_calibration = self.extrinsics != self.worker.nominal.extrinsics;
         self.worker.send(Command::Diagnose { traces, extrinsics: self.extrinsics });
+    }
+
+    /// A plan designed for this bench becomes the designed step's plan (when that step holds no
+    /// traces: they were measured with the plan before).
+    fn adopt_design(&mut self) {
+        let Some((preset, Ok(d))) = &self.wizard.design.result else { return };
+        let status = format!("plan designed for {preset}: {:.2} min of bench time", d.total_s / 60.0);
+        let plan = d.plan.clone();
+        if let Some(st) = self.wizard.steps.iter_mut().find(|st| st.designed && st.traces.is_empty()) {
+            st.plan = plan;
+            st.state = StepState::Pending;
+            self.status = status;
+        }
     }
 
     /// Forget the diagnosis (a new run, a new or opened session).
@@ -517,6 +610,7 @@ impl AppState {
         self.session.notes.clear();
         self.session.lab = Default::default();
         self.session.lock = None;
+        self.position.moves.clear();
         self.status = "new session".into();
     }
 
@@ -524,6 +618,9 @@ impl AppState {
     pub fn poll_worker(&mut self) {
         for e in self.worker.drain() {
             self.apply(e);
+        }
+        if self.wizard.design.poll() {
+            self.adopt_design();
         }
         while let Ok(outcome) = self.session.saves.1.try_recv() {
             self.session.saving -= 1;
@@ -616,6 +713,14 @@ impl AppState {
 
     /// A snapshot of what a session file keeps, for a save on another thread.
     pub fn snapshot(&self) -> Snapshot {
+        // The designed plan's step is kept only when it is the plan chosen or holds traces: a
+        // session of the paper's strategies lists their plans alone, as `calibrate` writes it.
+        let kept: Vec<usize> = (0..self.wizard.steps.len())
+            .filter(|&i| !self.wizard.steps[i].designed || self.step_used(i) || !self.wizard.steps[i].traces.is_empty())
+            .collect();
+        let progress = self
+            .unfinished_step()
+            .and_then(|p| kept.iter().position(|&i| i == p.plan).map(|k| Progress { plan: k, ..p }));
         Snapshot {
             bench: BenchInfo {
                 name: self.worker.bench_name.clone(),
@@ -624,15 +729,9 @@ impl AppState {
                 seed: Some(self.settings.seed),
             },
             robot: self.chain.description().clone(),
-            plans: (0..self.wizard.steps.len()).map(|i| self.plan_run(i)).collect(),
-            steps: self
-                .wizard
-                .steps
-                .iter()
-                .enumerate()
-                .map(|(i, st)| (st.traces.clone(), self.whole_traces(i)))
-                .collect(),
-            progress: self.unfinished_step(),
+            plans: kept.iter().map(|&i| self.plan_run(i)).collect(),
+            steps: kept.iter().map(|&i| (self.wizard.steps[i].traces.clone(), self.whole_traces(i))).collect(),
+            progress,
             imported: self.imported.clone(),
             calibration: self.results.report.as_deref().cloned(),
             diagnosis: match &self.diagnosis.result {
@@ -641,6 +740,7 @@ impl AppState {
             },
             notes: self.session.notes.clone(),
             lab: self.session.lab.clone(),
+            moves: self.position.moves.clone(),
         }
     }
 
@@ -721,12 +821,15 @@ impl AppState {
                 None => self.imported.extend(traces),
             }
         }
+        // A session measured with the designed plan opens on it.
+        self.wizard.quick = self.wizard.steps.iter().any(|st| st.designed && !st.traces.is_empty());
         self.results.report = loaded.session.calibration.map(Box::new);
         if let Some(r) = &self.results.report {
             self.extrinsics = r.extrinsics;
         }
         self.session.notes = loaded.session.notes;
         self.session.lab = loaded.session.lab;
+        self.position.moves = loaded.session.moves;
         self.analyses.clear();
         self.results.validation = None;
         // The session's diagnosis record is kept for the next save and shown as a record by the
@@ -820,6 +923,15 @@ impl AppState {
             }
             Event::HardwareStatus(axes) => self.hardware_status = Some((std::time::Instant::now(), axes)),
             Event::LaserStatus(laser) => self.laser_status = Some((std::time::Instant::now(), laser)),
+            Event::Moved(Ok(record)) => {
+                self.status = format!("move {}: {}", record.verdict.word(), record.note);
+                self.position.moves.push(*record);
+                self.session.mark_dirty();
+            }
+            Event::Moved(Err(e)) => {
+                self.status = format!("move refused: {e}");
+                self.position.refused = Some(e);
+            }
             Event::WorkerPanicked(message) => {
                 self.status = format!("the bench worker failed: {message}");
                 self.worker_failure = Some(message);

@@ -16,6 +16,7 @@ use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
+use photorobot_core::position::{move_to, MoveRecord, Placement, Reference, Target};
 use photorobot_core::session::Progress;
 use photorobot_core::trace::Trace;
 use photorobot_core::validate::before_after::run_before_and_after;
@@ -84,6 +85,18 @@ pub enum Command {
         /// The calibrated extrinsics.
         extrinsics: Extrinsics,
     },
+    /// Place the lamella at a target ([`photorobot_core::position::move_to`]), proven as the bench
+    /// allows; the record comes back in [`Event::Moved`].
+    Move {
+        /// The calibrated model the move is planned with.
+        placement: Box<Placement>,
+        /// Where the lamella goes.
+        target: Target,
+        /// Hold the gap while the rest moves.
+        keep_gap: bool,
+        /// Poses whose gap a sweep measured (a bench without a tunable laser tracks from them).
+        references: Vec<Reference>,
+    },
     /// Report the stage controllers' view of every joint axis ([`Event::HardwareStatus`]; nothing on a
     /// simulated bench).
     HardwareStatus,
@@ -128,6 +141,8 @@ pub const BUSY_EFFECT_VALIDATION: &str = "validating with and without the added 
 pub const BUSY_VALIDATING: &str = "validating";
 /// The worker's [`Event::Busy`] text while it runs the diagnosis.
 pub const BUSY_DIAGNOSING: &str = "diagnosing";
+/// The worker's [`Event::Busy`] text while it moves the lamella to a target.
+pub const BUSY_MOVING: &str = "moving the lamella to the target";
 /// The worker's [`Event::Busy`] text while it jogs the robot.
 pub const BUSY_JOGGING: &str = "jogging";
 
@@ -198,6 +213,9 @@ pub enum Event {
         /// The validation.
         validation: EffectValidation,
     },
+    /// A move of the lamella ran (its record, a stopped one included) or was refused before
+    /// anything moved (why).
+    Moved(Result<Box<MoveRecord>, String>),
     /// The worker started (`Some(what)`) or finished (`None`) a job.
     Busy(Option<String>),
     /// The stage controllers' view of every joint axis (a bench on controllers only).
@@ -302,7 +320,14 @@ impl Worker {
     pub fn send(&self, c: Command) {
         // A new motion starts with the stop flag down (a stop pressed before it was asked for
         // is not its stop).
-        if matches!(c, Command::Run { .. } | Command::Jog(_) | Command::Validate { .. } | Command::Diagnose { .. }) {
+        if matches!(
+            c,
+            Command::Run { .. }
+                | Command::Jog(_)
+                | Command::Validate { .. }
+                | Command::Diagnose { .. }
+                | Command::Move { .. }
+        ) {
             self.cancel.store(false, Ordering::Relaxed);
         }
         let _ = self.commands.send(c);
@@ -503,6 +528,32 @@ impl Thread {
                         }
                         Err(e) => self.send(Event::Diagnosed(Err(e))),
                     }
+                    self.send(Event::Busy(None));
+                }
+                Command::Move { placement, target, keep_gap, references } => {
+                    self.send(Event::Busy(Some(BUSY_MOVING.into())));
+                    // Paced as the plans are: a virtual bench's move takes the time a real one does.
+                    let (pace, wall0, bench_t0) = (self.pace, Instant::now(), self.bench.clock_s());
+                    let mut on_samples = |tr: &Trace, _: usize| {
+                        if let (Pace::Speed(f), Some(t)) = (pace, tr.t_s.last()) {
+                            let due = Duration::from_secs_f64(((t - bench_t0) / f.max(1e-6)).max(0.0));
+                            if let Some(wait) = due.checked_sub(wall0.elapsed()) {
+                                std::thread::sleep(wait.min(Duration::from_millis(500)));
+                            }
+                        }
+                    };
+                    let mut control =
+                        RunControl { cancel: &self.cancel, on_samples: &mut on_samples, on_progress: &mut |_| {} };
+                    let started = photorobot_core::session::now_utc_rfc3339();
+                    let record =
+                        move_to(self.bench.as_mut(), &placement, &target, keep_gap, &references, true, &mut control)
+                            .map(|mut r| {
+                                r.started_utc = Some(started);
+                                Box::new(r)
+                            })
+                            .map_err(|e| e.to_string());
+                    self.send(Event::Position(self.bench.position_display()));
+                    self.send(Event::Moved(record));
                     self.send(Event::Busy(None));
                 }
                 Command::Analyse { index, trace, extrinsics } => {

@@ -3,7 +3,8 @@
 //! and the built binary measuring on them through TCP, identifying, validating and writing a
 //! session that loads: a short plan (a laser sweep and three small moves), and the experiment
 //! design's plan on emulators running faster than real time, identified without the validation
-//! motions, whose every reported parameter must land within 3σ of the preset's truth.
+//! motions, whose every reported parameter must land within 3σ of the preset's truth, then a move
+//! of the lamella with that calibration on the same controllers, confirmed by the laser's sweep.
 
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::hardware::controller_bench::{LaserConfig, LaserFamily};
@@ -150,6 +151,38 @@ fn a_designed_plan_through_tcp_lands_within_3_sigma_of_the_truth() {
         }
     }
     assert_eq!(determined, EXPECTED_DETERMINED, "the parameters the plan determines");
+    move_through_tcp(&bench.file, &out, &preset);
+}
+
+/// `photorobot move` with that session on the same emulated controllers and laser: the lamella
+/// placed, the sweep at the end confirms it, and the emulated bench's true gap at the joints the
+/// controllers reached is within 10 nm of the request.
+fn move_through_tcp(bench_file: &Path, session: &Path, preset: &BenchPreset) {
+    let run = Command::new(env!("CARGO_BIN_EXE_photorobot"))
+        .args(["move", "--bench"])
+        .arg(bench_file)
+        .args(["--model", "table2-ideal", "--gap-um", "870", "--tilt-deg", "0.4,-0.2", "--lateral-um", "-80,-90"])
+        .args(["--json", "--session"])
+        .arg(session)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "move failed:\n{}\n{stderr}", String::from_utf8_lossy(&run.stdout));
+    let doc: Value = serde_json::from_slice(&run.stdout).unwrap();
+    let m = &doc["moves"][0];
+    assert_eq!(m["verdict"], "confirmed", "{m}");
+    let j = &m["joints_end"];
+    let q: [f64; 6] =
+        std::array::from_fn(|i| j[["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"][i]].as_f64().unwrap());
+    let truth = photorobot_core::model::phase::PhaseModel::of_preset(preset, preset.truth).unwrap();
+    let (gap_um, _) = truth.gap_and_tilt(&q).unwrap();
+    let error_nm = (gap_um - 870.0) * 1e3;
+    eprintln!(
+        "move through TCP: true gap error {error_nm:+.2} nm, measured {} nm, bound {} nm",
+        m["gap_error_nm"], m["bound_nm"]
+    );
+    assert!(error_nm.abs() <= 10.0, "{error_nm} nm");
+    assert_eq!(Session::load(session).unwrap().moves.len(), 1, "the move is in the session");
 }
 
 /// What the plan determines: all eight (the gap's split between Z_et and y_wf to about 2 µm).

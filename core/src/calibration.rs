@@ -330,6 +330,17 @@ fn forecast_validation(
     parameters: &[ParameterRow],
     report: &IdentifiabilityReport,
 ) -> Vec<ValidationForecast> {
+    let (sigma, correlation) = uncertainty_of(parameters, report);
+    forecast(nominal, identified, &sigma, &correlation)
+}
+
+/// The uncertainty of the extrinsics as the forecasts take it: the σ of each parameter of
+/// [`PARAMETER_NAMES`] the data determine (`None`: withheld or not determined) and the
+/// identifiability's correlations (0 where undefined).
+pub fn uncertainty_of(
+    parameters: &[ParameterRow],
+    report: &IdentifiabilityReport,
+) -> ([Option<f64>; 8], [[f64; 8]; 8]) {
     let index = |name: &str| report.parameters.iter().position(|p| p.name == name);
     let sigma: [Option<f64>; 8] = std::array::from_fn(|i| {
         parameters.iter().find(|p| p.name == PARAMETER_NAMES[i].0 && p.determined).and_then(|p| p.sigma)
@@ -340,7 +351,7 @@ fn forecast_validation(
             _ => 0.0,
         })
     });
-    forecast(nominal, identified, &sigma, &correlation)
+    (sigma, correlation)
 }
 
 /// The verdict on the identification's fit: its residual against [`rms_threshold`], the worst

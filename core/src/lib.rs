@@ -10,6 +10,7 @@ pub mod identify;
 pub mod measure;
 pub mod model;
 pub mod plan;
+pub mod position;
 pub mod report;
 pub mod session;
 pub mod solver;

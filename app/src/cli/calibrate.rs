@@ -10,7 +10,7 @@
 //! is written atomically. `--resume` continues a measurement a crash interrupted. The folder is locked
 //! while calibrate runs: a second photorobot writing into it is refused.
 
-use super::common::{json_text, load_plan, timed, CliError};
+use super::common::{hardware_bench_file, json_text, load_plan, timed, CliError};
 use super::progress::{Progress, INTERRUPT};
 use crate::hardware_bench::open_hardware_bench;
 use photorobot_core::bench::{Bench, BenchPreset, RunControl, VirtualBench};
@@ -270,21 +270,6 @@ fn calibrate_on_virtual_bench(
     let mut bench = VirtualBench::new(preset, a.seed)?;
     let seed = Some(a.seed.unwrap_or(preset.seed));
     measure_identify_validate(a, preset, nominal, mode, &mut bench, (seed, &[]))
-}
-
-/// `--bench` as a hardware bench file, when it is one (a file that parses as a HardwareConfig, or
-/// names `controllers:` and is then reported as a broken one); `None` for a preset.
-fn hardware_bench_file(bench: &str) -> Result<Option<HardwareConfig>, CliError> {
-    let path = Path::new(bench);
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let text = photorobot_core::files::read_text(path)?;
-    match HardwareConfig::from_ron_str(&text, path) {
-        Ok(config) => Ok(Some(config)),
-        Err(e) if text.contains("controllers:") => Err(e.into()),
-        Err(_) => Ok(None),
-    }
 }
 
 /// Measure the plans on the stage controllers and the laser of `config` (the same bench the

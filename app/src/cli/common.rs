@@ -146,3 +146,18 @@ pub fn timed<T>(stage: &str, f: impl FnOnce() -> T) -> T {
     tracing::info!(stage = %stage, elapsed_s = t0.elapsed().as_secs_f64(), "stage done");
     out
 }
+
+/// `--bench` as a hardware bench file, when it is one (a file that parses as a HardwareConfig, or
+/// names `controllers:` and is then reported as a broken one); `None` for a preset.
+pub fn hardware_bench_file(bench: &str) -> Result<Option<photorobot_core::hardware::HardwareConfig>, CliError> {
+    let path = std::path::Path::new(bench);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = photorobot_core::files::read_text(path)?;
+    match photorobot_core::hardware::HardwareConfig::from_ron_str(&text, path) {
+        Ok(config) => Ok(Some(config)),
+        Err(e) if text.contains("controllers:") => Err(e.into()),
+        Err(_) => Ok(None),
+    }
+}

@@ -9,6 +9,7 @@ pub mod diagnose;
 pub mod emulate;
 pub mod frames;
 pub mod fringes;
+pub mod r#move;
 pub mod progress;
 pub mod report;
 pub mod simulate;
@@ -52,6 +53,9 @@ pub enum Command {
     Diagnose(diagnose::DiagnoseArgs),
     /// Write a session's calibration report as one self-contained HTML file.
     Report(report::ReportArgs),
+    /// Place the lamella at a gap, tilt, lateral offset and rotation relative to the fiber with a
+    /// calibration, and prove the gap by a measurement that does not use the extrinsics.
+    Move(r#move::MoveArgs),
     /// Start the workbench GUI (the default when no command is given).
     Gui,
     /// Serve a stage-controller or tunable-laser protocol emulator (PI E-712, SmarAct MCS, Keysight or
@@ -89,6 +93,7 @@ pub fn run_parsed(cli: Cli, out: &mut dyn Write) -> Result<Outcome, CliError> {
         Some(Command::Design(a)) => design::run_design(&a, out).map(|()| Outcome::Done),
         Some(Command::Diagnose(a)) => diagnose::diagnose(&a, out).map(|()| Outcome::Done),
         Some(Command::Report(a)) => report::report(&a, out).map(|()| Outcome::Done),
+        Some(Command::Move(a)) => r#move::move_lamella(&a, out).map(|()| Outcome::Done),
         Some(Command::Emulate(a)) => emulate::emulate(&a, out).map(|()| Outcome::Done),
     }
 }

@@ -11,6 +11,7 @@ pub mod inspector;
 pub mod lab;
 pub mod live;
 pub mod messages;
+pub mod position;
 pub mod results;
 pub mod robot;
 pub mod validation;

@@ -1,6 +1,7 @@
-//! Calibration wizard: pre-alignment check, strategy 1, strategy 2 and the extra measurements,
-//! each explained (what the robot will do and why), with its planned motions, a run button,
-//! progress, cancel, the recorded traces and redo; then identification.
+//! Calibration wizard: the measurement plan (the paper's strategies or the designed plan, what
+//! each costs and determines, a plan designed for the bench at hand), pre-alignment check, the
+//! steps of the plan, each explained (what the robot will do and why), with its planned motions,
+//! a run button, progress, cancel, the recorded traces and redo; then identification.
 
 use crate::motion::RedoAnswer;
 use crate::state::{AppState, StepState};
@@ -13,10 +14,17 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
     confirm_redo(ui, s);
     egui::ScrollArea::vertical().id_salt("wizard").show(ui, |ui| {
         ui.heading("Calibration wizard");
-        ui.horizontal(|ui| {
-            ui.label("Identifier:");
-            ui.radio_value(&mut s.settings.joint_mode, true, "joint (every parameter, with σ)");
-            ui.radio_value(&mut s.settings.joint_mode, false, "paper (steps A, B, C)");
+        plan_choice(ui, s);
+        ui.separator();
+        ui.add_enabled_ui(!s.wizard.quick, |ui| {
+            ui.horizontal(|ui| {
+                ui.label("Identifier:");
+                ui.radio_value(&mut s.settings.joint_mode, true, "joint (every parameter, with σ)");
+                ui.radio_value(&mut s.settings.joint_mode, false, "paper (steps A, B, C)");
+                if s.wizard.quick {
+                    ui.label("(the designed plan is the joint identifier's)");
+                }
+            });
         });
         no_tunable_laser(ui, s);
         ui.separator();
@@ -38,7 +46,7 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
         let ready = s.ready_to_identify();
         let idle = s.busy.is_none() && s.wizard.running.is_none();
         if !ready {
-            ui.label("run every step above first (the extra measurements only for the joint identifier)");
+            ui.label("run every step of the chosen plan above first");
         }
         if ui.add_enabled(ready && idle, egui::Button::new(RichText::new("Identify").size(18.0))).clicked() {
             s.identify();
@@ -59,6 +67,92 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState, go_to_align: &mut bool) {
             ));
         }
     });
+}
+
+/// Bench time of steps (min), from their plans' timing model from q = 0.
+fn minutes(s: &AppState, steps: impl Iterator<Item = usize>) -> f64 {
+    let limits = photorobot_core::plan::MotionLimits::default();
+    steps.filter_map(|i| s.wizard.steps[i].plan.duration_s(s.chain.description(), [0.0; 6], &limits).ok()).sum::<f64>()
+        / 60.0
+}
+
+/// The measurement plan: the paper's strategies or the designed plan, what each costs in bench
+/// time and what it determines, and a plan designed for the bench at hand.
+fn plan_choice(ui: &mut egui::Ui, s: &mut AppState) {
+    ui.label(RichText::new("Measurement plan").size(18.0).strong());
+    let n = s.wizard.steps.len();
+    let joint = s.settings.joint_mode;
+    let paper = minutes(s, (0..n).filter(|&i| !s.wizard.steps[i].designed && (joint || !s.wizard.steps[i].joint_only)));
+    let designed = minutes(s, (0..n).filter(|&i| s.wizard.steps[i].designed));
+    let running = s.wizard.running.is_some();
+    ui.add_enabled_ui(!running, |ui| {
+        let what = if joint { "strategies 1 and 2 and the extra measurements" } else { "strategies 1 and 2" };
+        ui.radio_value(&mut s.wizard.quick, false, format!("The paper's {what}: {paper:.1} min of bench time"));
+        ui.label(if joint {
+            "    Determines every parameter the motions can see, far beyond the required σ (on table2-ideal: β_et, \
+             θ_et 0.00006°; β_wf, θ_wf 0.0006°; x_wf, z_wf 0.005 µm; the gap y_wf − Z_et within 0.1 nm). The split \
+             of the gap between y_wf and Z_et is seen only at second order."
+        } else {
+            "    Steps A, B, C: the lamella's tilt β_et, θ_et to about 0.0001° and the beam's line across the stage; \
+             not where the fiber sits on it, nor its direction (held at the design value), nor the absolute gap."
+        });
+        let source = match &s.wizard.design.result {
+            Some((preset, Ok(_))) => format!("designed here for {preset}"),
+            _ => "shipped, designed for table2-ideal".into(),
+        };
+        ui.radio_value(
+            &mut s.wizard.quick,
+            true,
+            format!("The designed plan ({source}): {designed:.2} min of bench time"),
+        );
+        ui.label(
+            "    The joint identifier's required σ and no more: β_et, θ_et ≤ 0.005°, β_wf, θ_wf ≤ 0.01°, x_wf, z_wf ≤ \
+             0.2 µm, the gap y_wf − Z_et ≤ 0.017 µm (on table2-ideal: 0.0017-0.0029°, 0.0023-0.0034°, 0.04-0.06 µm; \
+             the gap within 0.1 nm). A move's forecast σ of the gap is then a few nm.",
+        );
+    });
+    design_for_this_bench(ui, s);
+}
+
+/// "Design a plan for this bench": the experiment design for the preset at hand, and what it
+/// predicts.
+fn design_for_this_bench(ui: &mut egui::Ui, s: &mut AppState) {
+    let preset = s.settings.preset.clone();
+    let holds = s.wizard.steps.iter().any(|st| st.designed && !st.traces.is_empty());
+    ui.horizontal(|ui| {
+        let idle = !s.wizard.design.running() && s.wizard.running.is_none();
+        let button = egui::Button::new(format!("Design a plan for this bench ({preset})"));
+        if ui.add_enabled(idle && !holds, button).on_hover_text("as `photorobot design` does: a pilot run of 117 candidate motions at the design extrinsics, then the cheapest set that reaches every required σ").clicked() {
+            s.wizard.design.start(&preset);
+        }
+        if s.wizard.design.running() {
+            ui.spinner();
+            ui.label("designing: a pilot run of the candidate motions, then the selection…");
+            ui.ctx().request_repaint_after(std::time::Duration::from_millis(200));
+        }
+        if holds {
+            ui.label("(the designed plan's step holds traces: redo it from scratch to measure another plan)");
+        }
+    });
+    match &s.wizard.design.result {
+        Some((preset, Ok(d))) => {
+            ui.label(format!(
+                "Designed for {preset}: {} motions, {:.2} min of bench time; predicted σ (required):",
+                d.chosen.len(),
+                d.total_s / 60.0
+            ));
+            for t in &d.targets {
+                ui.monospace(format!(
+                    "    {:<36} {:>10.5} {} ({:.4})",
+                    t.name, t.predicted_sigma, t.unit, t.required_sigma
+                ));
+            }
+        }
+        Some((preset, Err(e))) => {
+            ui.colored_label(ui.visuals().error_fg_color, format!("no plan designed for {preset}: {e}"));
+        }
+        None => {}
+    }
 }
 
 /// Before step 1, on a bench without a tunable laser: the steps skip their sweeps, and what the
@@ -96,11 +190,15 @@ fn no_tunable_laser(ui: &mut egui::Ui, s: &mut AppState) {
 
 fn step(ui: &mut egui::Ui, s: &mut AppState, i: usize) {
     let idle = s.busy.is_none() && s.wizard.running.is_none();
+    let used = s.step_used(i);
     let st = &s.wizard.steps[i];
-    let used = s.settings.joint_mode || !st.joint_only;
     ui.label(RichText::new(format!("{}. {}", i + 1, st.title)).size(18.0).strong());
     if !used {
-        ui.label("(not used by the paper identifier)");
+        ui.label(if s.wizard.quick || st.designed {
+            "(not used by the measurement plan chosen above)"
+        } else {
+            "(not used by the paper identifier)"
+        });
     }
     ui.label(st.explanation);
     let moves = st.plan.recorded_moves();

@@ -280,3 +280,17 @@ pub fn analyse_sweep(trace: &Trace, model: &PhaseModel, seed: Option<&SweepSeed>
         .map_err(|problem| MeasureError::Trace { label: trace.meta.label.clone(), problem })?;
     Ok(Measurement::Sweep(SweepMeasurement { gap, fit: seed.fit.clone(), peak_fsr: seed.peak_fsr }))
 }
+
+/// The gap along the beam (µm) of sweep `trace`, measured without the extrinsics: the two-beam
+/// fit ([`sweep_seed`]: the air index and the fiber's mode field) refined with the model's full
+/// optics at a tilt `tilt_rad` between the lamella normal and the beam that the caller knows
+/// (a requested tilt), not the one the model's extrinsics give. Its σ is the fit's.
+pub fn sweep_gap_along_beam(trace: &Trace, model: &PhaseModel, tilt_rad: f64) -> Result<GapEstimate, MeasureError> {
+    let seed = sweep_seed(trace, model)?;
+    let perpendicular =
+        sweep::full_model::refine_gap_at_tilt(&trace.wavelength_nm, &trace.irradiance, tilt_rad, model, &seed.fit)
+            .map_err(|problem| MeasureError::Trace { label: trace.meta.label.clone(), problem })?;
+    // The fit pins g·(1 − θ²/2); the gap along the beam is g.
+    let along = 1.0 - tilt_rad * tilt_rad / 2.0;
+    Ok(GapEstimate { gap_um: perpendicular.gap_um / along, sigma_um: perpendicular.sigma_um / along, ..perpendicular })
+}

@@ -5,8 +5,8 @@
 //! σ, determined or why not; an undetermined parameter never shows a bare number); the
 //! identifiability warnings; the residual of every observation in units of its σ; the
 //! validation motions before and after calibration (figures and curves); the diagnosis if one
-//! was run; the lab record (who, when, ambient conditions, controllers); the notes and the list of
-//! traces.
+//! was run; the moves of the lamella made with the calibration and their proof; the lab record
+//! (who, when, ambient conditions, controllers); the notes and the list of traces.
 
 use crate::calibration::{CalibrationReport, ValidationRow};
 use crate::session::{Session, FORMAT_VERSION};
@@ -15,6 +15,7 @@ use svg::{svg_plot, Series};
 
 mod escape;
 mod lab;
+mod moves;
 mod svg;
 
 pub use escape::escape;
@@ -54,6 +55,7 @@ pub fn render_html(session: &Session) -> String {
         }
     }
     diagnosis(&mut h, session);
+    moves::moves(&mut h, session);
     notes_and_traces(&mut h, session);
     h.push_str("</body></html>\n");
     h

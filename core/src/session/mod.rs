@@ -28,6 +28,7 @@ mod diagnosis;
 mod folder;
 mod lab;
 pub mod lock;
+mod moves;
 pub mod recording;
 pub mod writer;
 
@@ -38,6 +39,7 @@ pub use lab::{
     TEMPERATURE_RANGE_C,
 };
 pub use lock::{FolderLock, LOCK_FILE};
+pub use moves::{placement_of, references_from};
 pub use writer::SessionWriter;
 
 use crate::bench::BenchPreset;
@@ -61,7 +63,7 @@ pub const TRACES_DIR: &str = "traces";
 /// samples, so a real one is a few hundred kB; anything larger is refused unread.
 pub const MAX_SESSION_BYTES: u64 = 32 << 20;
 
-const EXPECTED: &str = "a Session(format_version: 1, software, bench, robot, plans, traces, progress, calibration, diagnosis, notes, lab) as in docs/session-format.md";
+const EXPECTED: &str = "a Session(format_version: 1, software, bench, robot, plans, traces, progress, calibration, diagnosis, notes, lab, moves) as in docs/session-format.md";
 
 /// Why a session could not be loaded, saved or used. Every message names the file and the
 /// line or field.
@@ -176,6 +178,10 @@ pub struct Session {
     /// (absent in older files: empty).
     #[serde(default)]
     pub lab: LabRecord,
+    /// The moves of the lamella made with this calibration, in order, each with its proof
+    /// (absent in older files: none).
+    #[serde(default)]
+    pub moves: Vec<crate::position::MoveRecord>,
 }
 
 impl Session {
@@ -193,6 +199,7 @@ impl Session {
             diagnosis: None,
             notes: String::new(),
             lab: LabRecord::default(),
+            moves: Vec::new(),
         }
     }
 

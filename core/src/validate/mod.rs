@@ -217,13 +217,21 @@ pub fn plan_with_play(motion: ValidationMotion, waypoints: &[[f64; 6]], play: &[
 /// [`plan_with_play`], and the index of the segment that reaches each wanted pose (the dither's
 /// far end, its return to the first waypoint, then every later waypoint).
 fn plan_reaching(motion: ValidationMotion, waypoints: &[[f64; 6]], play: &[f64; 6]) -> (Plan, Backlash, Vec<usize>) {
+    plan_through(&format!("validation: {}", motion.name()), motion.name(), waypoints, play)
+}
+
+/// The plan of [`plan_with_play`] for any path through `waypoints` (µm, °): named `name`, its
+/// moves after the dither labelled `label`; with the stages' state at its first recorded sample
+/// and the index of the segment that reaches each wanted pose (the dither's far end, its return
+/// to the first waypoint, then every later waypoint).
+pub fn plan_through(name: &str, label: &str, waypoints: &[[f64; 6]], play: &[f64; 6]) -> (Plan, Backlash, Vec<usize>) {
     let w0 = waypoints[0];
     let mut out = w0;
     out[1] += 1.0;
     let half: [f64; 6] = std::array::from_fn(|j| 0.5 * play[j].abs());
     let wanted: Vec<([f64; 6], &str)> = [(out, ENVELOPE_DITHER), (w0, ENVELOPE_DITHER)]
         .into_iter()
-        .chain(waypoints[1..].iter().map(|w| (*w, motion.name())))
+        .chain(waypoints[1..].iter().map(|w| (*w, label)))
         .collect();
     // Each joint's first direction of travel.
     let mut dir = [0.0f64; 6];
@@ -268,7 +276,7 @@ fn plan_reaching(motion: ValidationMotion, waypoints: &[[f64; 6]], play: &[f64; 
         segments.push(Segment::Move { to: JointTarget::all(command), record: true, label: label.into() });
         prev = w;
     }
-    (Plan { name: format!("validation: {}", motion.name()), description: String::new(), segments }, state, reaching)
+    (Plan { name: name.to_string(), description: String::new(), segments }, state, reaching)
 }
 
 /// What a validation plan compensates from the extended model: the stages' play (reversal
@@ -375,7 +383,7 @@ pub fn pair_note(
 }
 
 /// Join the recorded traces of a plan run into one.
-fn join(traces: &[Trace]) -> Option<Trace> {
+pub(crate) fn join(traces: &[Trace]) -> Option<Trace> {
     let first = traces.first()?;
     let mut out = Trace::with_capacity(first.meta.clone(), traces.iter().map(Trace::len).sum());
     out.extra = first.extra.iter().map(|c| ExtraColumn { name: c.name.clone(), values: Vec::new() }).collect();

@@ -99,6 +99,22 @@ pub fn refine_gap_full_model(
     model: &PhaseModel,
     seed: &SweepFit,
 ) -> Result<GapEstimate, String> {
+    let q0 = model.chain.description().q_from_display(&first_joints);
+    let tilt = model.extrinsics.cavity(&model.chain.end_effector(&q0)).map(|c| c.tilt_rad).unwrap_or(0.0);
+    refine_gap_at_tilt(wavelength_nm, irradiance, tilt, model, seed)
+}
+
+/// [`refine_gap_full_model`] at a tilt `tilt_rad` between the lamella normal and the beam given
+/// by the caller (not the model's extrinsics): only the model's optics and air index are used.
+/// Returns the phase-equivalent (perpendicular) gap, `g·(1 − θ²/2)` with g the gap along the beam.
+pub fn refine_gap_at_tilt(
+    wavelength_nm: &[f64],
+    irradiance: &[f64],
+    tilt_rad: f64,
+    model: &PhaseModel,
+    seed: &SweepFit,
+) -> Result<GapEstimate, String> {
+    let tilt = tilt_rad;
     // Decimate long sweeps: the fringe frequency needs far fewer samples than a 10 kHz record has.
     let stride = (wavelength_nm.len() / 4000).max(1);
     let wl: Vec<f64> = wavelength_nm.iter().step_by(stride).copied().collect();
@@ -108,8 +124,6 @@ pub fn refine_gap_full_model(
         .map(|&w| FabryPerot::new(&model.optics, w, model.n_air).map_err(|e| e.to_string()))
         .collect::<Result<Vec<_>, _>>()?;
     let r1 = fps[0].field(1e9, 0.0).re; // far away, only the fiber face reflects
-    let q0 = model.chain.description().q_from_display(&first_joints);
-    let tilt = model.extrinsics.cavity(&model.chain.end_effector(&q0)).map(|c| c.tilt_rad).unwrap_or(0.0);
     let g0 = seed.estimate.gap_um / (1.0 - tilt * tilt / 2.0);
     let problem = |p| Problem { fps: &fps, y: &y, r1, tilt, p, at_gap: RefCell::new((f64::NAN, Vec::new())) };
     let solve = |p| {
