@@ -80,5 +80,8 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
 }
 
 pub mod independent;
+pub mod lab_files;
+pub mod lab_recordings;
 pub mod random;
 pub mod recordings;
+pub mod two_beam;
