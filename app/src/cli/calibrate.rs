@@ -608,23 +608,7 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
     if let Some(fit) = &r.fit {
         print_fit(fit, out)?;
     }
-    writeln!(out, "\n{:<10} {:>14} {:<4} {:>12}  determined", "parameter", "value", "unit", "σ")?;
-    for p in &r.parameters {
-        let sigma = p.sigma.map_or("-".to_string(), |s| format!("{s:.5}"));
-        if p.determined {
-            writeln!(out, "{:<10} {:>14.5} {:<4} {:>12}  yes", p.name, p.value, p.unit, sigma)?;
-        } else {
-            writeln!(
-                out,
-                "{:<10} {:>14} {:<4} {:>12}  NO: {}",
-                p.name,
-                format!("({:.3})", p.value),
-                p.unit,
-                sigma,
-                p.reason.as_deref().unwrap_or("not determined by these data")
-            )?;
-        }
-    }
+    print_parameters(r, out)?;
     let id = &r.identifiability;
     writeln!(out, "\nidentifiability: rank {} of {} columns", id.rank, id.parameters.len())?;
     if let Some(c) = id.condition_number {
@@ -678,6 +662,42 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
     }
     for w in &r.warnings {
         writeln!(out, "warning: {w}")?;
+    }
+    Ok(())
+}
+
+/// The Table II-style table: each parameter's value with its total σ and the two parts of it,
+/// noise and systematic (what noise cannot explain), or why it is not determined; then the
+/// families of observations that disagree with the others.
+fn print_parameters(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "\n{:<10} {:>14} {:<4} {:>12} {:>12} {:>12}  determined",
+        "parameter", "value", "unit", "σ noise", "σ systematic", "σ total"
+    )?;
+    let f = |s: Option<f64>| s.map_or("-".to_string(), |s| format!("{s:.5}"));
+    for p in &r.parameters {
+        let sigmas = format!("{:>12} {:>12} {:>12}", f(p.sigma_noise.or(p.sigma)), f(p.sigma_systematic), f(p.sigma));
+        if p.determined {
+            writeln!(out, "{:<10} {:>14.5} {:<4} {sigmas}  yes", p.name, p.value, p.unit)?;
+        } else {
+            let why = p.reason.as_deref().unwrap_or("not determined by these data");
+            writeln!(out, "{:<10} {:>14} {:<4} {sigmas}  NO: {why}", p.name, format!("({:.3})", p.value), p.unit)?;
+        }
+    }
+    for family in r.model_discrepancy.iter().flat_map(|d| &d.families) {
+        let test = if family.disagrees { "DISAGREES with the others" } else { "agrees with the others" };
+        writeln!(
+            out,
+            "  {:<18} {:>4} observations, Birge ratio {:.2}, scatter beyond noise {:.3} {}; left out: χ² {:.1} for {} ({test})",
+            family.family.words(),
+            family.observations,
+            family.birge_ratio,
+            family.excess_sigma,
+            family.unit,
+            family.shift_chi2,
+            family.shift_dof
+        )?;
     }
     Ok(())
 }
