@@ -141,6 +141,9 @@ const PARAMETER_GATE_SIGMA: f64 = 2.0;
 /// of its direction in the null space.
 fn pinv_sym(h: &DMatrix<f64>) -> (DMatrix<f64>, Vec<f64>) {
     let n = h.nrows();
+    if n == 0 {
+        return (DMatrix::zeros(0, 0), vec![]);
+    }
     let eig = SymmetricEigen::new(h.clone());
     let max = eig.eigenvalues.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
     let tol = NULL_TOLERANCE * max.max(f64::MIN_POSITIVE);
@@ -192,7 +195,7 @@ pub fn model_discrepancy(
         let vs = DMatrix::from_fn(seen.len(), seen.len(), |a, b| v[(seen[a], seen[b])]);
         let (vs_inv, vs_null) = pinv_sym(&vs);
         let dof = vs_null.iter().filter(|&&s| s < 0.5).count().min(seen.len());
-        let chi2 = (d.transpose() * &vs_inv * &d)[(0, 0)];
+        let chi2 = if seen.is_empty() { 0.0 } else { (d.transpose() * &vs_inv * &d)[(0, 0)] };
         let disagrees = dof > 0 && chi2 > chi2_quantile_99(dof);
         if disagrees {
             for &k in &seen {
