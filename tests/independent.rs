@@ -10,8 +10,10 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::f64::consts::PI;
-use std::fmt::Write as _;
 use std::path::Path;
+
+pub use crate::lab_files::{FileStyle, Row};
+pub use crate::two_beam::TwoBeamOptics;
 
 /// The eight extrinsic parameters (µm and °), named as in the paper.
 #[derive(Debug, Clone, Copy)]
@@ -79,30 +81,48 @@ pub fn end_effector(q: [f64; 6]) -> Matrix4<f64> {
     end_effector_with(q, &Hidden::default())
 }
 
-/// Imperfections of this bench that its readings do not show: a zero offset per joint (µm, °;
-/// the joint is at its reading plus the offset) and a tilt of the q3 stage's axis toward its
-/// link frame's x and y (mrad: it moves along (tan t_x, tan t_y, 1), normalised).
+/// Imperfections of this bench that its readings do not show (all zero by default):
+/// - `joint_offset`: a zero offset per joint (µm, °): the joint is at its reading plus the offset;
+/// - `q3_tilt_mrad`: the q3 stage's axis tilted toward its link frame's x and y (mrad: it moves
+///   along (tan t_x, tan t_y, 1), normalised);
+/// - `joint_scale_ppm`: gain errors of the q1..q3 stages (ppm: a stage moves its reading times
+///   1 + ppm·10⁻⁶);
+/// - `pivot_offset_um`: the q4 and q5 rotation axes displaced by these vectors (µm, in the joint's
+///   own frame: each turns about the axis through that point instead of its origin);
+/// - `drift_nm_per_s`: a thermal drift that lengthens the cavity along the beam with the session
+///   clock (nm/s).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Hidden {
     pub joint_offset: [f64; 6],
     pub q3_tilt_mrad: [f64; 2],
+    pub joint_scale_ppm: [f64; 3],
+    pub pivot_offset_um: [[f64; 3]; 2],
+    pub drift_nm_per_s: f64,
 }
 
 /// [`end_effector`] of a bench with `hidden` imperfections.
 pub fn end_effector_with(q: [f64; 6], hidden: &Hidden) -> Matrix4<f64> {
     let link = |alpha: f64, theta: f64, r: f64| rot_x(alpha) * rot_z(theta) * trans(0.0, 0.0, r);
     let m90 = -PI / 2.0;
-    let q: [f64; 6] = std::array::from_fn(|j| q[j] + hidden.joint_offset[j]);
+    let q: [f64; 6] = std::array::from_fn(|j| {
+        let scale = if j < 3 { 1.0 + hidden.joint_scale_ppm[j] * 1e-6 } else { 1.0 };
+        q[j] * scale + hidden.joint_offset[j]
+    });
     let [q4, q5, q6] = [q[3].to_radians(), q[4].to_radians(), q[5].to_radians()];
     let [tx, ty] = hidden.q3_tilt_mrad.map(|m| (m * 1e-3).tan());
     let axis = Vector3::new(tx, ty, 1.0).normalize() * q[2];
+    // A rotation about the axis through `p` instead of the frame's origin.
+    let about = |p: [f64; 3], angle: f64| trans(p[0], p[1], p[2]) * rot_z(angle) * trans(-p[0], -p[1], -p[2]);
+    let [p4, p5] = hidden.pivot_offset_um;
     link(0.0, 0.0, q[0])
         * link(m90, m90, q[1])
         * rot_x(m90)
         * rot_z(m90)
         * trans(axis.x, axis.y, axis.z)
-        * link(0.0, q4, 0.0)
-        * link(m90, q5 + m90, 0.0)
+        * about(p4, q4)
+        * rot_x(m90)
+        * about(p5, q5)
+        * rot_z(m90)
         * link(m90, q6, 0.0)
 }
 
@@ -113,6 +133,35 @@ pub fn cavity(e: &Extrinsics, q: [f64; 6]) -> (f64, f64) {
 
 /// [`cavity`] on a bench with `hidden` imperfections.
 pub fn cavity_with(e: &Extrinsics, q: [f64; 6], hidden: &Hidden) -> (f64, f64) {
+    let g = geometry_with(e, q, hidden);
+    (g.l_um, g.tilt_rad())
+}
+
+/// The cavity as optics see it: the signed length along the fiber axis and the axes of the
+/// fiber and lamella frames in the world.
+#[derive(Debug, Clone, Copy)]
+pub struct Geometry {
+    /// Signed cavity length L (µm) of SPEC section 3.
+    pub l_um: f64,
+    /// The fiber's optical axis (the Y column of its frame) and its X and Z columns.
+    pub n_f: Vector3<f64>,
+    pub fiber_x: Vector3<f64>,
+    pub fiber_z: Vector3<f64>,
+    /// The lamella normal (the Z column of the tool frame) and the tool frame's X and Y columns.
+    pub n_t: Vector3<f64>,
+    pub tool_x: Vector3<f64>,
+    pub tool_y: Vector3<f64>,
+}
+
+impl Geometry {
+    /// The angle between the lamella normal and the fiber axis (rad).
+    pub fn tilt_rad(&self) -> f64 {
+        self.n_t.dot(&self.n_f).abs().min(1.0).acos()
+    }
+}
+
+/// The cavity's [`Geometry`] at joints `q` (µm, °) on a bench with `hidden` imperfections.
+pub fn geometry_with(e: &Extrinsics, q: [f64; 6], hidden: &Hidden) -> Geometry {
     let fiber =
         trans(e.x_wf_um, e.y_wf_um, e.z_wf_um) * rot_x(e.beta_wf_deg.to_radians()) * rot_z(e.theta_wf_deg.to_radians());
     let tool = end_effector_with(q, hidden)
@@ -122,13 +171,21 @@ pub fn cavity_with(e: &Extrinsics, q: [f64; 6], hidden: &Hidden) -> (f64, f64) {
     let column = |m: &Matrix4<f64>, j: usize| Vector3::new(m[(0, j)], m[(1, j)], m[(2, j)]);
     let (n_f, o_f) = (column(&fiber, 1), column(&fiber, 3));
     let (n_t, o_t) = (column(&tool, 2), column(&tool, 3));
-    let cos = n_t.dot(&n_f);
-    (n_t.dot(&(o_t - o_f)) / cos, cos.abs().min(1.0).acos())
+    Geometry {
+        l_um: n_t.dot(&(o_t - o_f)) / n_t.dot(&n_f),
+        n_f,
+        fiber_x: column(&fiber, 0),
+        fiber_z: column(&fiber, 2),
+        n_t,
+        tool_x: column(&tool, 0),
+        tool_y: column(&tool, 1),
+    }
 }
 
 /// The optics of table2-ideal's documented numbers: SMF-28 fiber, LiNbO3 lamella, air at
 /// 268.1 ppm, six returning beams each with its Gouy phase, its tilt loss (2m·tilt after m
 /// round trips) and its path from the fiber's image in the tilted lamella.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Optics {
     pub mode_field_radius_um: f64,
     pub fiber_index: f64,
@@ -265,10 +322,36 @@ impl Profile {
     }
 }
 
+/// The optics a recording is made with: this simulator's multi-beam model ([`Optics`]), or the
+/// second, deliberately different model ([`TwoBeamOptics`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum OpticsModel {
+    MultiBeam(Optics),
+    TwoBeam(TwoBeamOptics),
+}
+
+impl OpticsModel {
+    /// Reflected power as a fraction of the input for the cavity `g` at `wavelength_nm`.
+    pub fn reflectance(&self, g: &Geometry, wavelength_nm: f64) -> f64 {
+        match self {
+            OpticsModel::MultiBeam(o) => o.reflectance(g.l_um.abs(), g.tilt_rad(), wavelength_nm),
+            OpticsModel::TwoBeam(o) => o.reflectance(g, wavelength_nm),
+        }
+    }
+
+    /// A short name for tables: `multi-beam` or `two-beam`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            OpticsModel::MultiBeam(_) => "multi-beam",
+            OpticsModel::TwoBeam(_) => "two-beam",
+        }
+    }
+}
+
 /// The recorder: detector and motion settings unlike the core's virtual bench.
 pub struct Recorder {
     pub truth: Extrinsics,
-    pub optics: Optics,
+    pub optics: OpticsModel,
     pub laser_nm: f64,
     pub sample_rate_hz: f64,
     pub prismatic_um_per_s: f64,
@@ -286,13 +369,15 @@ pub struct Recorder {
     pub hidden: Hidden,
     /// The session clock at the start of the first record (s).
     pub start_clock_s: f64,
+    /// How the files are written: our format with label lines, or another lab's export.
+    pub style: FileStyle,
 }
 
 impl Recorder {
     pub fn new(seed: u64) -> Self {
         Self {
             truth: TABLE2,
-            optics: Optics::default(),
+            optics: OpticsModel::MultiBeam(Optics::default()),
             laser_nm: 1560.0,
             sample_rate_hz: 4000.0,
             prismatic_um_per_s: 80.0,
@@ -305,20 +390,30 @@ impl Recorder {
             seed,
             hidden: Hidden::default(),
             start_clock_s: 3.7,
+            style: FileStyle::Ours,
         }
     }
 
-    fn signal(&self, q: [f64; 6], wavelength_nm: f64) -> f64 {
-        let (l, tilt) = cavity_with(&self.truth, q, &self.hidden);
-        self.offset_v + self.gain_v * self.optics.reflectance(l.abs(), tilt, wavelength_nm)
+    /// The cavity at joints `q` and session time `clock_s` (the hidden drift lengthens it).
+    fn geometry(&self, q: [f64; 6], clock_s: f64) -> Geometry {
+        let mut g = geometry_with(&self.truth, q, &self.hidden);
+        g.l_um += g.l_um.signum() * self.hidden.drift_nm_per_s * clock_s * 1e-3;
+        g
+    }
+
+    fn signal(&self, q: [f64; 6], wavelength_nm: f64, clock_s: f64) -> f64 {
+        self.offset_v + self.gain_v * self.optics.reflectance(&self.geometry(q, clock_s), wavelength_nm)
     }
 
     /// Peak-to-peak fringe amplitude (V) at q = 0, over one fringe of gap.
     fn fringe_amplitude_v(&self) -> f64 {
-        let (l, tilt) = cavity(&self.truth, [0.0; 6]);
+        let g = self.geometry([0.0; 6], 0.0);
         let half = self.laser_nm * 1e-3 / 2.0;
         let values: Vec<f64> = (0..400)
-            .map(|i| self.gain_v * self.optics.reflectance(l.abs() + half * i as f64 / 400.0, tilt, self.laser_nm))
+            .map(|i| {
+                let at = Geometry { l_um: g.l_um - half * i as f64 / 400.0 * g.l_um.signum(), ..g };
+                self.gain_v * self.optics.reflectance(&at, self.laser_nm)
+            })
             .collect();
         values.iter().cloned().fold(f64::MIN, f64::max) - values.iter().cloned().fold(f64::MAX, f64::min)
     }
@@ -330,9 +425,9 @@ impl Recorder {
         t * self.profile.duration_factor()
     }
 
-    /// Write every record to `dir` as `NNN.csv`, on one clock from `start_clock_s` (setup moves
-    /// between records and waits take their time unrecorded). Returns the number of samples
-    /// written and the clock at the end (s).
+    /// Write every record to `dir` as `NNN.csv` in [`Recorder::style`], on one clock from
+    /// `start_clock_s` (setup moves between records and waits take their time unrecorded).
+    /// Returns the number of samples written and the clock at the end (s).
     pub fn write_folder(&self, records: &[Record], dir: &Path) -> std::io::Result<(usize, f64)> {
         std::fs::create_dir_all(dir)?;
         let mut rng = StdRng::seed_from_u64(self.seed);
@@ -341,12 +436,10 @@ impl Recorder {
         let (mut clock, mut at, mut samples, mut files) = (self.start_clock_s, [0.0; 6], 0, 0);
         let encoder = |q: [f64; 6]| q.map(|v| (v * 1e4).round() / 1e4);
         for record in records {
-            let mut text = String::from("# recorded by an independent simulator\n");
+            let mut rows: Vec<Row> = Vec::new();
             let mut row = |t: f64, q: [f64; 6], nm: f64, rng: &mut StdRng| {
-                let v = self.signal(q, nm) + noise.sample(rng);
-                let q = encoder(q);
-                let _ = writeln!(text, "{t:.6},{},{},{},{},{},{},{nm:.6},{v:.7}", q[0], q[1], q[2], q[3], q[4], q[5]);
-                samples += 1;
+                let irradiance = self.signal(q, nm, t) + noise.sample(rng);
+                rows.push(Row { t_s: t, q: encoder(q), wavelength_nm: nm, irradiance });
             };
             let (label, start) = match record {
                 Record::Motion { label, from, .. } => (label, *from),
@@ -358,8 +451,6 @@ impl Recorder {
                 }
             };
             clock += self.duration_s(&at, &start) + 0.3;
-            let header =
-                format!("# label: {label}\nt_s,q1_um,q2_um,q3_um,q4_deg,q5_deg,q6_deg,wavelength_nm,irradiance\n");
             match record {
                 Record::Motion { from, to, .. } => {
                     let moving = self.duration_s(from, to);
@@ -387,7 +478,8 @@ impl Recorder {
                 }
                 Record::Wait { .. } => unreachable!("a wait records nothing: handled above"),
             }
-            std::fs::write(dir.join(format!("{files:03}.csv")), header + &text)?;
+            samples += rows.len();
+            std::fs::write(dir.join(format!("{files:03}.csv")), self.style.file(label, &rows))?;
             files += 1;
         }
         Ok((samples, clock))

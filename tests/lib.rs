@@ -80,6 +80,8 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
 }
 
 pub mod independent;
+pub mod lab_files;
+pub mod lab_recordings;
 pub mod random;
 pub mod recordings;
 
@@ -139,3 +141,4 @@ pub mod moves {
         (t.gap_um, t.tilt_deg)
     }
 }
+pub mod two_beam;

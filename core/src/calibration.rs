@@ -7,6 +7,7 @@
 //! identify and validate so that neither depends on the other; the CLI and the GUI call it.
 
 use crate::bench::{run_plan, Bench, RunControl};
+use crate::identify::discrepancy::{model_discrepancy, ModelDiscrepancy};
 use crate::identify::joint::analyse_estimate;
 pub use crate::identify::multistart::{identify, Identification, Mode};
 use crate::identify::observability::IdentifiabilityReport;
@@ -33,14 +34,24 @@ pub struct ParameterRow {
     pub value: f64,
     /// Unit.
     pub unit: String,
-    /// Standard uncertainty, `None` when the data do not determine the parameter.
+    /// Total standard uncertainty, √(σ_noise² + σ_systematic²); `None` when the data do not
+    /// determine the parameter.
     pub sigma: Option<f64>,
-    /// Whether the data determine it.
+    /// The part the noise model gives (the covariance of the fit, scaled up by the residual's χ²
+    /// when above 1). `None` when not determined, or in reports that predate it.
+    #[serde(default)]
+    pub sigma_noise: Option<f64>,
+    /// The part noise cannot explain: how far independent views of the data (families of
+    /// observations, traces) disagree beyond their noise (`identify::discrepancy`). `None` as
+    /// `sigma_noise`.
+    #[serde(default)]
+    pub sigma_systematic: Option<f64>,
+    /// Whether the data determine it (its total σ within the parameter's useful bound).
     pub determined: bool,
     /// Why not, when not.
     pub reason: Option<String>,
-    /// The σ is the spread of the estimate over the traces (jackknife), larger than the σ the
-    /// noise model gives: the traces disagree beyond their noise.
+    /// The systematic part is the spread of the estimate over the traces (jackknife), not a
+    /// disagreement between families of observations.
     #[serde(default)]
     pub sigma_from_jackknife: bool,
 }
@@ -129,6 +140,10 @@ pub struct CalibrationReport {
     /// The sign of each translation's gap change and the sources that fix it.
     #[serde(default)]
     pub translation_signs: Vec<TranslationSign>,
+    /// The model-discrepancy term: each family of observations against the model and against the
+    /// others (`identify::discrepancy`); `None` in reports saved without one.
+    #[serde(default)]
+    pub model_discrepancy: Option<ModelDiscrepancy>,
     /// What leaving the wavelength sweeps out cost (a bench without a tunable laser, or
     /// `calibrate --no-sweeps`); `None` when the plans ran with their sweeps.
     #[serde(default)]
@@ -203,6 +218,8 @@ pub fn parameter_rows(extrinsics: &Extrinsics, report: &IdentifiabilityReport) -
                 value: values[i],
                 unit: unit.to_string(),
                 sigma: uncertainty.and_then(|u| u.sigma),
+                sigma_noise: uncertainty.and_then(|u| u.sigma),
+                sigma_systematic: uncertainty.and_then(|u| u.sigma).map(|_| 0.0),
                 determined: uncertainty.is_some_and(|u| u.determined),
                 reason: match uncertainty {
                     Some(u) => u.reason.clone(),
@@ -253,7 +270,8 @@ pub fn report_from_identification(
     // see can end whole turns away. The identification itself runs on the solver's values.
     let extrinsics = id.estimate.extrinsics.with_angles_wrapped();
     let mut parameters = parameter_rows(&extrinsics, &report);
-    widen_to_jackknife(&mut parameters, id);
+    let discrepancy = discrepancy_of(id);
+    add_systematic(&mut parameters, id, &discrepancy);
     withhold_undetermined(&mut parameters, &fit);
     let (est, obs) = (&id.estimate, &id.observations);
     let mut warnings = report.warnings.clone();
@@ -316,6 +334,7 @@ pub fn report_from_identification(
         warnings,
         fit: Some(fit),
         translation_signs: signs,
+        model_discrepancy: Some(discrepancy),
         sweep_cost: None,
         extrinsics,
         traces,
@@ -410,30 +429,44 @@ pub fn fit_check(id: &Identification, report: &IdentifiabilityReport) -> FitChec
     }
 }
 
-/// Each determined parameter's σ raised to the jackknife σ over the traces where that is larger
-/// ([`jackknife_sigma`]); a parameter whose jackknife σ exceeds its useful bound is not
-/// determined.
-fn widen_to_jackknife(rows: &mut [ParameterRow], id: &Identification) {
+/// The model-discrepancy term of an identification's fit ([`model_discrepancy`]).
+pub fn discrepancy_of(id: &Identification) -> ModelDiscrepancy {
+    let est = &id.estimate;
+    let m = id.observations.len().min(est.weighted_jacobian.nrows());
+    model_discrepancy(&est.weighted_jacobian, &est.normalised_residuals[..m], &id.observations, &est.column_parameter)
+}
+
+/// Each determined parameter's systematic σ, what noise cannot explain: the larger of the
+/// families' disagreement ([`ModelDiscrepancy::sigma_from_families`]) and the jackknife σ over the
+/// traces in excess of the noise σ ([`jackknife_sigma`]); the total σ is both in quadrature. A
+/// parameter whose total σ exceeds its useful bound is not determined.
+fn add_systematic(rows: &mut [ParameterRow], id: &Identification, discrepancy: &ModelDiscrepancy) {
     use crate::identify::observability::{DEFAULT_USEFUL_ANGLE_DEG, DEFAULT_USEFUL_LENGTH_UM};
     let est = &id.estimate;
     let m = id.observations.len().min(est.weighted_jacobian.nrows());
     let labels: Vec<String> = id.observations.iter().take(m).map(|o| o.label.clone()).collect();
     let jacobian = est.weighted_jacobian.rows(0, m).into_owned();
-    let Some(jack) = jackknife_sigma(&jacobian, &est.normalised_residuals[..m], &labels) else { return };
+    let jack = jackknife_sigma(&jacobian, &est.normalised_residuals[..m], &labels);
     for row in rows.iter_mut().filter(|r| r.determined) {
         let Some(i) = PARAMETER_NAMES.iter().position(|(n, _)| *n == row.name) else { continue };
-        let Some(c) = est.column_parameter.iter().position(|p| *p == Some(i)) else { continue };
-        let sigma = jack[c] * crate::identify::parameter_scale(i);
-        if row.sigma.is_some_and(|s| sigma > s) {
-            row.sigma = Some(sigma);
-            row.sigma_from_jackknife = true;
-            let bound = if row.unit == "°" { DEFAULT_USEFUL_ANGLE_DEG } else { DEFAULT_USEFUL_LENGTH_UM };
-            if sigma > bound {
-                row.determined = false;
-                row.reason =
-                    Some(format!("the traces disagree: σ over the traces {sigma:.3} {} (jackknife)", row.unit));
-                row.sigma = None;
-            }
+        let Some(noise) = row.sigma_noise else { continue };
+        let c = est.column_parameter.iter().position(|p| *p == Some(i));
+        let spread = match (&jack, c) {
+            (Some(jack), Some(c)) => (jack[c] * crate::identify::parameter_scale(i)).powi(2) - noise * noise,
+            _ => 0.0,
+        };
+        let families = discrepancy.sigma_from_families.get(i).copied().flatten().unwrap_or(0.0).powi(2);
+        let systematic = spread.max(families).max(0.0).sqrt();
+        let total = noise.hypot(systematic);
+        row.sigma = Some(total);
+        row.sigma_systematic = Some(systematic);
+        row.sigma_from_jackknife = spread > families && spread > 0.0;
+        let bound = if row.unit == "°" { DEFAULT_USEFUL_ANGLE_DEG } else { DEFAULT_USEFUL_LENGTH_UM };
+        if total > bound {
+            let why = if row.sigma_from_jackknife { "the traces disagree" } else { "the families of observations disagree" };
+            row.determined = false;
+            row.reason = Some(format!("{why}: total σ {total:.3} {} (above its useful bound)", row.unit));
+            (row.sigma, row.sigma_noise, row.sigma_systematic) = (None, None, None);
         }
     }
 }
@@ -459,7 +492,7 @@ fn withhold_undetermined(rows: &mut [ParameterRow], fit: &FitCheck) {
         };
         if let Some(reason) = reason {
             row.determined = false;
-            row.sigma = None;
+            (row.sigma, row.sigma_noise, row.sigma_systematic) = (None, None, None);
             row.reason = Some(reason);
         }
     }

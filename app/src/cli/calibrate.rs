@@ -31,7 +31,7 @@ use photorobot_core::session::{
     self as lab, autosave_path, find_recovery, recording::record_with, BenchInfo, ControllerIdentity, FolderLock,
     LabRecord, Session, SessionWriter, AUTOSAVE_FILE,
 };
-use photorobot_core::trace::import::{read_folder_sourced, ColumnMapping};
+use photorobot_core::trace::import::{read_folder_with, ColumnMapping, Constants, FolderOptions};
 use photorobot_core::trace::Trace;
 use std::cell::RefCell;
 use std::io::Write;
@@ -71,9 +71,14 @@ pub struct CalibrateArgs {
     /// Identify from a folder of CSV traces (one motion or sweep per file) instead of measuring.
     #[arg(long, value_name = "DIR", conflicts_with = "resume")]
     pub traces: Option<PathBuf>,
-    /// Column mapping (RON) for traces from another acquisition system (default: our format).
+    /// Column mapping (RON) for traces from another acquisition system (default: our format, or
+    /// a lab's export whose column names carry their units).
     #[arg(long, value_name = "FILE", requires = "traces")]
     pub mapping: Option<PathBuf>,
+    /// With --traces: the laser's fixed wavelength (nm) for files that have neither a wavelength
+    /// column nor a `# wavelength_nm:` line.
+    #[arg(long, value_name = "NM", requires = "traces", value_parser = wavelength_nm)]
+    pub wavelength_nm: Option<f64>,
     /// Measure these plans instead of the mode's (repeatable, run in order): a plan file (RON) or
     /// an embedded plan (strategy1, strategy2, joint-extras, optimised). Joint mode on
     /// `--plan optimised` runs the experiment design's plan (`photorobot design`).
@@ -133,6 +138,14 @@ fn pressure_hpa(text: &str) -> Result<f64, String> {
 
 fn humidity_percent(text: &str) -> Result<f64, String> {
     in_range(text, "relative humidity", &lab::HUMIDITY_RANGE_PERCENT, "%")
+}
+
+fn wavelength_nm(text: &str) -> Result<f64, String> {
+    let v: f64 = text.trim().parse().map_err(|_| format!("expected a wavelength in nm, found `{text}`"))?;
+    match (200.0..=20_000.0).contains(&v) {
+        true => Ok(v),
+        false => Err(format!("expected a vacuum wavelength in nm between 200 and 20000, found {v}")),
+    }
 }
 
 impl LabArgs {
@@ -217,7 +230,8 @@ fn calibrate_from_traces(
     mode: Mode,
 ) -> Result<(Session, CalibrationReport), CliError> {
     let mapping = a.mapping.as_deref().map(ColumnMapping::load).transpose()?;
-    let sourced = timed("read_traces", || read_folder_sourced(dir, mapping.as_ref()))?;
+    let options = FolderOptions { mapping: mapping.as_ref(), constants: Constants { wavelength_nm: a.wavelength_nm } };
+    let sourced = timed("read_traces", || read_folder_with(dir, &options))?;
     if std::fs::canonicalize(dir).ok() == std::fs::canonicalize(a.out.join("traces")).ok() {
         return Err(CliError::Argument {
             argument: "--out",
@@ -593,23 +607,7 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
     if let Some(fit) = &r.fit {
         print_fit(fit, out)?;
     }
-    writeln!(out, "\n{:<10} {:>14} {:<4} {:>12}  determined", "parameter", "value", "unit", "σ")?;
-    for p in &r.parameters {
-        let sigma = p.sigma.map_or("-".to_string(), |s| format!("{s:.5}"));
-        if p.determined {
-            writeln!(out, "{:<10} {:>14.5} {:<4} {:>12}  yes", p.name, p.value, p.unit, sigma)?;
-        } else {
-            writeln!(
-                out,
-                "{:<10} {:>14} {:<4} {:>12}  NO: {}",
-                p.name,
-                format!("({:.3})", p.value),
-                p.unit,
-                sigma,
-                p.reason.as_deref().unwrap_or("not determined by these data")
-            )?;
-        }
-    }
+    print_parameters(r, out)?;
     let id = &r.identifiability;
     writeln!(out, "\nidentifiability: rank {} of {} columns", id.rank, id.parameters.len())?;
     if let Some(c) = id.condition_number {
@@ -663,6 +661,42 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
     }
     for w in &r.warnings {
         writeln!(out, "warning: {w}")?;
+    }
+    Ok(())
+}
+
+/// The Table II-style table: each parameter's value with its total σ and the two parts of it,
+/// noise and systematic (what noise cannot explain), or why it is not determined; then the
+/// families of observations that disagree with the others.
+fn print_parameters(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "\n{:<10} {:>14} {:<4} {:>12} {:>12} {:>12}  determined",
+        "parameter", "value", "unit", "σ noise", "σ systematic", "σ total"
+    )?;
+    let f = |s: Option<f64>| s.map_or("-".to_string(), |s| format!("{s:.5}"));
+    for p in &r.parameters {
+        let sigmas = format!("{:>12} {:>12} {:>12}", f(p.sigma_noise.or(p.sigma)), f(p.sigma_systematic), f(p.sigma));
+        if p.determined {
+            writeln!(out, "{:<10} {:>14.5} {:<4} {sigmas}  yes", p.name, p.value, p.unit)?;
+        } else {
+            let why = p.reason.as_deref().unwrap_or("not determined by these data");
+            writeln!(out, "{:<10} {:>14} {:<4} {sigmas}  NO: {why}", p.name, format!("({:.3})", p.value), p.unit)?;
+        }
+    }
+    for family in r.model_discrepancy.iter().flat_map(|d| &d.families) {
+        let test = if family.disagrees { "DISAGREES with the others" } else { "agrees with the others" };
+        writeln!(
+            out,
+            "  {:<18} {:>4} observations, Birge ratio {:.2}, scatter beyond noise {:.3} {}; left out: χ² {:.1} for {} ({test})",
+            family.family.words(),
+            family.observations,
+            family.birge_ratio,
+            family.excess_sigma,
+            family.unit,
+            family.shift_chi2,
+            family.shift_dof
+        )?;
     }
     Ok(())
 }

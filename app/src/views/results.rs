@@ -65,11 +65,12 @@ fn report(ui: &mut egui::Ui, r: &CalibrationReport) {
             ambiguous(ui, fit);
         }
     }
-    egui::Grid::new("parameters").striped(true).num_columns(5).show(ui, |ui| {
-        for h in ["parameter", "value", "unit", "σ", "determined"] {
+    egui::Grid::new("parameters").striped(true).num_columns(7).show(ui, |ui| {
+        for h in ["parameter", "value", "unit", "σ noise", "σ systematic", "σ total", "determined"] {
             ui.strong(h);
         }
         ui.end_row();
+        let sigma = |s: Option<f64>| s.map_or("–".into(), |s| format!("{s:.5}"));
         for p in &r.parameters {
             ui.label(display_name(&p.name));
             if p.determined {
@@ -78,7 +79,9 @@ fn report(ui: &mut egui::Ui, r: &CalibrationReport) {
                 ui.monospace(format!("({:.3})", p.value));
             }
             ui.label(&p.unit);
-            ui.monospace(p.sigma.map_or("–".into(), |s| format!("{s:.5}")));
+            ui.monospace(sigma(p.sigma_noise.or(p.sigma)));
+            ui.monospace(sigma(p.sigma_systematic));
+            ui.monospace(sigma(p.sigma));
             if p.determined {
                 ui.colored_label(Color32::from_rgb(60, 180, 90), "yes");
             } else {
@@ -90,6 +93,7 @@ fn report(ui: &mut egui::Ui, r: &CalibrationReport) {
             ui.end_row();
         }
     });
+    families(ui, r);
     ui.separator();
     let id = &r.identifiability;
     ui.label(RichText::new("Identifiability").strong());
@@ -116,6 +120,31 @@ fn report(ui: &mut egui::Ui, r: &CalibrationReport) {
     ui.columns(2, |cols| {
         residual_plot(&mut cols[0], r);
         heat_map(&mut cols[1], r);
+    });
+}
+
+/// Each family of observations against the model and the others: where the systematic σ comes from.
+fn families(ui: &mut egui::Ui, r: &CalibrationReport) {
+    let Some(d) = r.model_discrepancy.as_ref().filter(|d| !d.families.is_empty()) else { return };
+    ui.label("σ systematic: what noise cannot explain, from families of observations (and traces) that disagree:");
+    egui::Grid::new("families").striped(true).num_columns(5).show(ui, |ui| {
+        for h in ["family", "observations", "Birge ratio", "scatter beyond noise", "left out"] {
+            ui.strong(h);
+        }
+        ui.end_row();
+        for f in &d.families {
+            ui.label(f.family.words());
+            ui.monospace(f.observations.to_string());
+            ui.monospace(format!("{:.2}", f.birge_ratio));
+            ui.monospace(format!("{:.3} {}", f.excess_sigma, f.unit));
+            let text = format!("χ² {:.1} for {}: {}", f.shift_chi2, f.shift_dof, if f.disagrees { "disagrees" } else { "agrees" });
+            if f.disagrees {
+                ui.colored_label(ui.visuals().warn_fg_color, text);
+            } else {
+                ui.label(text);
+            }
+            ui.end_row();
+        }
     });
 }
 

@@ -7,6 +7,7 @@
 
 mod approach;
 pub mod design;
+pub mod discrepancy;
 pub mod joint;
 pub mod measurements;
 pub mod multistart;

@@ -124,29 +124,72 @@ fn with_sigma(value: f64, sigma: Option<f64>) -> (String, String) {
 fn parameter_table(h: &mut String, c: &CalibrationReport) {
     h.push_str(
         "<h2>Identified parameters</h2>\n<p>The extrinsic parameters of the paper's Table II: where the fiber and \
-         the lamella are. σ is the standard uncertainty (68 %). A parameter the measurements do not determine is \
-         shown as such, never as a number.</p>\n<table>\n<tr><th>parameter</th><th>what it is</th><th>value</th><th>σ</th><th>unit</th><th>determined</th></tr>\n",
+         the lamella are. σ is the standard uncertainty (68 %): the noise of the measurements and, in quadrature, a \
+         systematic part, what noise cannot explain (independent views of the data that disagree beyond their \
+         noise: families of observations, traces). A parameter the measurements do not determine is shown as \
+         such, never as a number.</p>\n<table>\n<tr><th>parameter</th><th>what it is</th><th>value</th><th>σ noise</th>\
+         <th>σ systematic</th><th>σ total</th><th>unit</th><th>determined</th></tr>\n",
     );
     for p in &c.parameters {
         if p.determined {
             let (v, s) = with_sigma(p.value, p.sigma);
+            let digits = |x: Option<f64>| match (x, p.sigma) {
+                (Some(x), Some(total)) if total > 0.0 && total.is_finite() => {
+                    let decimals = (1 - total.log10().floor() as i64).clamp(0, 12) as usize;
+                    format!("{x:.decimals$}")
+                }
+                _ => "–".into(),
+            };
             let _ = writeln!(
                 h,
-                "<tr><td>{}</td><td>{}</td><td class=\"num\">{v}</td><td class=\"num\">{s}</td><td>{}</td><td class=\"yes\">yes</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td class=\"num\">{v}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
+                 <td class=\"num\">{s}</td><td>{}</td><td class=\"yes\">yes</td></tr>",
                 escape(&p.name),
                 meaning(&p.name),
+                digits(p.sigma_noise.or(p.sigma)),
+                digits(p.sigma_systematic),
                 escape(&p.unit)
             );
         } else {
             let _ = writeln!(
                 h,
-                "<tr><td>{}</td><td>{}</td><td class=\"muted\">not determined</td><td class=\"num\">–</td><td>{}</td><td><span class=\"no\">no</span>: {}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td class=\"muted\">not determined</td><td class=\"num\">–</td><td class=\"num\">–</td>\
+                 <td class=\"num\">–</td><td>{}</td><td><span class=\"no\">no</span>: {}</td></tr>",
                 escape(&p.name),
                 meaning(&p.name),
                 escape(&p.unit),
                 escape(p.reason.as_deref().unwrap_or("not determined by these data"))
             );
         }
+    }
+    h.push_str("</table>\n");
+    discrepancy_table(h, c);
+}
+
+/// Each family of observations against the model and the others: what the systematic σ comes from.
+fn discrepancy_table(h: &mut String, c: &CalibrationReport) {
+    let Some(d) = c.model_discrepancy.as_ref().filter(|d| !d.families.is_empty()) else { return };
+    h.push_str(
+        "<p>Families of observations: each one's residual against its noise (Birge ratio, 1 at the noise floor) \
+         and how far the estimate moves when it is left out, against what noise gives (χ², its 99 % quantile \
+         decides).</p>\n<table>\n<tr><th>family</th><th>observations</th><th>traces</th><th>Birge ratio</th>\
+         <th>scatter beyond noise</th><th>left out: χ² (dof)</th><th>against the others</th></tr>\n",
+    );
+    for f in &d.families {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{:.2}</td>\
+             <td class=\"num\">{:.3} {}</td><td class=\"num\">{:.1} ({})</td><td>{}</td></tr>",
+            f.family.words(),
+            f.observations,
+            f.traces,
+            f.birge_ratio,
+            f.excess_sigma,
+            escape(&f.unit),
+            f.shift_chi2,
+            f.shift_dof,
+            if f.disagrees { "<span class=\"no\">disagrees</span>" } else { "agrees" }
+        );
     }
     h.push_str("</table>\n");
 }

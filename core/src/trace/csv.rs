@@ -2,7 +2,7 @@
 //! extra columns) and writing one atomically, bit-exact on reading back.
 
 use super::plain::read_table_bytes;
-use super::table::{open_limited, read_table_sized, ReadOptions, Table};
+use super::table::{open_limited, read_table_sized, Dialect, MetaLine, ReadOptions, Table};
 use super::{escape_meta, ExtraColumn, Trace, TraceError, FORMAT_LINE, REQUIRED_COLUMNS};
 use crate::files::{write_atomic, FileError};
 use rayon::prelude::*;
@@ -91,11 +91,21 @@ impl Trace {
     /// Read and validate a trace held in memory (a whole file's bytes), with options; `origin`
     /// names it in errors. The same trace as [`Trace::from_csv_reader_with`], read faster.
     pub fn from_csv_bytes(bytes: &[u8], origin: &Path, options: &ReadOptions) -> Result<Self, TraceError> {
-        let table = read_table_bytes(bytes, origin, options, |names, line| {
+        Ok(Self::from_csv_bytes_keyed(bytes, origin, options)?.0)
+    }
+
+    /// [`Trace::from_csv_bytes`] with every `# key: value` line of the file.
+    pub(crate) fn from_csv_bytes_keyed(
+        bytes: &[u8],
+        origin: &Path,
+        options: &ReadOptions,
+    ) -> Result<(Self, Vec<MetaLine>), TraceError> {
+        let mut table = read_table_bytes(bytes, origin, options, |names, line| {
             check_required(names, origin, line)?;
             Ok(0)
         })?;
-        Ok(Self::from_table(table))
+        let keyed = std::mem::take(&mut table.meta_lines);
+        Ok((Self::from_table(table), keyed))
     }
 
     /// [`Trace::from_csv_reader_with`] of an input of `size_bytes` when known (the columns are
@@ -106,7 +116,7 @@ impl Trace {
         options: &ReadOptions,
         size_bytes: Option<u64>,
     ) -> Result<Self, TraceError> {
-        let table = read_table_sized(reader, origin, options, size_bytes, |names, line| {
+        let table = read_table_sized(reader, origin, options, size_bytes, Dialect::OURS, |names, line| {
             check_required(names, origin, line)?;
             Ok(0)
         })?;

@@ -89,8 +89,7 @@ pub enum TraceError {
     },
     /// A data row has a different number of fields from the header.
     #[error("{file}:{line}: expected {expected} fields (one per header column), found {found}{hint}",
-        file = .file.display(),
-        hint = if .found < .expected { " (truncated row?)" } else { "" })]
+        file = .file.display())]
     FieldCount {
         /// The file.
         file: PathBuf,
@@ -100,6 +99,23 @@ pub enum TraceError {
         expected: usize,
         /// Number of fields in the row.
         found: usize,
+        /// What may have caused it, in parentheses after a space, or empty.
+        hint: String,
+    },
+    /// A number with the other decimal mark than the file's earlier numbers: a file holds to one.
+    #[error("{file}:{line}: column `{column}`: `{text}` does not use {earlier}, as the earlier numbers of this file do \
+             (expected one decimal mark throughout a file)", file = .file.display())]
+    MixedDecimalMarks {
+        /// The file.
+        file: PathBuf,
+        /// Line of the row.
+        line: usize,
+        /// Column name.
+        column: String,
+        /// The field as found.
+        text: String,
+        /// The mark of the earlier numbers, in words.
+        earlier: &'static str,
     },
     /// A field is not a decimal number.
     #[error("{file}:{line}: column `{column}`: expected a number, found {}", show_field(.text), file = .file.display())]
@@ -181,6 +197,20 @@ pub enum TraceError {
         target: String,
         /// The header as found (joined with commas).
         found: String,
+    },
+    /// A lab's file: one of our columns is neither in the header nor given otherwise.
+    #[error("{file}:{line}: no `{column}` column: {how}; found `{found}` (a file whose names are not ours reads through a column mapping, --mapping)", file = .file.display())]
+    LabColumnMissing {
+        /// The file.
+        file: PathBuf,
+        /// Line of the header.
+        line: usize,
+        /// Our column(s) missing.
+        column: String,
+        /// The header as found (joined with commas).
+        found: String,
+        /// What would give it.
+        how: String,
     },
     /// Import: a value is no longer finite after the mapping's unit conversion and scale.
     #[error("{file}: column `{column}`, data row {row}: {value} after the mapping's unit conversion and scale (expected a finite number: check the mapping's unit and scale)", file = .file.display())]

@@ -39,7 +39,7 @@ mod plain;
 mod table;
 
 pub use error::TraceError;
-pub use table::{open_limited, read_table, ReadOptions, Table};
+pub use table::{open_limited, read_table, MetaLine, ReadOptions, Table};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;

@@ -4,7 +4,7 @@
 //! full reader would skip, a bad row) is read again by [`read_table_sized`], which then reads it
 //! or names its problem: this path only ever returns the table that one would.
 
-use super::table::{check_names, read_meta, read_table_sized, ReadOptions, Rows, Table};
+use super::table::{check_names, read_meta, read_table_sized, Dialect, ReadOptions, Rows, Table};
 use super::TraceError;
 use std::path::Path;
 
@@ -17,7 +17,7 @@ pub(crate) fn read_table_bytes(
 ) -> Result<Table, TraceError> {
     match plain_table(bytes, origin, options, &header) {
         Some(table) => Ok(table),
-        None => read_table_sized(bytes, origin, options, Some(bytes.len() as u64), header),
+        None => read_table_sized(bytes, origin, options, Some(bytes.len() as u64), Dialect::OURS, header),
     }
 }
 
@@ -33,7 +33,7 @@ pub(super) fn plain_table(
         return None;
     }
     let mut rest = bytes;
-    let (meta, meta_lines) = read_meta(&mut rest, origin).ok()?;
+    let (meta, meta_lines, keyed) = read_meta(&mut rest, origin).ok()?;
     let mut lines = Lines(rest);
     let header_text = lines.next()?;
     if header_text.first() == Some(&b'#') || header_text.trim_ascii().is_empty() {
@@ -54,7 +54,7 @@ pub(super) fn plain_table(
         }
         rows.push(line.split(|&b| b == b','), line.len() + 1, options.max_rows).ok()?;
     }
-    (rows.len() > 0).then(|| Table { meta, header_line, names, columns: rows.into_columns() })
+    (rows.len() > 0).then(|| Table { meta, meta_lines: keyed, header_line, names, columns: rows.into_columns() })
 }
 
 /// The lines of a text, each without its `\n`.

@@ -43,6 +43,66 @@ fn parse_field(bytes: &[u8]) -> Option<f64> {
     std::str::from_utf8(bytes.trim_ascii()).ok()?.parse::<f64>().ok()
 }
 
+/// How a file separates its fields and writes its decimals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Dialect {
+    /// The field separator: `,`, `;` or a tab.
+    pub separator: u8,
+    /// A decimal comma is read as well as a decimal point (never with `,` as the separator): a
+    /// file uses one mark throughout, the first one a number of it shows.
+    pub decimal_comma: bool,
+}
+
+impl Dialect {
+    /// Our format: commas between fields, a decimal point.
+    pub const OURS: Dialect = Dialect { separator: b',', decimal_comma: false };
+}
+
+/// The decimal mark of a file, as its numbers show it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mark {
+    /// No number with a fraction yet.
+    Unknown,
+    Point,
+    Comma,
+}
+
+impl Mark {
+    fn words(self) -> &'static str {
+        match self {
+            Mark::Comma => "a decimal comma",
+            _ => "a decimal point",
+        }
+    }
+}
+
+/// Parse a field that may use a decimal comma, holding the file to the first mark it used.
+fn parse_with_mark(field: &[u8], mark: &mut Mark) -> Result<f64, Option<Mark>> {
+    let bytes = field.trim_ascii();
+    let (point, comma) = (bytes.contains(&b'.'), bytes.contains(&b','));
+    let this = match (point, comma) {
+        (true, true) => return Err(None),
+        (true, false) => Mark::Point,
+        (false, true) => Mark::Comma,
+        (false, false) => Mark::Unknown,
+    };
+    if this != Mark::Unknown {
+        if *mark != Mark::Unknown && *mark != this {
+            return Err(Some(*mark));
+        }
+        *mark = this;
+    }
+    if this != Mark::Comma {
+        return parse_field(bytes).ok_or(None);
+    }
+    let mut buffer = [0u8; 64];
+    let text = buffer.get_mut(..bytes.len()).ok_or(None)?;
+    for (to, &from) in text.iter_mut().zip(bytes) {
+        *to = if from == b',' { b'.' } else { from };
+    }
+    parse_field(text).ok_or(None)
+}
+
 /// The last field read in a column and its value: most columns of a recording repeat their
 /// field row after row (the stages that do not move, a fixed wavelength), and comparing a few
 /// bytes costs a fraction of parsing them.
@@ -70,13 +130,29 @@ impl LastField {
     }
 }
 
-/// Read the metadata lines (and blank lines) before the header. Returns the metadata and the
-/// number of lines consumed.
-pub(super) fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(TraceMeta, usize), TraceError> {
+/// A `# key: value` line before the header: its 1-based line, its key (trimmed, lower case) and
+/// its value (unescaped).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MetaLine {
+    /// 1-based line of the file.
+    pub line: usize,
+    /// The key, trimmed and in lower case.
+    pub key: String,
+    /// The value, unescaped.
+    pub value: String,
+}
+
+/// Read the metadata lines (and blank lines) before the header. Returns the metadata, the
+/// number of lines consumed and every `key: value` line (known keys and others).
+pub(super) fn read_meta<R: BufRead>(
+    reader: &mut R,
+    file: &Path,
+) -> Result<(TraceMeta, usize, Vec<MetaLine>), TraceError> {
     let io_err = |source| TraceError::File(FileError::Io { file: file.to_path_buf(), action: "cannot read", source });
     let mut meta = TraceMeta::default();
     let mut lines = 0usize;
     let mut line = Vec::new();
+    let mut keyed = Vec::new();
     // A UTF-8 byte-order mark (spreadsheet exports) is skipped.
     if reader.fill_buf().map_err(io_err)?.starts_with(b"\xEF\xBB\xBF") {
         reader.consume(3);
@@ -119,7 +195,9 @@ pub(super) fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(Trac
             continue; // a free comment
         };
         let value = unescape_meta(value.strip_prefix(' ').unwrap_or(value));
-        match key.trim().to_ascii_lowercase().as_str() {
+        let key = key.trim().to_ascii_lowercase();
+        keyed.push(MetaLine { line: lines, key: key.clone(), value: value.clone() });
+        match key.as_str() {
             "label" => meta.label = value,
             "bench" => meta.bench = value,
             "irradiance_unit" => meta.irradiance_unit = value,
@@ -133,10 +211,10 @@ pub(super) fn read_meta<R: BufRead>(reader: &mut R, file: &Path) -> Result<(Trac
                     found: value.clone(),
                 })?
             }
-            _ => {} // unknown keys are ignored (forward compatibility, other systems)
+            _ => {} // unknown keys are ignored here (forward compatibility, other systems)
         }
     }
-    Ok((meta, lines))
+    Ok((meta, lines, keyed))
 }
 
 /// Check the header row's names: UTF-8, non-empty, on one line, unique. Returns them trimmed.
@@ -186,6 +264,8 @@ pub(super) fn check_names(header: &csv::ByteRecord, file: &Path, line: usize) ->
 pub struct Table {
     /// Metadata from the `# key: value` lines (defaults where absent).
     pub meta: TraceMeta,
+    /// Every `# key: value` line before the header, known keys and others.
+    pub meta_lines: Vec<MetaLine>,
     /// 1-based line of the header row.
     pub header_line: usize,
     /// Column names, trimmed, unique, in file order.
@@ -219,7 +299,7 @@ pub fn read_table<R: Read>(
     options: &ReadOptions,
     header: impl FnOnce(&[String], usize) -> Result<usize, TraceError>,
 ) -> Result<Table, TraceError> {
-    read_table_sized(reader, origin, options, None, header)
+    read_table_sized(reader, origin, options, None, Dialect::OURS, header)
 }
 
 /// [`read_table`] of an input of `size_bytes` when known: the columns are sized from it and the
@@ -229,16 +309,18 @@ pub(crate) fn read_table_sized<R: Read>(
     origin: &Path,
     options: &ReadOptions,
     size_bytes: Option<u64>,
+    dialect: Dialect,
     header: impl FnOnce(&[String], usize) -> Result<usize, TraceError>,
 ) -> Result<Table, TraceError> {
     let file = || origin.to_path_buf();
     let mut input = BufReader::with_capacity(64 * 1024, reader);
-    let (meta, meta_lines) = read_meta(&mut input, origin)?;
+    let (meta, meta_lines, keyed) = read_meta(&mut input, origin)?;
     // A final '\n' makes every record end with one, so the reader's line count after a
     // record is always one past the record's (last) line. `\r` before it is trimmed as space.
     let mut csv_reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
+        .delimiter(dialect.separator)
         .terminator(csv::Terminator::Any(b'\n'))
         .comment(Some(b'#'))
         .buffer_capacity(64 * 1024)
@@ -273,12 +355,13 @@ pub(crate) fn read_table_sized<R: Read>(
     let names = check_names(&record, origin, header_line)?;
     let time_column = header(&names, header_line)?;
     let mut rows = Rows::new(names.len(), time_column, size_bytes);
+    rows.decimal_comma = dialect.decimal_comma;
     let mut previous_line = header_line;
     while let Some(line) = next_record(&mut record)? {
         if rows.len() >= options.max_rows {
             return Err(TraceError::TooLarge { file: file(), line, max_rows: options.max_rows });
         }
-        let bad = |bad: BadRow| bad.at(origin, line, previous_line, &names);
+        let bad = |bad: BadRow| bad.at(origin, (line, previous_line), &names, dialect);
         if record.len() != names.len() {
             return Err(bad(BadRow::FieldCount { expected: names.len(), found: record.len() }));
         }
@@ -289,7 +372,7 @@ pub(crate) fn read_table_sized<R: Read>(
     if rows.len() == 0 {
         return Err(TraceError::EmptyTrace { file: file() });
     }
-    Ok(Table { meta, header_line, names, columns: rows.into_columns() })
+    Ok(Table { meta, meta_lines: keyed, header_line, names, columns: rows.into_columns() })
 }
 
 /// What is wrong with a data row, before the file and line are known.
@@ -297,18 +380,32 @@ pub(crate) fn read_table_sized<R: Read>(
 pub(super) enum BadRow {
     FieldCount { expected: usize, found: usize },
     NotANumber { column: usize, text: String },
+    /// A number with the other decimal mark than the file's earlier numbers.
+    MixedDecimalMarks { column: usize, text: String, earlier: &'static str },
     NonFinite { column: usize, value: f64 },
     NonMonotonicTime { column: usize, t: f64, previous_t: f64 },
 }
 
 impl BadRow {
-    /// The error of this row at `line` of `file` (`previous_line`: the row before it).
-    fn at(self, file: &Path, line: usize, previous_line: usize, names: &[String]) -> TraceError {
+    /// The error of this row at `lines.0` of `file` (`lines.1`: the row before it).
+    fn at(self, file: &Path, (line, previous_line): (usize, usize), names: &[String], dialect: Dialect) -> TraceError {
         let file = file.to_path_buf();
         match self {
-            BadRow::FieldCount { expected, found } => TraceError::FieldCount { file, line, expected, found },
+            BadRow::FieldCount { expected, found } => {
+                let hint = match (found < expected, dialect.separator) {
+                    (true, _) => " (truncated row?)".to_string(),
+                    (false, b',') => " (a decimal comma with `,` as the separator cannot be read: export with `;` \
+                                      as the separator, or with a decimal point)"
+                        .to_string(),
+                    _ => String::new(),
+                };
+                TraceError::FieldCount { file, line, expected, found, hint }
+            }
             BadRow::NotANumber { column, text } => {
                 TraceError::NotANumber { file, line, column: names[column].clone(), text }
+            }
+            BadRow::MixedDecimalMarks { column, text, earlier } => {
+                TraceError::MixedDecimalMarks { file, line, column: names[column].clone(), text, earlier }
             }
             BadRow::NonFinite { column, value } => {
                 TraceError::NonFinite { file, line, column: names[column].clone(), value }
@@ -329,6 +426,9 @@ pub(super) struct Rows {
     /// Size of the input when known, to reserve the columns from the first row's length.
     size_bytes: Option<u64>,
     rows: usize,
+    /// A decimal comma is read as well as a point ([`Dialect::decimal_comma`]).
+    pub(super) decimal_comma: bool,
+    mark: Mark,
 }
 
 impl Rows {
@@ -339,6 +439,8 @@ impl Rows {
             time_column,
             size_bytes,
             rows: 0,
+            decimal_comma: false,
+            mark: Mark::Unknown,
         }
     }
 
@@ -366,8 +468,14 @@ impl Rows {
             let value = match self.last[column].value_of(field) {
                 Some(value) => value,
                 None => {
-                    let value =
-                        parse_field(field).ok_or_else(|| BadRow::NotANumber { column, text: field_text(field) })?;
+                    let value = if self.decimal_comma {
+                        parse_with_mark(field, &mut self.mark).map_err(|earlier| match earlier {
+                            Some(m) => BadRow::MixedDecimalMarks { column, text: field_text(field), earlier: m.words() },
+                            None => BadRow::NotANumber { column, text: field_text(field) },
+                        })?
+                    } else {
+                        parse_field(field).ok_or_else(|| BadRow::NotANumber { column, text: field_text(field) })?
+                    };
                     if !value.is_finite() {
                         return Err(BadRow::NonFinite { column, value });
                     }
