@@ -296,3 +296,36 @@ impl Link {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+    use std::net::TcpListener;
+
+    /// Replies ended by LF, CR or CR LF (split across packets too) read as the same lines; the
+    /// traffic is counted.
+    #[test]
+    fn replies_end_with_lf_cr_or_crlf() {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = listener.local_addr().unwrap().to_string();
+        let server = std::thread::spawn(move || {
+            let (mut s, _) = listener.accept().unwrap();
+            s.set_nodelay(true).unwrap();
+            for chunk in [&b"one\r"[..], b"two\r\nthree\n", b"four\r", b"\nfive\r"] {
+                s.write_all(chunk).unwrap();
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            let mut buf = [0u8; 16];
+            let n = std::io::Read::read(&mut s, &mut buf).unwrap();
+            buf[..n].to_vec()
+        });
+        let mut link = Link::connect_with("dev", &addr, 2.0, LineEnd::CrLf).unwrap();
+        let lines: Vec<String> = (0..5).map(|_| link.read_line("q").unwrap()).collect();
+        assert_eq!(lines, ["one", "two", "three", "four", "five"]);
+        link.send("go").unwrap();
+        assert_eq!(server.join().unwrap(), b"go\r\n", "commands end with the device's terminator");
+        let t = link.traffic();
+        assert_eq!((t.commands, t.bytes_out, t.lines_in, t.bytes_in), (1, 4, 5, 26));
+    }
+}

@@ -156,7 +156,14 @@ impl ControllerBench {
         Ok(())
     }
 
-    pub(super) fn read_recorder(&mut self, acq: &mut Acquisition, up_to_s: Option<f64>) -> Result<(), HwError> {
+    /// Read what the recorder holds (up to bench time `up_to_s`), at most `max_rows` rows: while
+    /// the segment runs, the reads stay short so that the polls and the progress keep their pace.
+    pub(super) fn read_recorder(
+        &mut self,
+        acq: &mut Acquisition,
+        up_to_s: Option<f64>,
+        max_rows: usize,
+    ) -> Result<(), HwError> {
         let asked_s = self.bench_now();
         let Some(rec) = self.controllers[self.recorder_controller].recorder() else { return Ok(()) };
         let mut available = rec.recorded_len()?;
@@ -173,6 +180,7 @@ impl ControllerBench {
             let last = ((end - acq.t_trigger_s) / acq.dt_s).floor().max(0.0) as usize + 1;
             available = available.min(last);
         }
+        let available = available.min(acq.read.saturating_add(max_rows));
         while acq.read < available {
             let count = (available - acq.read).min(50_000);
             let block = rec.read(acq.read, count)?;
@@ -236,7 +244,7 @@ impl ControllerBench {
         // The recorder may lag a poll behind: wait for the last samples.
         let wait_until = self.bench_now() + 1.0;
         loop {
-            self.read_recorder(a, Some(end))?;
+            self.read_recorder(a, Some(end), usize::MAX)?;
             let needed = ((end - a.t_trigger_s) / a.dt_s).floor().max(0.0) as usize + 1;
             let have_all = a.t_trigger_known && a.read >= needed.min(a.capacity.unwrap_or(usize::MAX));
             if have_all || self.bench_now() > wait_until {
@@ -254,6 +262,9 @@ impl ControllerBench {
             });
         }
         self.emit(a, seg, true);
+        // Rows read while the loop had not yet noticed the end belong to no segment.
+        let keep = a.trace.t_s.partition_point(|&t| t <= end + 1e-9);
+        keep_range(&mut a.trace, 0, keep);
         self.log_recording(a);
         Ok(())
     }

@@ -261,6 +261,16 @@ mod tests {
     }
 
     #[test]
+    fn the_mcs2_bench_file_names_an_mcs2_where_femto_hardware_has_an_mcs() {
+        let text = include_str!("../../../../assets/benches/femto-mcs2-hardware.ron");
+        let c = HardwareConfig::from_ron_str(text, Path::new("assets/benches/femto-mcs2-hardware.ron")).unwrap();
+        let femto = HardwareConfig::femto();
+        assert_eq!((c.controllers[1].kind, femto.controllers[1].kind), (ControllerKind::SmarActMcs2, ControllerKind::SmarActMcs));
+        assert_eq!(c.controllers[1].address, "127.0.0.1:55551");
+        assert_eq!((c.joints.clone(), c.photodiode.clone()), (femto.joints, femto.photodiode), "the same wiring");
+    }
+
+    #[test]
     fn the_laser_entry_is_optional_and_checked() {
         let c = HardwareConfig::femto();
         let laser = c.laser.as_ref().expect("the embedded bench names its laser");

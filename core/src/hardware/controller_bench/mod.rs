@@ -417,7 +417,7 @@ impl Bench for ControllerBench {
                 self.remember(&e);
                 // Keep whatever the recorder still holds (its link may be the healthy one).
                 if let Some(a) = acq.as_mut() {
-                    let _ = self.read_recorder(a, None);
+                    let _ = self.read_recorder(a, None, usize::MAX);
                     self.emit(a, segment, true);
                 }
                 let stops = self.stop_all();

@@ -13,6 +13,9 @@ use crate::plan::{TimedMotion, TimedSegment};
 use crate::trace::TraceMeta;
 use std::time::Duration;
 
+/// Most recorder rows read per turn of the loop that follows a segment.
+const READ_ROWS_WHILE_MOVING: usize = 10_000;
+
 /// The slowest speed a joint is commanded, as a fraction of its limit: controllers print speeds
 /// with six decimals and refuse 0 (PI GCS error 8).
 const MIN_SPEED_FRACTION: f64 = 1e-4;
@@ -102,10 +105,7 @@ impl ControllerBench {
             }
             if let Some(a) = acq.as_mut() {
                 self.poll(a, false)?;
-                self.read_recorder(a, None)?;
-                if done_at.is_none() {
-                    self.check_capacity(a, &seg.label)?;
-                }
+                self.read_recorder(a, None, READ_ROWS_WHILE_MOVING)?;
                 self.emit(a, seg, false);
                 if a.trace.len() > reported {
                     (control.on_samples)(&a.trace, reported);
@@ -130,6 +130,12 @@ impl ControllerBench {
                         }
                         TimedMotion::Dwell => now >= t_start + seg.duration_s,
                     };
+                    if !finished {
+                        // Still running with the recorder full: the rest of the segment is lost.
+                        if let Some(a) = acq.as_ref() {
+                            self.check_capacity(a, &seg.label)?;
+                        }
+                    }
                     if finished {
                         // The stages stand still from here: a poll now is exact whatever its round
                         // trip, and bounds the interpolation at the end of the motion (polls during
@@ -137,7 +143,11 @@ impl ControllerBench {
                         if let Some(a) = acq.as_mut() {
                             self.poll(a, true)?;
                         }
-                        done_at = Some(now + settle_s);
+                        // A dwell ends on time, however late the loop notices.
+                        done_at = Some(match seg.motion {
+                            TimedMotion::Dwell => t_start + seg.duration_s,
+                            _ => now + settle_s,
+                        });
                     } else if now > deadline {
                         return Err(self.overdue(seg, sweep.is_some(), deadline - t_start));
                     }

@@ -149,7 +149,8 @@ mod tests {
     }
 
     /// The truth recovered from a monitor with 3 pm quantisation and 2 pm noise, against the
-    /// truth itself (the oracle), to a few fm; the run-up and the rests are left out.
+    /// truth itself (the oracle), to under a pm (a 40 ms latency mistimed would be 400 pm); the
+    /// run-up and the rests are left out.
     #[test]
     fn a_noisy_quantised_monitor_times_the_sweep() {
         let mut rng = StdRng::seed_from_u64(3);
@@ -165,7 +166,7 @@ mod tests {
             .enumerate()
             .map(|(i, w)| (w - truth(t[got.first + i])).abs())
             .fold(0.0, f64::max);
-        assert!(worst < 2e-4, "worst {worst} nm");
+        assert!(worst < 1e-3, "worst {worst} nm");
         assert!(got.wavelengths_nm.windows(2).all(|w| w[1] > w[0]), "strictly monotonic");
         let first_t = t[got.first];
         assert!(first_t >= 0.045 - dt && first_t < 0.045 + 3.0 * dt, "starts where the laser reaches 1550 nm at speed: {first_t}");

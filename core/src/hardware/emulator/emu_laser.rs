@@ -171,7 +171,7 @@ mod tests {
         let (t_from, t_to) = laser.sweep_with(1550.0, 1552.0, 10.0, p, Some(0.001));
         assert!((t_from - 0.05).abs() < 1e-6 && (t_to - 0.25).abs() < 1e-6, "{t_from} {t_to}");
         assert_eq!(laser.wavelength_at(0.03), 1550.0, "latency");
-        assert!((laser.wavelength_at(0.04) - 1549.95).abs() < 1e-9, "run-up from v²/2a = 0.05 nm before");
+        assert!((laser.wavelength_at(0.045) - 1549.9625).abs() < 1e-9, "run-up from v²/2a = 0.05 nm before");
         assert!((laser.wavelength_at(0.05) - 1550.0).abs() < 1e-9);
         assert!((laser.wavelength_at(0.15) - 1551.0).abs() < 1e-9);
         assert!((laser.wavelength_at(1.0) - 1552.05).abs() < 1e-9, "run-out past the stop");

@@ -208,7 +208,8 @@ fn start(shared: &Shared, st: &mut State, now: f64) -> Scpi<()> {
         t0_s,
         end_s,
         busy_until_s,
-        log_ready_s: busy_until_s + realism.post_processing_s,
+        // The Keysight post-processes its log after the sweep (its FLAG? says when it is ready).
+        log_ready_s: busy_until_s + if keysight { realism.post_processing_s } else { 0.0 },
         logging,
     });
     // "Lambda logging is disabled at the end of a sweep."
