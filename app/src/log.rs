@@ -1,5 +1,7 @@
-//! The program's log: warnings and errors on stderr (more with `-v` or `RUST_LOG`), and the full
-//! log at debug level in `photorobot.log` inside the session folder a command writes. Owns the
+//! The program's log: warnings and errors on stderr (more with `-v` or `RUST_LOG`), and the log at
+//! debug level in `photorobot.log` inside the session folder a command writes: milestones, the
+//! commands that change an instrument's state and one summary per recording, so that a whole run
+//! fits in it; every command and reply (the recorder's rows) at trace level, with `-vvv`. Owns the
 //! subscriber set-up and the size-based rotation of the log file (`photorobot.log` →
 //! `photorobot.log.1` … `.3`); what is logged is decided where it happens (`tracing` macros).
 
@@ -110,8 +112,8 @@ impl<'a> MakeWriter<'a> for SessionLogWriter {
 }
 
 /// Install the process's log: stderr at warn (`quiet`: errors only; `-v`: info, `-vv`: debug;
-/// `RUST_LOG` overrides), and the session log at debug level once [`open_session_log`] is
-/// called. A second call does nothing.
+/// `RUST_LOG` overrides), and the session log at debug level (trace with `-vvv`: every command and
+/// reply) once [`open_session_log`] is called. A second call does nothing.
 pub fn init(verbose: u8, quiet: bool) {
     let stderr_filter = match std::env::var("RUST_LOG") {
         Ok(spec) if !spec.is_empty() => EnvFilter::new(spec),
@@ -132,12 +134,13 @@ pub fn init(verbose: u8, quiet: bool) {
         .without_time()
         .with_ansi(std::io::IsTerminal::is_terminal(&io::stderr()))
         .with_filter(stderr_filter);
-    // Our crates at debug; dependencies only when they warn.
+    // Our crates at debug (trace with -vvv); dependencies only when they warn.
+    let ours = if verbose >= 3 { LevelFilter::TRACE } else { LevelFilter::DEBUG };
     let file_filter = Targets::new()
         .with_default(LevelFilter::WARN)
-        .with_target("photorobot_core", LevelFilter::DEBUG)
-        .with_target("photorobot_app", LevelFilter::DEBUG)
-        .with_target("photorobot", LevelFilter::DEBUG);
+        .with_target("photorobot_core", ours)
+        .with_target("photorobot_app", ours)
+        .with_target("photorobot", ours);
     let file = tracing_subscriber::fmt::layer().with_writer(SessionLogWriter).with_ansi(false).with_filter(file_filter);
     let _ = tracing_subscriber::registry().with(stderr).with(file).try_init();
 }

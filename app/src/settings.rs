@@ -166,6 +166,7 @@ pub fn default_port(kind: ControllerKind) -> u16 {
     match kind {
         ControllerKind::PiGcs => photorobot_core::hardware::pi_gcs::DEFAULT_PORT,
         ControllerKind::SmarActMcs => photorobot_core::hardware::smaract::DEFAULT_PORT,
+        ControllerKind::SmarActMcs2 => photorobot_core::hardware::smaract_mcs2::DEFAULT_PORT,
     }
 }
 

@@ -1,6 +1,7 @@
-//! The log of a bench on the stage-controller emulators: every command sent and reply received
-//! at debug level, with its controller, and a lost connection as a warning, written through the
-//! app's rotating log file as `photorobot.log` in a session folder.
+//! The log of a bench on the stage-controller emulators, written through the app's rotating log
+//! file as `photorobot.log` in a session folder: at debug level the commands that change a
+//! controller's state and one summary per recording (its rows, reads, bytes and timing), not the
+//! recorder's rows; every command and reply only at trace level; a lost connection as a warning.
 
 use photorobot_app::log::{RotatingFile, LOG_FILE};
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl};
@@ -10,13 +11,14 @@ use photorobot_core::plan::{JointTarget, Plan, Segment};
 use std::sync::atomic::AtomicBool;
 use std::sync::Mutex;
 
-#[test]
-fn the_log_has_the_controllers_transcript_and_their_failures() {
+/// Run a short recorded jog on the emulators with the log at `level`, then lose the connection;
+/// the log's text.
+fn jog_log(level: tracing::Level) -> String {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join(LOG_FILE);
     let file = RotatingFile::open(&path, 10 << 20, 3).unwrap();
     let subscriber = tracing_subscriber::fmt()
-        .with_max_level(tracing::Level::DEBUG)
+        .with_max_level(level)
         .with_ansi(false)
         .with_writer(Mutex::new(file))
         .finish();
@@ -48,16 +50,32 @@ fn the_log_has_the_controllers_transcript_and_their_failures() {
         drop(emu);
         let _ = bench.axis_status();
     });
-    let log = std::fs::read_to_string(&path).unwrap();
+    std::fs::read_to_string(&path).unwrap()
+}
+
+#[test]
+fn the_log_summarises_each_recording_and_keeps_the_rows_for_trace_level() {
+    let log = jog_log(tracing::Level::DEBUG);
     let lines = |needle: &str| log.lines().filter(|l| l.contains(needle)).count();
-    assert!(lines("DEBUG") > 20, "a command and reply per line at debug level:\n{log}");
     assert!(log.contains("PI E-712") && log.contains("SmarAct MCS"), "each line names its controller");
-    assert!(lines("> POS?") > 0 && lines("< ") > 0, "commands sent and replies received:\n{log}");
-    assert!(lines("> *IDN?") > 0, "the PI identification query");
+    assert!(lines("MOV ") > 0 && lines("VCO ") > 0 && lines(":MAA") > 0, "the commands that change state:\n{log}");
+    let summary: Vec<&str> = log.lines().filter(|l| l.contains("recording:")).collect();
+    assert_eq!(summary.len(), 1, "one summary for the one recording:\n{log}");
+    for want in ["label=jog", "rows=", "recorder_reads=", "PI E-712:", "commands", "B in", "polls_kept="] {
+        assert!(summary[0].contains(want), "`{want}` in {}", summary[0]);
+    }
+    assert_eq!(lines("< "), 0, "no reply rows at debug level:\n{log}");
+    assert_eq!(lines("END_HEADER"), 0, "no recorder rows at debug level");
+    assert!(log.len() < 20_000, "a short jog's debug log is short: {} bytes", log.len());
     assert!(log.contains("connected"), "the connection itself");
     assert!(
         log.lines().any(|l| l.contains("WARN") && (l.contains("no reply") || l.contains("send failed"))),
         "a lost connection is a warning:\n{}",
         log.lines().rev().take(10).collect::<Vec<_>>().join("\n")
     );
+    // At trace level every command and reply is there, the recorder's rows with them.
+    let trace = jog_log(tracing::Level::TRACE);
+    assert!(trace.lines().filter(|l| l.contains("> POS?")).count() > 0, "commands at trace level");
+    assert!(trace.lines().filter(|l| l.contains("< # END_HEADER")).count() > 0, "recorder rows at trace level");
+    assert!(trace.len() > 10 * log.len(), "{} vs {} bytes", trace.len(), log.len());
 }

@@ -12,6 +12,7 @@ use crate::identify::joint::analyse_estimate;
 pub use crate::identify::multistart::{identify, Identification, Mode};
 use crate::identify::observability::IdentifiabilityReport;
 use crate::identify::signs::{translation_signs, TranslationSign};
+use crate::identify::sweep_cost::LostSweep;
 use crate::identify::verdict::{
     differing_parameters, jackknife_sigma, rms_threshold, worst_traces, FitCheck, Verdict, WORST_TRACES,
 };
@@ -145,7 +146,8 @@ pub struct CalibrationReport {
     #[serde(default)]
     pub model_discrepancy: Option<ModelDiscrepancy>,
     /// What leaving the wavelength sweeps out cost (a bench without a tunable laser, or
-    /// `calibrate --no-sweeps`); `None` when the plans ran with their sweeps.
+    /// `calibrate --no-sweeps`), or losing sweeps whose analysis was refused; `None` when every
+    /// planned sweep was measured and analysed.
     #[serde(default)]
     pub sweep_cost: Option<crate::identify::sweep_cost::SweepCost>,
     /// The identified extrinsics.
@@ -273,8 +275,15 @@ pub fn report_from_identification(
     let discrepancy = discrepancy_of(id);
     add_systematic(&mut parameters, id, &discrepancy);
     withhold_undetermined(&mut parameters, &fit);
+    let lost = lost_sweeps(id, &traces, nominal, &fit);
+    if let Some(cost) = &lost {
+        withhold_lost(&mut parameters, cost);
+    }
     let (est, obs) = (&id.estimate, &id.observations);
     let mut warnings = report.warnings.clone();
+    if let Some(cost) = lost.as_ref().filter(|c| !c.is_free()) {
+        warnings.insert(0, format!("not a complete calibration: {}", cost.sentences().join("; ")));
+    }
     if fit.verdict != Verdict::Fits {
         warnings.insert(0, fit.summary.clone());
     }
@@ -335,9 +344,48 @@ pub fn report_from_identification(
         fit: Some(fit),
         translation_signs: signs,
         model_discrepancy: Some(discrepancy),
-        sweep_cost: None,
+        sweep_cost: lost,
         extrinsics,
         traces,
+    }
+}
+
+/// What the sweeps whose analysis the identification refused cost it
+/// ([`crate::identify::sweep_cost::lost`]); `None` when none was lost.
+fn lost_sweeps(
+    id: &Identification,
+    traces: &[Trace],
+    nominal: &PhaseModel,
+    fit: &FitCheck,
+) -> Option<crate::identify::sweep_cost::SweepCost> {
+    let lost: Vec<LostSweep> = id
+        .skipped
+        .iter()
+        .filter_map(|(label, why)| {
+            let t = traces.iter().find(|t| &t.meta.label == label && crate::trace::is_sweep(t))?;
+            Some(LostSweep {
+                label: label.clone(),
+                at_display: t.joints_display(0),
+                wavelength_nm: t.wavelength_nm[t.len() / 2],
+                time_s: [t.t_s[0], t.t_s[t.len() - 1]],
+                why: why.clone(),
+            })
+        })
+        .collect();
+    if lost.is_empty() {
+        return None;
+    }
+    let model = PhaseModel { extrinsics: id.estimate.extrinsics, ..nominal.clone() };
+    Some(crate::identify::sweep_cost::lost(&model, &id.observations, &id.estimate.extrinsics, lost, Some(fit)))
+}
+
+/// No parameter is determined that the lost sweeps would determine and the rest of the data do not.
+fn withhold_lost(rows: &mut [ParameterRow], cost: &crate::identify::sweep_cost::SweepCost) {
+    let labels: Vec<&str> = cost.lost.iter().map(|l| l.label.as_str()).collect();
+    for row in rows.iter_mut().filter(|r| cost.undetermined.iter().any(|p| p.name == r.name)) {
+        row.determined = false;
+        row.sigma = None;
+        row.reason = Some(format!("its sweeps were lost (their analysis refused): `{}`", labels.join("`, `")));
     }
 }
 

@@ -12,11 +12,14 @@
 use photorobot_core::bench::{
     resume_plan, run_plan, Bench, BenchError, BenchPreset, RunControl, RunError, VirtualBench,
 };
+use photorobot_core::hardware::emulator::local::{MONITOR_NM_PER_V, MONITOR_OFFSET_NM, PHOTODIODE_V_PER_MW};
 use photorobot_core::hardware::emulator::{
     EmuClock, EmuLaser, EmulatedLaser, Fault, FaultSpec, PiEmulator, PiEmulatorConfig, SmarActEmulator,
     SmarActEmulatorConfig,
 };
-use photorobot_core::hardware::{ControllerBench, HardwareConfig, PiGcs, SmarActMcs, StageController, VirtualStages};
+use photorobot_core::hardware::{
+    ControllerBench, HardwareConfig, PiGcs, RecordTrigger, RecorderRequest, SmarActMcs, StageController, VirtualStages,
+};
 use photorobot_core::measure::{self, Measurement};
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::model::robot::RobotDescription;
@@ -67,11 +70,11 @@ fn rig(scale: f64, preset: &BenchPreset, seed: u64) -> Rig {
             let m = mcs_axes.lock().unwrap().iter().map(|a| a.position_at(t) * 1e-6).collect::<Vec<_>>();
             let q = [p[2] - 150.0, p[1] - 150.0, p[0] - 150.0, m[0], m[1], m[2]];
             let noise: f64 = StandardNormal.sample(&mut *rng.lock().unwrap());
-            optics.reflected_power_mw(t, &q, l.wavelength_at(t)).unwrap_or(f64::NAN) + sigma * noise
+            PHOTODIODE_V_PER_MW * (optics.reflected_power_mw(t, &q, l.wavelength_at(t)).unwrap_or(f64::NAN) + sigma * noise)
         }),
     );
     let l = laser.clone();
-    pi.set_input("6", Arc::new(move |t| l.wavelength_at(t)));
+    pi.set_input("6", Arc::new(move |t| (l.wavelength_at(t) - MONITOR_OFFSET_NM) / MONITOR_NM_PER_V));
     Rig { clock, pi, mcs, laser }
 }
 
@@ -363,12 +366,22 @@ fn virtual_bench_and_drivers_share_one_stage_interface() {
     assert!((got[0] + 4.0).abs() < 1e-6 && (got[1] + 2.5).abs() < 1e-6, "{got:?}");
     // The recorder: the virtual bench's samples and the E-712's through one trait.
     let rec = v.recorder().unwrap();
-    rec.arm(&[1], &["5".into()], 0.0005).unwrap();
+    rec.arm(&request(&[1], 0.0005)).unwrap();
     v.move_absolute(&[(1, 6.0)]).unwrap();
     let rec = v.recorder().unwrap();
     let n = rec.recorded_len().unwrap();
     let block = rec.read(0, n).unwrap();
     assert!(n > 100 && (block.axes[0][n - 1] - 6.0).abs() < 1e-9 && block.inputs[0].iter().all(|x| x.is_finite()));
+}
+
+fn request(axes: &[usize], period_s: f64) -> RecorderRequest {
+    RecorderRequest {
+        axes: axes.to_vec(),
+        inputs: vec!["5".into()],
+        sample_period_s: period_s,
+        duration_s: 1.0,
+        trigger: RecordTrigger::NextMove,
+    }
 }
 
 fn fixture(name: &str) -> std::path::PathBuf {
@@ -387,10 +400,10 @@ fn check_fixture(name: &str, transcript: &[String]) {
     assert_eq!(text, want, "the session differs from {}", path.display());
 }
 
-/// The GCS 2 subset the bench needs, plus `DRL?`, `TSP?` and `FRF?` (see pi_gcs.rs).
-const GCS_SUBSET: [&str; 21] = [
-    "*IDN?", "SAI?", "SVO", "MOV", "MVR", "POS?", "ONT?", "VEL", "TMN?", "TMX?", "STP", "HLT", "ERR?", "DRC", "DRT",
-    "RTR", "DRR?", "DRL?", "TSP?", "FRF?", "FRF",
+/// The GCS 2 subset the bench needs (see pi_gcs.rs and pi_recorder.rs).
+const GCS_SUBSET: [&str; 29] = [
+    "*IDN?", "SAI?", "SVO", "SVO?", "VCO", "VCO?", "MOV", "MVR", "POS?", "ONT?", "VEL", "TMN?", "TMX?", "STP", "HLT",
+    "ERR?", "DRC", "DRT", "RTR", "RTR?", "DRR?", "DRL?", "TNS?", "FRF?", "FRF", "SPA?", "SPA", "TNR?", "HDR?",
 ];
 
 #[test]
@@ -399,7 +412,7 @@ fn pi_session_transcript_follows_the_gcs_subset() {
     // A clock a million times faster than real time: every move is over before the next command,
     // so the session is the same on every run.
     let clock = EmuClock::new(1e6);
-    let emu = PiEmulator::start(clock, PiEmulatorConfig::default()).unwrap();
+    let emu = PiEmulator::start(clock, PiEmulatorConfig::ideal()).unwrap();
     emu.set_photodiode(Arc::new(|_| 0.25));
     let transcript = Arc::new(Mutex::new(Vec::new()));
     let mut pi = PiGcs::connect("PI E-712", &emu.addr().to_string(), 1.0).unwrap();
@@ -407,7 +420,7 @@ fn pi_session_transcript_follows_the_gcs_subset() {
     pi.set_velocity(1, 100.0).unwrap();
     assert_eq!(pi.travel_limits(1).unwrap(), (0.0, 300.0));
     let rec = pi.recorder().unwrap();
-    assert_eq!(rec.arm(&[1], &["5".into()], 0.0005).unwrap(), 0.0005);
+    assert_eq!(rec.arm(&request(&[1], 0.0005)).unwrap().sample_period_s, 0.0005);
     pi.move_absolute(&[(1, 160.0)]).unwrap();
     std::thread::sleep(std::time::Duration::from_millis(20));
     assert_eq!(pi.on_target(&[1]).unwrap(), [true]);
@@ -473,7 +486,7 @@ fn smaract_session_transcript_follows_the_mcs_subset() {
     let err = mcs.move_absolute(&[(0, 20.0)]).unwrap_err().to_string();
     assert!(err.contains("outside the travel range"), "{err}");
     let t = transcript.lock().unwrap().clone();
-    const SUBSET: [&str; 12] = ["SCM", "GNC", "GPPK", "GP", "GA", "GS", "MPA", "MPR", "MAA", "MAR", "SCLS", "FRM"];
+    const SUBSET: [&str; 13] = ["SCM", "GNC", "GST", "GPPK", "GP", "GA", "GS", "MPA", "MPR", "MAA", "MAR", "SCLS", "FRM"];
     for line in &t {
         if let Some(cmd) = line.strip_prefix("> :") {
             let known = SUBSET.iter().any(|s| cmd.starts_with(s))

@@ -1,7 +1,9 @@
 //! The tunable-laser emulators and driver on loopback: an independent client (a plain
-//! `TcpStream`, not the driver) checks each emulator's replies, the driver runs sweeps against each
-//! emulator, and a fault matrix checks that every laser fault gives a clear error in bounded time,
-//! with the stages stopped and the recorded samples kept when a bench run is involved.
+//! `TcpStream`, not the driver) checks each emulator's replies as the manuals describe them, the
+//! driver runs sweeps against each realistic emulator (its latency, run-up, allowed speeds and
+//! direction rules), and a fault matrix checks that every laser fault gives a clear error in
+//! bounded time, with the stages stopped and the recorded samples kept when a bench run is
+//! involved.
 
 use photorobot_core::bench::{run_plan, BenchError, BenchPreset, RunControl, RunError};
 use photorobot_core::hardware::controller_bench::{Laser, LaserConfig, LaserFamily};
@@ -21,23 +23,26 @@ use std::time::{Duration, Instant};
 struct Raw {
     w: TcpStream,
     r: BufReader<TcpStream>,
+    /// The terminator of commands and replies: LF (Keysight), CR (Santec over LAN).
+    end: u8,
 }
 
 impl Raw {
-    fn new(emu: &LaserEmulator) -> Self {
+    fn new(emu: &LaserEmulator, end: u8) -> Self {
         let s = TcpStream::connect(emu.addr()).unwrap();
         s.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
-        Raw { w: s.try_clone().unwrap(), r: BufReader::new(s) }
+        Raw { w: s.try_clone().unwrap(), r: BufReader::new(s), end }
     }
     fn send(&mut self, c: &str) {
-        self.w.write_all(format!("{c}\n").as_bytes()).unwrap();
+        self.w.write_all(&[c.as_bytes(), &[self.end]].concat()).unwrap();
     }
     fn ask(&mut self, c: &str) -> String {
         self.send(c);
-        let mut l = String::new();
-        self.r.read_line(&mut l).unwrap();
-        assert!(l.ends_with('\n'), "{c}: {l:?}");
-        l.trim_end().to_string()
+        let mut l = Vec::new();
+        self.r.read_until(self.end, &mut l).unwrap();
+        assert_eq!(l.last(), Some(&self.end), "{c}: {l:?}");
+        assert!(!l[..l.len() - 1].contains(&b'\n'), "{c}: one terminator only: {l:?}");
+        String::from_utf8(l).unwrap().trim_end().to_string()
     }
     /// `#<n><len><bytes>\n`, parsed by hand.
     fn ask_block(&mut self, c: &str) -> Vec<u8> {
@@ -49,9 +54,14 @@ impl Raw {
         let mut len = vec![0u8; n];
         self.r.read_exact(&mut len).unwrap();
         let len: usize = std::str::from_utf8(&len).unwrap().parse().unwrap();
-        let mut data = vec![0u8; len + 1];
+        let mut data = vec![0u8; len];
         self.r.read_exact(&mut data).unwrap();
-        assert_eq!(data.pop(), Some(b'\n'));
+        // The Keysight ends the block with its terminator; the Santec sends nothing after it.
+        if self.end == b'\n' {
+            let mut end = [0u8];
+            self.r.read_exact(&mut end).unwrap();
+            assert_eq!(end[0], b'\n');
+        }
         data
     }
     fn wait_sweep(&mut self, q: &str, idle: &str) {
@@ -67,10 +77,13 @@ fn emulator(family: LaserFamily, scale: f64) -> LaserEmulator {
     LaserEmulator::start(EmuClock::new(scale), 1550.0, LaserEmulatorConfig::new(family)).unwrap()
 }
 
+/// The Keysight as its programming guide describes it: units on the numbers, lambda logging only
+/// with the trigger output at STF and amplitude modulation off, a start below the stop, the log
+/// ready once `FLAG?` is even.
 #[test]
 fn an_independent_client_drives_the_keysight_emulator() {
     let emu = emulator(LaserFamily::Keysight, 10.0);
-    let mut c = Raw::new(&emu);
+    let mut c = Raw::new(&emu, b'\n');
     assert!(c.ask("*IDN?").starts_with("Keysight Technologies,8164B"));
     assert_eq!(c.ask(":SYST:ERR?"), "+0,\"No error\"");
     c.send(":SOUR0:WAV:FROB 1");
@@ -80,23 +93,43 @@ fn an_independent_client_drives_the_keysight_emulator() {
     assert_eq!(c.ask(":SYST:ERR?"), "+0,\"No error\"");
     c.send(":SOUR0:WAV 1.5405e-6");
     assert_eq!(c.ask(":SOUR0:WAV?").parse::<f64>().unwrap(), 1.5405e-6);
-    for cmd in [
+    // "1500NM, 1.5UM and 1.5E-6M are all equivalent" (guide, chapter 1).
+    c.send(":SOUR0:WAV 1555.5NM");
+    assert_eq!(c.ask(":SYST:ERR?"), "+0,\"No error\"");
+    assert!((c.ask(":SOUR0:WAV?").parse::<f64>().unwrap() - 1.5555e-6).abs() < 1e-15);
+    let configure = [
         ":SOUR0:WAV:SWE:MODE CONT",
-        ":SOUR0:WAV:SWE:STAR 1.540e-6",
+        ":SOUR0:WAV:SWE:REP ONEW",
+        ":SOUR0:WAV:SWE:STAR 1540NM",
         ":SOUR0:WAV:SWE:STOP 1.541e-6",
-        ":SOUR0:WAV:SWE:SPE 1e-9",
-        ":SOUR0:WAV:SWE:STEP 1e-11",
+        ":SOUR0:WAV:SWE:SPE 1NM/S",
+        ":SOUR0:WAV:SWE:STEP 10PM",
         ":SOUR0:WAV:SWE:CYCL 1",
         ":TRIG0:OUTP STF",
         ":SOUR0:WAV:SWE:LLOG 1",
         ":SOUR0:POW 1.5MW",
-        ":SOUR0:WAV:SWE 1",
-    ] {
+    ];
+    for cmd in configure {
         c.send(cmd);
         assert_eq!(c.ask(":SYST:ERR?"), "+0,\"No error\"", "{cmd}");
     }
+    // Amplitude modulation is on: lambda logging refuses, and the start says so.
+    assert!(c.ask(":SOUR0:WAV:SWE:CHEC?").starts_with("5,"), "modulation on");
+    c.send(":SOUR0:WAV:SWE 1");
+    assert_eq!(c.ask(":SYST:ERR?"), "-221,\"Settings conflict\"");
+    assert_eq!(c.ask(":SOUR0:WAV:SWE:LLOG?"), "0", "lambda logging turned off by the refused start");
+    for cmd in [":SOUR0:AM:STAT OFF", ":SOUR0:WAV:SWE:LLOG 1"] {
+        c.send(cmd);
+    }
+    assert_eq!(c.ask(":SOUR0:WAV:SWE:CHEC?"), "0,OK");
+    c.send(":SOUR0:WAV:SWE 1");
+    assert_eq!(c.ask(":SYST:ERR?"), "+0,\"No error\"");
     assert_eq!(c.ask(":SOUR0:WAV:SWE?"), "+1");
+    assert_eq!(c.ask(":SOUR0:WAV:SWE:FLAG?"), "+0");
     c.wait_sweep(":SOUR0:WAV:SWE?", "+0");
+    // The log is ready after the sweep's post-processing, when FLAG? turns even and non-zero.
+    c.wait_sweep(":SOUR0:WAV:SWE:FLAG?", "+2");
+    assert_eq!(c.ask(":SOUR0:WAV:SWE:LLOG?"), "0", "lambda logging is disabled at the end of a sweep");
     assert_eq!(c.ask(":SOUR0:READ:POIN? LLOG"), "+101");
     let data = c.ask_block(":SOUR0:READ:DATA? LLOG");
     assert_eq!(data.len(), 101 * 8);
@@ -104,22 +137,36 @@ fn an_independent_client_drives_the_keysight_emulator() {
     assert!((m[0] - 1.540e-6).abs() < 1e-15 && (m[100] - 1.541e-6).abs() < 1e-15, "{} {}", m[0], m[100]);
     assert!(m.windows(2).all(|w| ((w[1] - w[0]) - 1e-11).abs() < 1e-15));
     assert_eq!(c.ask(":SOUR0:POW?"), "1.5");
+    // A sweep down (start above stop) is refused.
+    for cmd in [":SOUR0:WAV:SWE:STAR 1541NM", ":SOUR0:WAV:SWE:STOP 1540NM"] {
+        c.send(cmd);
+    }
+    assert!(c.ask(":SOUR0:WAV:SWE:CHEC?").starts_with("2,"));
 }
 
+/// The Santec as its samples and QMI describe it: replies ended by a bare CR, the SCPI command set
+/// (metres) until Legacy is selected (nm), its eight sweep speeds, the log as 0.1 pm integers.
 #[test]
 fn an_independent_client_drives_the_santec_emulator() {
     let emu = emulator(LaserFamily::Santec, 10.0);
-    let mut c = Raw::new(&emu);
+    let mut c = Raw::new(&emu, b'\r');
     assert!(c.ask("*IDN?").starts_with("SANTEC,TSL-570"));
     assert_eq!(c.ask(":SYST:ERR?"), "0,\"No error\"");
+    assert_eq!(c.ask(":SYST:COMM:COD?"), "1", "the SCPI command set: unitless values are metres");
+    c.send(":WAV 1550");
+    assert_eq!(c.ask(":SYST:ERR?"), "-222,\"Data out of range\"", "1550 m");
+    c.send(":SYST:COMM:COD 0");
+    assert_eq!(c.ask(":SYST:COMM:COD?"), "0");
     c.send(":SOUR0:WAV 1550");
     assert_eq!(c.ask(":SYST:ERR?"), "-113,\"Undefined header\"");
-    c.send(":WAV:SWE 1");
+    c.send(":WAV:SWE:STAT 1");
     assert_eq!(c.ask(":SYST:ERR?"), "-221,\"Settings conflict\"", "a sweep before its mode is set");
     c.send(":WAVelength 1551.25");
     assert_eq!(c.ask(":WAV?"), "1551.25");
+    c.send(":WAV:SWE:SPE 3");
+    assert_eq!(c.ask(":SYST:ERR?"), "-222,\"Data out of range\"", "3 nm/s is not one of its speeds");
     for cmd in [
-        ":WAV:SWE:MODE 1",
+        ":WAV:SWE:MOD 1",
         ":WAV:SWE:STAR 1541.0000",
         ":WAV:SWE:STOP 1540.0000",
         ":WAV:SWE:SPE 1",
@@ -127,13 +174,13 @@ fn an_independent_client_drives_the_santec_emulator() {
         ":TRIG:OUTP:STEP 0.0100",
         ":POW:UNIT 1",
         ":POW 2",
-        ":WAV:SWE 1",
+        ":WAV:SWE:STAT 1",
     ] {
         c.send(cmd);
         assert_eq!(c.ask(":SYST:ERR?"), "0,\"No error\"", "{cmd}");
     }
-    assert_eq!(c.ask(":WAV:SWE?"), "1");
-    c.wait_sweep(":WAV:SWE?", "0");
+    assert_ne!(c.ask(":WAV:SWE:STAT?"), "0", "preparing or running");
+    c.wait_sweep(":WAV:SWE:STAT?", "0");
     assert_eq!(c.ask(":READout:POINts?"), "101");
     let data = c.ask_block(":READout:DATa?");
     let v: Vec<u32> = data.chunks(4).map(|b| u32::from_le_bytes(b.try_into().unwrap())).collect();
@@ -142,30 +189,36 @@ fn an_independent_client_drives_the_santec_emulator() {
     assert_eq!((v[0], v[1], v[100]), (15_410_000, 15_409_900, 15_400_000));
 }
 
-/// The driver against each emulator: a wavelength set and read back, a sweep, its log.
+/// The driver against each realistic emulator: a wavelength set and read back, a sweep set up by
+/// the family's rules and read back (the Keysight sweeps a downward span upwards; the Santec takes
+/// the allowed speed below the one asked; both keep the log under their trigger rate), its log.
 #[test]
 fn the_driver_sweeps_each_emulated_laser_and_reads_its_log() {
-    for family in [LaserFamily::Keysight, LaserFamily::Santec] {
+    for (family, rate, want_rate, want_from) in
+        [(LaserFamily::Keysight, 50.0, 50.0, 1555.0), (LaserFamily::Santec, 60.0, 50.0, 1560.0)]
+    {
         let emu = emulator(family, 10.0);
         let mut laser = ScpiLaser::connect(family, &emu.addr().to_string(), 1.0, 1550.0).unwrap();
         laser.set_wavelength(1547.1234).unwrap();
         assert!((laser.wavelength_nm().unwrap() - 1547.1234).abs() < 1e-9, "{family:?}");
         laser.set_power_mw(1.0).unwrap();
-        let (from, to, rate) = (1560.0, 1555.0, 50.0);
-        laser.prepare_sweep(from, to, rate).unwrap();
-        laser.start_sweep(from, to, rate).unwrap();
+        let setup = laser.prepare_sweep(1560.0, 1555.0, rate).unwrap();
+        assert_eq!((setup.from_nm, setup.rate_nm_per_s), (want_from, want_rate), "{family:?}");
+        let max_trigger_hz = if family == LaserFamily::Keysight { 40e3 } else { 20e3 };
+        assert!(setup.rate_nm_per_s / setup.step_nm <= max_trigger_hz, "{family:?}: {setup:?}");
+        laser.start_sweep(setup.from_nm, setup.to_nm, setup.rate_nm_per_s).unwrap();
         assert!(laser.sweep_running().unwrap());
         let t = Instant::now();
         while laser.sweep_running().unwrap() {
             assert!(t.elapsed() < Duration::from_secs(5));
         }
         let log = laser.lambda_log().unwrap().unwrap();
-        assert_eq!(log.step_nm, ScpiLaser::log_step_nm(5.0));
+        assert_eq!(log.step_nm, setup.step_nm);
         assert_eq!(log.wavelengths_nm.len(), log.expected_points(), "{family:?}");
-        assert!((log.wavelengths_nm[0] - from).abs() < 1e-9, "{family:?}");
-        assert!((log.wavelengths_nm.last().unwrap() - to).abs() <= log.step_nm, "{family:?}");
+        assert!((log.wavelengths_nm[0] - setup.from_nm).abs() < 1e-9, "{family:?}");
+        assert!((log.wavelengths_nm.last().unwrap() - setup.to_nm).abs() <= log.step_nm, "{family:?}");
         // Half-way through in time is half-way through in wavelength.
-        let mid = log.wavelength_at(0.5 * (from - to) / rate).unwrap();
+        let mid = log.wavelength_at(0.5 * 5.0 / setup.rate_nm_per_s).unwrap();
         assert!((mid - 1557.5).abs() < 1e-6, "{family:?}: {mid}");
     }
 }
@@ -174,20 +227,23 @@ fn the_driver_sweeps_each_emulated_laser_and_reads_its_log() {
 #[test]
 fn laser_faults_give_clear_errors_in_bounded_time() {
     type Check = fn(&HwError) -> bool;
-    let cases: [(&str, Fault, &str, Check); 4] = [
-        ("drop", Fault::DropConnection, "SWE 1", |e| matches!(e, HwError::Disconnected { .. })),
-        ("no reply", Fault::NoReply, ":SYST:ERR?", |e| matches!(e, HwError::Timeout { .. })),
-        ("error code", Fault::ErrorCode(-222), "SWE:STAR", |e| {
+    let cases: [(&str, Fault, [&str; 2], Check); 4] = [
+        ("drop", Fault::DropConnection, [":SOUR0:WAV:SWE 1", ":WAV:SWE:STAT 1"], |e| {
+            matches!(e, HwError::Disconnected { .. })
+        }),
+        ("no reply", Fault::NoReply, [":SYST:ERR?", ":SYST:ERR?"], |e| matches!(e, HwError::Timeout { .. })),
+        ("error code", Fault::ErrorCode(-222), [":SOUR0:WAV:SWE:STAR", ":WAV:SWE:STAR"], |e| {
             e.to_string().contains("failed: laser error -222, \"Injected error\"")
         }),
-        ("silent query", Fault::ErrorCode(-221), "SWE?", |e| e.to_string().contains("laser error -221")),
+        ("silent query", Fault::ErrorCode(-221), [":SOUR0:WAV:SWE?", ":WAV:SWE:STAT?"], |e| {
+            e.to_string().contains("laser error -221")
+        }),
     ];
     for family in [LaserFamily::Keysight, LaserFamily::Santec] {
-        let prefix = if family == LaserFamily::Keysight { ":SOUR0:WAV:" } else { ":WAV:" };
         for (what, fault, at, check) in &cases {
             let emu = emulator(family, 10.0);
             let mut laser = ScpiLaser::connect(family, &emu.addr().to_string(), 0.3, 1550.0).unwrap();
-            let at = if at.starts_with(':') { at.to_string() } else { format!("{prefix}{at}") };
+            let at = at[usize::from(family == LaserFamily::Santec)].to_string();
             emu.inject(FaultSpec::on_command(&at, 0, fault.clone()));
             let t = Instant::now();
             let r = laser.start_sweep(1550.0, 1551.0, 10.0).and_then(|()| laser.sweep_running().map(|_| ()));
@@ -209,8 +265,10 @@ fn bench(family: LaserFamily) -> (LocalEmulators, LaserEmulator, ControllerBench
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
     let robot = preset.robot_description().unwrap();
     let mut config = HardwareConfig::femto();
-    // No wavelength monitor: the samples take their wavelength from the laser's log.
+    // No wavelength monitor: the laser's trigger output on the E-712's digital input 1 starts the
+    // recorder at its first logged point, and the samples take their wavelength from the log.
     config.photodiode.wavelength_input = None;
+    config.photodiode.laser_trigger_input = Some("1".into());
     let emus = LocalEmulators::start(&preset, 3, &robot, &config, 0, 0).unwrap();
     let laser_emu = LaserEmulator::start_on(0, emus.emu_laser(), LaserEmulatorConfig::new(family)).unwrap();
     let a = emus.addresses();
@@ -239,8 +297,9 @@ fn a_sweep_on_the_emulated_bench_takes_its_wavelengths_from_the_laser_log() {
     let t = &run.traces[0];
     let w = &t.wavelength_nm;
     assert!(t.len() > 300, "{} samples over 0.2 s at 2 kHz", t.len());
-    assert!((w[0] - 1552.0).abs() < 0.01 && (w[w.len() - 1] - 1550.0).abs() < 0.01, "{} .. {}", w[0], w[w.len() - 1]);
-    assert!(w.windows(2).all(|p| p[1] < p[0]), "the trimmed sweep is strictly monotonic");
+    // The Keysight sweeps a span upwards only: 1550 → 1552 nm.
+    assert!((w[0] - 1550.0).abs() < 0.01 && (w[w.len() - 1] - 1552.0).abs() < 0.01, "{} .. {}", w[0], w[w.len() - 1]);
+    assert!(w.windows(2).all(|p| p[1] > p[0]), "the sweep is strictly monotonic");
     // The same CSV columns as a trace of the virtual bench.
     let csv = String::from_utf8(t.to_csv_bytes(Path::new("sweep.csv")).unwrap()).unwrap();
     let header = csv.lines().find(|l| !l.starts_with('#')).unwrap();

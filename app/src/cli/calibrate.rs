@@ -559,6 +559,10 @@ fn calibration_verdict(a: &CalibrateArgs, report: &CalibrationReport) -> Result<
     if let Some(fit) = report.fit.as_ref().filter(|fit| fit.verdict != Verdict::Fits) {
         return refused(fit.summary.clone());
     }
+    // Sweeps measured but not analysed leave the calibration without what they determine.
+    if let Some(cost) = report.sweep_cost.as_ref().filter(|c| !c.lost.is_empty() && !c.is_free()) {
+        return refused(format!("the calibration is incomplete: {}", cost.sentences().join("; ")));
+    }
     if report.parameters.iter().all(|p| !p.determined) {
         return refused("these data determine none of the parameters (the table says why for each)".into());
     }
@@ -654,7 +658,11 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
     }
     print_signs(&r.translation_signs, out)?;
     if let Some(cost) = &r.sweep_cost {
-        writeln!(out, "\nno wavelength sweeps (no tunable laser, or --no-sweeps): what that costs")?;
+        if cost.lost.is_empty() {
+            writeln!(out, "\nno wavelength sweeps (no tunable laser, or --no-sweeps): what that costs")?;
+        } else {
+            writeln!(out, "\nsweeps lost (measured, their analysis refused): what that costs")?;
+        }
         for s in cost.sentences() {
             writeln!(out, "  {s}")?;
         }

@@ -1,11 +1,12 @@
-//! `photorobot emulate pi|smaract|laser|all [--port N] [--family keysight|santec] [--time-scale S]`: serve a
-//! stage-controller or tunable-laser protocol emulator (or all of them as one optical bench) on
-//! loopback. Owns only argument parsing and printing; the emulators are
+//! `photorobot emulate pi|smaract|mcs2|laser|all [--port N] [--family keysight|santec] [--time-scale S]
+//! [--ideal] [--hardware FILE] [--seed N]`: serve a stage-controller or tunable-laser protocol emulator
+//! (or all of them as one optical bench) on loopback, as strict and as imperfect as the instruments
+//! unless `--ideal`. Owns only argument parsing and printing; the emulators are
 //! `photorobot_core::hardware::emulator`.
 
 use super::common::CliError;
 use photorobot_core::bench::BenchPreset;
-use photorobot_core::hardware::controller_bench::{LaserFamily, MAX_TIME_SCALE};
+use photorobot_core::hardware::controller_bench::{HardwareConfig, LaserFamily, MAX_TIME_SCALE};
 use photorobot_core::hardware::emulator::laser::run_laser_emulator;
 use photorobot_core::hardware::emulator::optical_bench::run_optical_bench;
 use photorobot_core::hardware::emulator::{run_emulator, EmulatorKind};
@@ -19,9 +20,11 @@ pub enum EmulatedController {
     Pi,
     /// SmarAct MCS, ASCII protocol over TCP (default port 5000).
     Smaract,
+    /// SmarAct MCS2, its ASCII (SCPI-like) protocol over TCP (default port 55551).
+    Mcs2,
     /// A tunable laser, SCPI over a raw socket (default port 5025 Keysight, 5000 Santec).
     Laser,
-    /// The PI, the MCS and the laser on one emulated optical bench (default ports).
+    /// The PI, the MCS (or MCS2) and the laser on one emulated optical bench (default ports).
     All,
 }
 
@@ -53,6 +56,17 @@ pub struct EmulateArgs {
     /// `time_scale` in its hardware bench file.
     #[arg(long, value_name = "S", default_value_t = 1.0, value_parser = time_scale)]
     pub time_scale: f64,
+    /// Ideal instruments: no ADC noise or quantisation, no sweep latency or run-up, `VEL` without
+    /// `VCO` (the default is as strict and as imperfect as the real ones).
+    #[arg(long)]
+    pub ideal: bool,
+    /// The hardware bench file whose controllers and wiring `all` emulates (default: the embedded
+    /// femto-hardware: an E-712 and an MCS; a file naming an MCS2 gets one).
+    #[arg(long, value_name = "FILE")]
+    pub hardware: Option<std::path::PathBuf>,
+    /// Seed of the emulated detector's noise (`all`; default: from the clock, a new bench each run).
+    #[arg(long)]
+    pub seed: Option<u64>,
 }
 
 /// A clock scale in (0, MAX_TIME_SCALE], or a message clap shows after the flag's name.
@@ -73,6 +87,20 @@ fn pace(scale: f64) -> String {
     } else {
         format!("{scale}× real time")
     }
+}
+
+/// The emulators' kind, for the ready line.
+fn realism(ideal: bool) -> &'static str {
+    if ideal {
+        "ideal"
+    } else {
+        "realistic"
+    }
+}
+
+/// A seed from the clock: a new emulated bench each run.
+fn clock_seed() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_nanos() as u64)
 }
 
 fn family(k: LaserKind) -> LaserFamily {
@@ -98,10 +126,12 @@ fn serve(a: &EmulateArgs, out: &mut dyn Write, stop: &AtomicBool) -> Result<(), 
     let kind = match a.controller {
         EmulatedController::Pi => EmulatorKind::Pi,
         EmulatedController::Smaract => EmulatorKind::SmarAct,
+        EmulatedController::Mcs2 => EmulatorKind::Mcs2,
         EmulatedController::Laser => {
             let f = family(a.family);
-            run_laser_emulator(f, a.port, a.time_scale, stop, &mut |addr| {
-                say(format!("{f:?} laser (SCPI) emulator listening on {addr}, {}; Ctrl-C to stop", pace(a.time_scale)))
+            run_laser_emulator(f, a.port, a.time_scale, !a.ideal, stop, &mut |addr| {
+                let (pace, kind) = (pace(a.time_scale), realism(a.ideal));
+                say(format!("{f:?} laser (SCPI) emulator listening on {addr}, {pace}, {kind}; Ctrl-C to stop"))
             })?;
             return ready_error.map_or(Ok(()), |e| Err(e.into()));
         }
@@ -113,22 +143,30 @@ fn serve(a: &EmulateArgs, out: &mut dyn Write, stop: &AtomicBool) -> Result<(), 
                 });
             }
             let preset = BenchPreset::resolve(&a.bench)?;
+            let mut hardware = match &a.hardware {
+                Some(path) => HardwareConfig::load(path)?,
+                None => HardwareConfig::femto(),
+            };
+            hardware.time_scale = a.time_scale;
             let f = family(a.family);
-            run_optical_bench(&preset, f, a.time_scale, stop, &mut |addresses| {
+            let seed = a.seed.unwrap_or_else(clock_seed);
+            run_optical_bench(&preset, &hardware, (f, seed, !a.ideal), stop, &mut |addresses| {
                 let list: Vec<String> = addresses.iter().map(|(n, at)| format!("{n} at {at}")).collect();
-                let (name, pace) = (&preset.name, pace(a.time_scale));
-                say(format!("optical bench `{name}` emulated: {}; {pace}; Ctrl-C to stop", list.join(", ")))
+                let (name, pace, kind) = (&preset.name, pace(a.time_scale), realism(a.ideal));
+                say(format!("optical bench `{name}` emulated: {}; {pace}, {kind}, seed {seed}; Ctrl-C to stop", list.join(", ")))
             })
             .map_err(|problem| CliError::Failed { what: "emulate all", problem })?;
             return ready_error.map_or(Ok(()), |e| Err(e.into()));
         }
     };
-    run_emulator(kind, a.port, a.time_scale, stop, &mut |addr| {
+    run_emulator(kind, a.port, a.time_scale, !a.ideal, stop, &mut |addr| {
         let name = match kind {
             EmulatorKind::Pi => "PI E-712 (GCS 2)",
             EmulatorKind::SmarAct => "SmarAct MCS (ASCII)",
+            EmulatorKind::Mcs2 => "SmarAct MCS2 (ASCII)",
         };
-        say(format!("{name} emulator listening on {addr}, {}; Ctrl-C to stop", pace(a.time_scale)))
+        let (pace, kind) = (pace(a.time_scale), realism(a.ideal));
+        say(format!("{name} emulator listening on {addr}, {pace}, {kind}; Ctrl-C to stop"))
     })?;
     ready_error.map_or(Ok(()), |e| Err(e.into()))
 }
@@ -161,7 +199,7 @@ mod tests {
             });
             let line = rx.recv_timeout(std::time::Duration::from_secs(5)).unwrap();
             assert!(line.starts_with("Santec laser (SCPI) emulator listening on 127.0.0.1:"), "{line}");
-            assert!(line.contains(", 4× real time;"), "{line}");
+            assert!(line.contains(", 4× real time, realistic;"), "{line}");
             let addr = line.split_whitespace().find(|w| w.starts_with("127.0.0.1:")).unwrap().trim_end_matches(',');
             let stream = std::net::TcpStream::connect(addr).unwrap();
             stream.set_read_timeout(Some(std::time::Duration::from_secs(2))).unwrap();

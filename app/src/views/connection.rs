@@ -31,6 +31,18 @@ fn kind_name(kind: ControllerKind) -> &'static str {
     match kind {
         ControllerKind::PiGcs => "PI GCS 2",
         ControllerKind::SmarActMcs => "SmarAct MCS ASCII",
+        ControllerKind::SmarActMcs2 => "SmarAct MCS2 ASCII",
+    }
+}
+
+/// The protocols a controller of `kind` may be switched to: the SmarAct ones to each other (an
+/// MCS or, bought today, an MCS2 in the same place of the bench).
+fn kind_choices(kind: ControllerKind) -> &'static [ControllerKind] {
+    match kind {
+        ControllerKind::PiGcs => &[ControllerKind::PiGcs],
+        ControllerKind::SmarActMcs | ControllerKind::SmarActMcs2 => {
+            &[ControllerKind::SmarActMcs, ControllerKind::SmarActMcs2]
+        }
     }
 }
 
@@ -107,6 +119,7 @@ fn hardware_config(c: &ConnectionSettings) -> HardwareConfig {
     for k in &mut config.controllers {
         if let Some(a) = c.controllers.iter().find(|a| a.name == k.name) {
             k.address = a.address();
+            k.kind = a.kind;
         }
         k.timeout_s = c.timeout_s;
     }
@@ -238,17 +251,14 @@ impl ConnectionPanel {
 
     fn start_emulators(&mut self, s: &mut AppState) {
         let c = &s.settings.connection;
-        let port = |kind| c.controllers.iter().find(|a| a.kind == kind).map_or(default_port(kind), |a| a.port);
+        let port = |kinds: &[ControllerKind]| {
+            c.controllers.iter().find(|a| kinds.contains(&a.kind)).map_or(default_port(kinds[0]), |a| a.port)
+        };
+        let ports = (port(&[ControllerKind::PiGcs]), port(&[ControllerKind::SmarActMcs, ControllerKind::SmarActMcs2]));
+        let config = hardware_config(c);
         let started = BenchPreset::resolve(&s.settings.preset).map_err(|e| e.to_string()).and_then(|preset| {
             let robot = preset.robot_description().map_err(|e| e.to_string())?;
-            LocalEmulators::start(
-                &preset,
-                s.settings.seed,
-                &robot,
-                &HardwareConfig::femto(),
-                port(ControllerKind::PiGcs),
-                port(ControllerKind::SmarActMcs),
-            )
+            LocalEmulators::start_with(&preset, s.settings.seed, &robot, &config, ports, true)
         });
         match started {
             Ok(e) => {
@@ -423,7 +433,23 @@ fn controllers(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx
         for i in 0..c.controllers.len() {
             let a = &mut c.controllers[i];
             ui.label(&a.name);
-            ui.label(kind_name(a.kind));
+            let choices = kind_choices(a.kind);
+            if choices.len() > 1 && !locked {
+                let before = a.kind;
+                egui::ComboBox::from_id_salt(("protocol", i)).selected_text(kind_name(a.kind)).width(150.0).show_ui(
+                    ui,
+                    |ui| {
+                        for &k in choices {
+                            ui.selectable_value(&mut a.kind, k, kind_name(k));
+                        }
+                    },
+                );
+                if a.kind != before && a.port == default_port(before) {
+                    a.port = default_port(a.kind);
+                }
+            } else {
+                ui.label(kind_name(a.kind));
+            }
             // A grid cell offers a text field only last frame's column width: give it its size.
             ui.add_enabled_ui(!locked, |ui| ui.add_sized([140.0, 20.0], egui::TextEdit::singleline(&mut a.host)));
             ui.add_enabled(!locked, egui::DragValue::new(&mut a.port).range(1..=65535));
@@ -433,7 +459,10 @@ fn controllers(ui: &mut egui::Ui, s: &mut AppState, p: &mut ConnectionPanel, ctx
                 .on_disabled_hover_text("disconnect first: Identify opens a connection of its own")
                 .on_hover_text(match a.kind {
                     ControllerKind::PiGcs => "*IDN? and SAI?: who answers and which axes it has (changes nothing)",
-                    ControllerKind::SmarActMcs => ":GNC and the :GP/:GA probe of each channel (moves nothing)",
+                    ControllerKind::SmarActMcs => ":GNC and each channel's sensor type, :GST (moves nothing)",
+                    ControllerKind::SmarActMcs2 => {
+                        ":DEV:SNUM?, :DEV:NOCH? and each channel's movement type (moves nothing)"
+                    }
                 })
                 .clicked()
             {

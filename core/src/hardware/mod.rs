@@ -1,5 +1,6 @@
 //! Real stage controllers and their emulators: the hardware abstraction every stage driver implements
-//! (PI E-712 over GCS 2, SmarAct MCS over its ASCII protocol, and the virtual bench through an adapter),
+//! (PI E-712 over GCS 2, SmarAct MCS and MCS2 over their ASCII protocols, and the virtual bench through
+//! an adapter),
 //! the line-based TCP link they share, and the [`ControllerBench`] that runs plans on real controllers.
 //!
 //! The layer above [`crate::bench`]: the controller bench implements its [`crate::bench::Bench`] trait.
@@ -15,22 +16,24 @@ pub mod clock;
 pub mod controller_bench;
 pub mod emulator;
 pub mod laser;
+pub mod link;
 pub mod pi_gcs;
+pub mod pi_recorder;
 pub mod pi_replies;
 pub mod probe;
 pub mod smaract;
+pub mod smaract_mcs2;
 pub mod virtual_stages;
 
 use crate::bench::AxisUnit;
-use std::io::{BufRead, BufReader, ErrorKind, Write};
-use std::net::{TcpStream, ToSocketAddrs};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
 pub use controller_bench::{ControllerBench, HardwareConfig};
+pub use link::{LineEnd, Link, Traffic, Transcript};
 pub use pi_gcs::{GcsError, PiGcs};
 pub use smaract::{McsError, SmarActMcs};
+pub use smaract_mcs2::SmarActMcs2;
 pub use virtual_stages::VirtualStages;
 
 /// One axis of a controller.
@@ -216,18 +219,53 @@ pub struct RecordedBlock {
     pub inputs: Vec<Vec<f64>>,
 }
 
-/// A controller's synchronized data recorder: axis positions and an analog input (the photodiode)
-/// sampled on the controller's clock.
+/// What starts a recording.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RecordTrigger {
+    /// The next command of this controller that changes a position (the segment's move).
+    NextMove,
+    /// An edge on a digital input line of this controller (the laser's trigger output).
+    External {
+        /// The controller's identifier of the line.
+        line: String,
+    },
+}
+
+/// What a recording needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecorderRequest {
+    /// Recorded axes (indices into [`StageController::axes`]).
+    pub axes: Vec<usize>,
+    /// Recorded analog inputs (photodiode, then the wavelength monitor if wired).
+    pub inputs: Vec<String>,
+    /// The sampling period wanted (s); the controller rounds it to its servo cycle and lengthens
+    /// it when `duration_s` would not fit its tables at that period.
+    pub sample_period_s: f64,
+    /// The longest the recording may last (s): the segment with its margins.
+    pub duration_s: f64,
+    /// What starts it.
+    pub trigger: RecordTrigger,
+}
+
+/// How the recorder was set up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecorderSetup {
+    /// The sampling period it runs at (s).
+    pub sample_period_s: f64,
+    /// Samples each table holds (`None`: no limit the driver knows of).
+    pub capacity: Option<usize>,
+}
+
+/// A controller's synchronized data recorder: axis positions and analog inputs (the photodiode,
+/// the laser's wavelength monitor) sampled on the controller's clock.
 pub trait DataRecorder {
-    /// Configure the recorder for `axes` (indices into [`StageController::axes`]) and the analog
-    /// `inputs`, sampling every `sample_period_s` (rounded to what the controller can do; the actual
-    /// period is returned). Recording starts with the next motion command of this controller.
-    fn arm(&mut self, axes: &[usize], inputs: &[String], sample_period_s: f64) -> Result<f64, HwError>;
+    /// Configure the recorder for `request` and arm it: recording starts at its trigger.
+    fn arm(&mut self, request: &RecorderRequest) -> Result<RecorderSetup, HwError>;
     /// Number of samples recorded since the trigger.
     fn recorded_len(&mut self) -> Result<usize, HwError>;
     /// Read `count` samples from `start` (0-based).
     fn read(&mut self, start: usize, count: usize) -> Result<RecordedBlock, HwError>;
-    /// One reading of an analog input, now.
+    /// One reading of an analog input now, the same quantity the recorder records.
     fn read_input(&mut self, input: &str) -> Result<f64, HwError>;
 }
 
@@ -271,6 +309,10 @@ pub trait StageController: Send {
     fn recorder(&mut self) -> Option<&mut dyn DataRecorder> {
         None
     }
+    /// The traffic on the controller's link so far, for the log's summaries (`None`: no link).
+    fn traffic(&self) -> Option<Traffic> {
+        None
+    }
     /// True while any of `axes` moves.
     fn is_moving(&mut self, axes: &[usize]) -> Result<bool, HwError> {
         Ok(self.on_target(axes)?.iter().any(|&t| !t))
@@ -287,164 +329,6 @@ pub trait StageController: Send {
                 return Err(HwError::WaitTimeout { controller: self.name(), axes: ids.join(","), timeout_s });
             }
             std::thread::sleep(Duration::from_micros(500));
-        }
-    }
-}
-
-/// Every command sent and reply received on a link, for logs and test fixtures: `> command` and
-/// `< reply line` entries.
-pub type Transcript = Arc<Mutex<Vec<String>>>;
-
-/// A line-oriented TCP link (LF-terminated commands and replies) with a read timeout.
-pub struct Link {
-    controller: String,
-    address: String,
-    timeout_s: f64,
-    reader: Option<BufReader<TcpStream>>,
-    transcript: Option<Transcript>,
-}
-
-impl Link {
-    /// Connect to `address` (host:port).
-    pub fn connect(controller: &str, address: &str, timeout_s: f64) -> Result<Self, HwError> {
-        let mut link = Link {
-            controller: controller.to_string(),
-            address: address.to_string(),
-            timeout_s,
-            reader: None,
-            transcript: None,
-        };
-        link.reconnect()?;
-        Ok(link)
-    }
-
-    /// Close and open the connection again.
-    pub fn reconnect(&mut self) -> Result<(), HwError> {
-        self.reader = None;
-        let err = |reason: String| HwError::Connect {
-            controller: self.controller.clone(),
-            address: self.address.clone(),
-            reason,
-        };
-        let timeout = Duration::from_secs_f64(self.timeout_s.max(1e-3));
-        let addr = self
-            .address
-            .to_socket_addrs()
-            .map_err(|e| err(e.to_string()))?
-            .next()
-            .ok_or_else(|| err("the address resolves to nothing".into()))?;
-        let stream = TcpStream::connect_timeout(&addr, timeout).map_err(|e| err(e.to_string()))?;
-        tracing::info!(controller = %self.controller, address = %self.address, "connected");
-        stream.set_read_timeout(Some(timeout)).map_err(|e| err(e.to_string()))?;
-        stream.set_write_timeout(Some(timeout)).map_err(|e| err(e.to_string()))?;
-        let _ = stream.set_nodelay(true);
-        self.reader = Some(BufReader::new(stream));
-        Ok(())
-    }
-
-    /// True while the connection is open.
-    pub fn is_open(&self) -> bool {
-        self.reader.is_some()
-    }
-
-    /// Close the connection.
-    pub fn close(&mut self) {
-        self.reader = None;
-    }
-
-    /// Record every command and reply in `transcript`.
-    pub fn set_transcript(&mut self, transcript: Option<Transcript>) {
-        self.transcript = transcript;
-    }
-
-    /// The read timeout (s).
-    pub fn timeout_s(&self) -> f64 {
-        self.timeout_s
-    }
-
-    fn log(&self, entry: String) {
-        if let Some(t) = &self.transcript {
-            if let Ok(mut t) = t.lock() {
-                t.push(entry);
-            }
-        }
-    }
-
-    /// Send one command line (LF appended).
-    pub fn send(&mut self, command: &str) -> Result<(), HwError> {
-        let controller = self.controller.clone();
-        let reader = self.reader.as_mut().ok_or(HwError::NotConnected { controller: controller.clone() })?;
-        let mut line = Vec::with_capacity(command.len() + 1);
-        line.extend_from_slice(command.as_bytes());
-        line.push(b'\n');
-        if let Err(e) = reader.get_mut().write_all(&line) {
-            self.reader = None;
-            tracing::warn!(controller = %controller, command, "send failed: {e}");
-            return Err(HwError::Disconnected { controller, command: command.into(), reason: e.to_string() });
-        }
-        tracing::debug!(controller = %self.controller, "> {command}");
-        self.log(format!("> {command}"));
-        Ok(())
-    }
-
-    /// Read one reply line (without its LF; a trailing space is kept). `command` names the request
-    /// in errors.
-    pub fn read_line(&mut self, command: &str) -> Result<String, HwError> {
-        let reply = self.read_line_inner(command);
-        if let Err(e) = &reply {
-            tracing::warn!(controller = %self.controller, command, "no reply: {e}");
-        }
-        reply
-    }
-
-    fn read_line_inner(&mut self, command: &str) -> Result<String, HwError> {
-        let controller = self.controller.clone();
-        let timeout_s = self.timeout_s;
-        let reader = self.reader.as_mut().ok_or(HwError::NotConnected { controller: controller.clone() })?;
-        let mut buf = Vec::new();
-        // A line longer than this is not a reply of these protocols (a DRR? data line is < 200 bytes).
-        const MAX_LINE_BYTES: u64 = 1 << 20;
-        let result = std::io::Read::take(&mut *reader, MAX_LINE_BYTES).read_until(b'\n', &mut buf);
-        if buf.len() as u64 >= MAX_LINE_BYTES && buf.last() != Some(&b'\n') {
-            self.reader = None;
-            return Err(HwError::BadReply {
-                controller,
-                command: command.into(),
-                reply: String::from_utf8_lossy(&buf[..80]).into_owned() + "…",
-                expected: format!("a reply line shorter than {MAX_LINE_BYTES} bytes"),
-            });
-        }
-        match result {
-            Ok(0) => {
-                self.reader = None;
-                Err(HwError::Disconnected { controller, command: command.into(), reason: "closed by the peer".into() })
-            }
-            Ok(_) if buf.last() != Some(&b'\n') => {
-                self.reader = None;
-                Err(HwError::Disconnected {
-                    controller,
-                    command: command.into(),
-                    reason: "closed by the peer in the middle of a reply".into(),
-                })
-            }
-            Ok(_) => {
-                buf.pop();
-                if buf.last() == Some(&b'\r') {
-                    buf.pop();
-                }
-                let line = String::from_utf8_lossy(&buf).into_owned();
-                tracing::debug!(controller = %controller, "< {line}");
-                self.log(format!("< {line}"));
-                Ok(line)
-            }
-            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
-                self.reader = None;
-                Err(HwError::Timeout { controller, command: command.into(), timeout_s })
-            }
-            Err(e) => {
-                self.reader = None;
-                Err(HwError::Disconnected { controller, command: command.into(), reason: e.to_string() })
-            }
         }
     }
 }

@@ -1,29 +1,21 @@
 //! PI E-712 driver: the GCS 2 ASCII command subset the bench needs, over TCP (port 50000).
 //! Owns command formatting, reply parsing (multi-line replies: a line ending in space-LF continues),
-//! the `ERR?` check after every command, GCS error codes, and the data recorder (`DRC`, `DRT`, `RTR`,
-//! `DRL?`, `DRR?`).
+//! the `ERR?` check after every command, GCS error codes, closed loop and velocity control at
+//! connect; the data recorder is [`super::pi_recorder`].
 //!
-//! Positions are in µm (the E-712's unit for the P-563.3CD axes). Errors keep the controller's
-//! number and PI's text for it ([`GcsError`]).
+//! Sources: PI's GCS 2 command docstrings in PIPython (`pipython/pidevice/common/gcsbasecommands.py`,
+//! release 2.13) and PI's EPICS driver (`PIGCSPiezoController.cpp`, motorPIGCS2). Positions are in
+//! µm (the E-712's unit for the P-563.3CD axes). Errors keep the controller's number and PI's text
+//! for it ([`GcsError`]).
 
+use super::pi_recorder::RecorderFacts;
 use super::pi_replies as replies;
-use super::{parse_f64, AxisInfo, DataRecorder, HwError, Link, RecordedBlock, StageController};
+use super::{parse_f64, AxisInfo, DataRecorder, HwError, Link, StageController, Traffic};
 use crate::bench::AxisUnit;
 use std::fmt;
 
 /// The E-712's default TCP port.
 pub const DEFAULT_PORT: u16 = 50000;
-
-/// E-712 servo cycle time (s): the data recorder samples every `RTR` cycles of it.
-pub const SERVO_CYCLE_S: f64 = 20e-6;
-
-/// Data recorder option: actual position of an axis.
-pub const RECORD_ACTUAL_POSITION: u32 = 2;
-/// Data recorder option: normalised value of an input signal channel (the photodiode's analog input).
-/// Assumption to check against the E-712 manual for the installed analog-input module.
-pub const RECORD_INPUT_SIGNAL: u32 = 17;
-/// Data recorder trigger: any command changing a position (`MOV`, `MVR`) starts recording.
-pub const TRIGGER_ON_MOVE: u32 = 1;
 
 /// GCS error numbers and their meaning (PI GCS 2 error codes, as in PI's GCS DLL header): the
 /// subset the driver and the emulator use or may meet.
@@ -47,6 +39,7 @@ pub const GCS_ERRORS: &[(i32, &str, &str)] = &[
     (24, "PI_CNTR_PARAM_NR", "Incorrect number of parameters"),
     (25, "PI_CNTR_INVALID_REAL_NR", "Invalid floating point number"),
     (26, "PI_CNTR_MISSING_PARAM", "Parameter missing"),
+    (54, "PI_CNTR_UNKNOWN_PARAMETER", "Unknown parameter"),
     (57, "PI_CNTR_INVALID_RECORDER_CHAN", "Data Record Table does not exist"),
     (58, "PI_CNTR_INVALID_RECORDER_SRC_OPT", "Source does not exist; number too low or too high"),
     (77, "PI_CNTR_NOT_ENOUGH_RECORDED_DATA", "Data Record Table does not hold enough recorded data"),
@@ -94,15 +87,19 @@ impl fmt::Display for GcsError {
 
 /// A connected E-712.
 pub struct PiGcs {
-    name: String,
+    pub(super) name: String,
     link: Link,
     axes: Vec<AxisInfo>,
     idn: String,
     /// Data recorder state: recorded axes (indices) and tables.
-    armed_axes: Vec<usize>,
-    armed_inputs: usize,
+    pub(super) armed_axes: Vec<usize>,
+    pub(super) armed_inputs: usize,
+    /// What the recorder is (servo cycle, capacity, options), read at connect.
+    pub(super) recorder: RecorderFacts,
     /// Travel ranges read once per connection (`TMN?`, `TMX?`).
     limits: Vec<Option<(f64, f64)>>,
+    /// `FRF?` answered (`None`: not asked yet); an E-712 with absolute sensors may not know it.
+    frf_known: Option<bool>,
 }
 
 impl PiGcs {
@@ -115,11 +112,14 @@ impl PiGcs {
             idn: String::new(),
             armed_axes: vec![],
             armed_inputs: 0,
+            recorder: RecorderFacts::default(),
             limits: vec![],
+            frf_known: None,
         })
     }
 
-    /// Connect, read `*IDN?` and the axes (`SAI?`), switch every axis to closed loop (`SVO`).
+    /// Connect, read `*IDN?` and the axes (`SAI?`), switch every axis to closed loop (`SVO`) and
+    /// velocity control (`VCO`), read both back, and read what the data recorder is.
     pub fn connect(name: &str, address: &str, timeout_s: f64) -> Result<Self, HwError> {
         let mut pi = Self::open(name, address, timeout_s)?;
         pi.init()?;
@@ -149,8 +149,32 @@ impl PiGcs {
     fn init(&mut self) -> Result<(), HwError> {
         self.read_identity()?;
         self.limits = vec![None; self.axes.len()];
-        let svo: Vec<String> = self.axes.iter().map(|a| format!("{} 1", a.id)).collect();
-        self.command(&format!("SVO {}", svo.join(" ")))?;
+        self.frf_known = None;
+        let all: Vec<usize> = (0..self.axes.len()).collect();
+        // GCS 2 `SVO`: closed-loop operation; `VEL` "only takes effect when the given axis is in
+        // closed-loop operation" (PIPython `VEL` docstring).
+        self.set_flags("SVO", &all)?;
+        // GCS 2 `VCO`: "When velocity-control is on, the axes move with the velocity set with VEL"
+        // (PIPython `VCO` docstring); without it a MOV is a step the servo follows at once.
+        self.set_flags("VCO", &all)?;
+        self.recorder = RecorderFacts::read(self)?;
+        Ok(())
+    }
+
+    /// Switch a per-axis flag on (`SVO`, `VCO`) and read it back (`SVO?`, `VCO?`).
+    fn set_flags(&mut self, command: &str, axes: &[usize]) -> Result<(), HwError> {
+        let ids = self.axis_list(axes)?;
+        let pairs: Vec<String> = ids.iter().map(|id| format!("{id} 1")).collect();
+        self.command(&format!("{command} {}", pairs.join(" ")))?;
+        let query = format!("{command}?");
+        let values = self.query_per_axis(&query, axes)?;
+        let set = replies::flags(&self.name, &query, &values)?;
+        if let Some(k) = set.iter().position(|&on| !on) {
+            return Err(HwError::Usage {
+                controller: self.name.clone(),
+                problem: format!("axis {} reads back `{query}` = 0 after `{command} {} 1`", ids[k], ids[k]),
+            });
+        }
         Ok(())
     }
 
@@ -164,7 +188,7 @@ impl PiGcs {
         self.link.set_transcript(t);
     }
 
-    fn bad(&self, command: &str, reply: &str, expected: &str) -> HwError {
+    pub(super) fn bad(&self, command: &str, reply: &str, expected: &str) -> HwError {
         HwError::bad_reply(&self.name, command, reply, expected)
     }
 
@@ -228,6 +252,7 @@ impl PiGcs {
 
     /// Send a command that has no reply, then `ERR?`; a non-zero code is a typed error.
     pub fn command(&mut self, command: &str) -> Result<(), HwError> {
+        tracing::debug!(controller = %self.name, "{command}");
         self.link.send(command)?;
         let code = self.error_code()?;
         if code != 0 {
@@ -240,7 +265,7 @@ impl PiGcs {
         Ok(())
     }
 
-    fn axis_list(&self, axes: &[usize]) -> Result<Vec<String>, HwError> {
+    pub(super) fn axis_list(&self, axes: &[usize]) -> Result<Vec<String>, HwError> {
         axes.iter()
             .map(|&a| {
                 self.axes.get(a).map(|x| x.id.clone()).ok_or_else(|| HwError::Usage {
@@ -252,7 +277,7 @@ impl PiGcs {
     }
 
     /// A per-axis query (`POS? 1 2`): `id=value` lines, returned in the order asked.
-    fn query_per_axis(&mut self, cmd: &str, axes: &[usize]) -> Result<Vec<String>, HwError> {
+    pub(super) fn query_per_axis(&mut self, cmd: &str, axes: &[usize]) -> Result<Vec<String>, HwError> {
         let ids = self.axis_list(axes)?;
         let command = format!("{cmd} {}", ids.join(" "));
         let lines = self.query(&command)?;
@@ -385,10 +410,25 @@ impl StageController for PiGcs {
         Ok((min, max))
     }
 
-    /// The E-712 with capacitive sensors measures absolute positions: `FRF?` says so.
+    /// `FRF?` where the controller knows it; an E-712 with capacitive sensors measures absolute
+    /// positions, and one that answers `FRF?` with GCS error 2 (unknown command) is referenced, as
+    /// PI's EPICS driver reads it (`PIGCSPiezoController::getReferencedState`).
     fn is_referenced(&mut self, axis: usize) -> Result<bool, HwError> {
-        let v = self.query_per_axis("FRF?", &[axis])?;
-        Ok(v[0] == "1")
+        if self.frf_known == Some(false) {
+            self.axis_list(&[axis])?;
+            return Ok(true);
+        }
+        match self.query_per_axis("FRF?", &[axis]) {
+            Ok(v) => {
+                self.frf_known = Some(true);
+                Ok(replies::flags(&self.name, "FRF?", &v)?[0])
+            }
+            Err(HwError::Gcs { error: GcsError { code: 2 }, .. }) => {
+                self.frf_known = Some(false);
+                Ok(true)
+            }
+            Err(e) => Err(e),
+        }
     }
 
     /// `SVO?`.
@@ -412,52 +452,9 @@ impl StageController for PiGcs {
     fn recorder(&mut self) -> Option<&mut dyn DataRecorder> {
         Some(self)
     }
-}
 
-impl DataRecorder for PiGcs {
-    fn arm(&mut self, axes: &[usize], inputs: &[String], sample_period_s: f64) -> Result<f64, HwError> {
-        let ids = self.axis_list(axes)?;
-        for (k, id) in ids.iter().enumerate() {
-            self.command(&format!("DRC {} {id} {RECORD_ACTUAL_POSITION}", k + 1))?;
-        }
-        for (k, input) in inputs.iter().enumerate() {
-            self.command(&format!("DRC {} {input} {RECORD_INPUT_SIGNAL}", ids.len() + k + 1))?;
-        }
-        let rate = (sample_period_s / SERVO_CYCLE_S).round().max(1.0) as u64;
-        self.command(&format!("RTR {rate}"))?;
-        self.command(&format!("DRT 0 {TRIGGER_ON_MOVE} 0"))?;
-        self.armed_axes = axes.to_vec();
-        self.armed_inputs = inputs.len();
-        Ok(rate as f64 * SERVO_CYCLE_S)
-    }
-
-    fn recorded_len(&mut self) -> Result<usize, HwError> {
-        let table = 1;
-        let lines = self.query(&format!("DRL? {table}"))?;
-        replies::count(&self.name, "DRL?", &lines)
-    }
-
-    fn read(&mut self, start: usize, count: usize) -> Result<RecordedBlock, HwError> {
-        let tables = self.armed_axes.len() + self.armed_inputs;
-        if count == 0 || tables == 0 {
-            return Ok(RecordedBlock {
-                start,
-                axes: vec![vec![]; self.armed_axes.len()],
-                inputs: vec![vec![]; self.armed_inputs],
-            });
-        }
-        let list: Vec<String> = (1..=tables).map(|t| t.to_string()).collect();
-        let command = format!("DRR? {} {count} {}", start + 1, list.join(" "));
-        let lines = self.query(&command)?;
-        let mut columns = replies::data_block(&self.name, &command, &lines, tables)?;
-        let inputs = columns.split_off(self.armed_axes.len());
-        Ok(RecordedBlock { start, axes: columns, inputs })
-    }
-
-    fn read_input(&mut self, input: &str) -> Result<f64, HwError> {
-        let command = format!("TSP? {input}");
-        let lines = self.query(&command)?;
-        replies::input_value(&self.name, &command, &lines)
+    fn traffic(&self) -> Option<Traffic> {
+        Some(self.link.traffic())
     }
 }
 

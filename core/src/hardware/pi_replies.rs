@@ -90,6 +90,53 @@ pub fn input_value(controller: &str, command: &str, lines: &[String]) -> Result<
     parse_f64(controller, command, line, v)
 }
 
+/// `SPA? <item> <param>` (GCS 2 parameter query, as PIPython's `qSPA` reads it): the value of the
+/// line `<item> <param>=<value>`; the parameter id matches in any hexadecimal spelling.
+pub fn param_value(controller: &str, command: &str, lines: &[String], item: &str, param: u32) -> Result<String, HwError> {
+    lines
+        .iter()
+        .find_map(|l| {
+            let (key, value) = l.split_once('=')?;
+            let mut key = key.split_whitespace();
+            let (i, p) = (key.next()?, key.next()?);
+            let p = p.strip_prefix("0x").or_else(|| p.strip_prefix("0X")).unwrap_or(p);
+            (i == item && u32::from_str_radix(p, 16).ok()? == param).then(|| value.trim().to_string())
+        })
+        .ok_or_else(|| {
+            HwError::bad_reply(controller, command, &lines.join("\\n"), &format!("a line `{item} 0x{param:08X}=<value>`"))
+        })
+}
+
+/// The record and trigger options an `HDR?` reply lists (PIPython's `get_hdr_options`: a
+/// `#RecordOptions` section, a `#TriggerOptions` section, lines `<number>=<text>`), and its
+/// additional-information lines.
+pub fn record_options(lines: &[String]) -> (Vec<u32>, Vec<u32>, Vec<String>) {
+    let (mut record, mut trigger, mut info) = (vec![], vec![], vec![]);
+    let mut section = 0;
+    for line in lines.iter().map(|l| l.trim()) {
+        if let Some(h) = line.strip_prefix('#') {
+            section = if h.starts_with("RecordOptions") {
+                1
+            } else if h.starts_with("TriggerOptions") {
+                2
+            } else if h.starts_with("Additional information") {
+                3
+            } else {
+                0
+            };
+            continue;
+        }
+        let option = line.split('=').next().and_then(|o| o.trim().parse::<u32>().ok());
+        match (section, option) {
+            (1, Some(o)) => record.push(o),
+            (2, Some(o)) => trigger.push(o),
+            (3, _) if !line.is_empty() => info.push(line.to_string()),
+            _ => {}
+        }
+    }
+    (record, trigger, info)
+}
+
 /// `DRR?`: a GCS data block, `#` header lines up to `# END_HEADER` then `tables` numbers per line;
 /// the columns. `DIM` must equal `tables` and `NDATA` the number of data lines.
 pub fn data_block(controller: &str, command: &str, lines: &[String], tables: usize) -> Result<Vec<Vec<f64>>, HwError> {
@@ -147,6 +194,18 @@ mod tests {
         assert!(e.contains("ERR?") && e.contains("4294967296") && e.contains("2147483647"), "{e}");
         assert_eq!(error_code("pi", &lines(&["216"])).unwrap(), 216);
         assert!(error_code("pi", &[]).is_err());
+    }
+
+    #[test]
+    fn parameters_and_record_options_parse() {
+        let l = lines(&["1 0x0E000200=2e-05"]);
+        assert_eq!(param_value("pi", "SPA?", &l, "1", 0x0E00_0200).unwrap(), "2e-05");
+        let l = lines(&["1 0xe000200=2e-05"]);
+        assert_eq!(param_value("pi", "SPA?", &l, "1", 0x0E00_0200).unwrap(), "2e-05");
+        assert!(param_value("pi", "SPA?", &l, "1", 0x1600_0200).is_err());
+        let hdr = lines(&["#RecordOptions", "0=Nothing", "17=Normalized value of input signal channel", "#TriggerOptions", "1=any command changing position", "3=external trigger", "#Additional information", "32768 datapoints per table"]);
+        let (r, t, i) = record_options(&hdr);
+        assert_eq!((r, t, i.len()), (vec![0, 17], vec![1, 3], 1));
     }
 
     #[test]

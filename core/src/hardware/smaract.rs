@@ -1,9 +1,13 @@
 //! SmarAct MCS (first generation) driver: the ASCII protocol over TCP (port 5000), synchronous mode.
-//! Owns command formatting (`:SCM0`, `:GP`, `:GA`, `:MPA`, `:MPR`, `:MAA`, `:MAR`, `:GS`, `:S`, `:FRM`,
-//! `:SCLS`, `:GPPK`, `:GSI`), reply parsing, MCS error codes, and the linear/rotary probe at connect.
+//! Owns command formatting (`:SCM0`, `:GST`, `:GP`, `:GA`, `:MPA`, `:MPR`, `:MAA`, `:MAR`, `:GS`,
+//! `:S`, `:FRM`, `:SCLS`, `:GPPK`, `:GSI`), reply parsing, MCS error codes, and each channel's kind
+//! from its sensor type at connect.
 //!
-//! The controller speaks nm for linear positioners and µ° plus a revolution count for rotary ones;
-//! this driver speaks µm and degrees ([`crate::bench::AxisUnit`]).
+//! Sources: the MCS ASCII programming interface as SmarAct's SDK header states it
+//! (`MCSControl.h`: status codes `SA_*_STATUS`, sensor types `SA_*_SENSOR_TYPE`, error codes) and
+//! the EPICS driver `smarActMCSMotorDriver.cpp` (motorSmarAct: `:GST`, `:GS`, `:GP`/`:GA`,
+//! `:SCLS`, `:GPPK`). The controller speaks nm for linear positioners and µ° plus a revolution
+//! count for rotary ones; this driver speaks µm and degrees ([`crate::bench::AxisUnit`]).
 
 use super::{AxisInfo, HwError, Link, StageController};
 use crate::bench::AxisUnit;
@@ -33,6 +37,29 @@ pub mod status {
     pub const CALIBRATING: i64 = 6;
     /// Finding the reference mark.
     pub const FINDING_REFERENCE: i64 = 7;
+    /// Opening or closing a gripper end effector (`SA_OPENING_STATUS`).
+    pub const OPENING: i64 = 8;
+    /// Movement locked (by the hand control module or an emergency stop).
+    pub const LOCKED: i64 = 9;
+}
+
+/// What a sensor type (`:GST`, `SA_*_SENSOR_TYPE` of `MCSControl.h`) says of the channel's
+/// positioner: `Some(true)` rotary (goniometers `G…`, rotary stages `SR…`, `MR`, `RA`, `RB`,
+/// `R20ME`), `Some(false)` linear, `None` for a type this table does not know (the channel is
+/// then probed with `:GP`/`:GA`). Type 0 is "no sensor".
+pub fn sensor_is_rotary(sensor_type: i64) -> Option<bool> {
+    const ROTARY: &[i64] = &[
+        2, 4, 8, 10, 11, 12, 13, 14, 15, 16, 17, 19, 20, 22, 23, 25, 26, 27, 28, 29, 30, 31, 33, 36, 37, 45, 46, 47,
+        48, 49, 50, 51, 52, 53, 54, 55,
+    ];
+    const LINEAR: &[i64] = &[1, 3, 5, 6, 7, 9, 18, 21, 24, 32, 34, 35, 38, 40, 41, 42, 43, 44];
+    if ROTARY.contains(&sensor_type) {
+        Some(true)
+    } else if LINEAR.contains(&sensor_type) {
+        Some(false)
+    } else {
+        None
+    }
 }
 
 /// MCS ASCII error codes and their meaning (SmarAct MCS ASCII programming interface).
@@ -106,6 +133,8 @@ pub enum McsReply {
     Channels(i64),
     /// `:ID<system id>`: the controller's serial system ID (`:GSI`).
     SystemId(u64),
+    /// `:ST<ch>,<type>`: the channel's sensor type (`:GST`).
+    SensorType { channel: i64, sensor: i64 },
 }
 
 /// Parse one reply line; `None` if it is not one of the replies above.
@@ -115,6 +144,10 @@ pub fn parse_reply(line: &str) -> Option<McsReply> {
     // Longest prefixes first.
     if let Some(rest) = body.strip_prefix("ID") {
         return rest.trim().parse::<u64>().ok().map(McsReply::SystemId);
+    }
+    if let Some(rest) = body.strip_prefix("ST") {
+        let v = nums(rest)?;
+        return (v.len() == 2 && v[1] >= 0).then(|| McsReply::SensorType { channel: v[0], sensor: v[1] });
     }
     if let Some(rest) = body.strip_prefix("PPK") {
         let v = nums(rest)?;
@@ -160,6 +193,8 @@ pub struct SmarActMcs {
     targets: Vec<Option<f64>>,
     /// The system ID `:GSI` answered; `None` where the firmware refuses the query.
     system_id: Option<u64>,
+    /// Each channel's sensor type (`:GST`).
+    sensors: Vec<i64>,
 }
 
 impl SmarActMcs {
@@ -175,6 +210,7 @@ impl SmarActMcs {
             limits: limits.to_vec(),
             targets: vec![],
             system_id: None,
+            sensors: vec![],
         };
         m.init()?;
         Ok(m)
@@ -187,24 +223,59 @@ impl SmarActMcs {
             other => return Err(self.bad(":GNC", &format!("{other:?}"), "`:N<count>` with 1 to 64 channels")),
         };
         let mut axes = Vec::new();
+        let mut sensors = Vec::new();
         for ch in 0..n {
-            let unit = match self.request(&format!(":GP{ch}"))? {
-                McsReply::Position { channel, .. } if channel == ch => AxisUnit::Micrometre,
-                McsReply::Error(e) if e.code == 143 => match self.request(&format!(":GA{ch}"))? {
-                    McsReply::Angle { channel, .. } if channel == ch => AxisUnit::Degree,
-                    McsReply::Error(e) => return Err(self.mcs(&format!(":GA{ch}"), e)),
-                    other => return Err(self.bad(&format!(":GA{ch}"), &format!("{other:?}"), "`:A<ch>,<µ°>,<rev>`")),
-                },
-                McsReply::Error(e) => return Err(self.mcs(&format!(":GP{ch}"), e)),
-                other => return Err(self.bad(&format!(":GP{ch}"), &format!("{other:?}"), "`:P<ch>,<nm>`")),
+            let sensor = self.sensor_type(ch)?;
+            let unit = match sensor_is_rotary(sensor) {
+                Some(true) => AxisUnit::Degree,
+                Some(false) => AxisUnit::Micrometre,
+                None if sensor == 0 => {
+                    return Err(HwError::Usage {
+                        controller: self.name.clone(),
+                        problem: format!("channel {ch} has no sensor (`:GST{ch}` = 0): closed-loop moves need one"),
+                    })
+                }
+                None => self.probe_unit(ch)?,
             };
             axes.push(AxisInfo { id: ch.to_string(), unit });
+            sensors.push(sensor);
         }
+        self.sensors = sensors;
         self.targets = vec![None; axes.len()];
         self.limits.resize(axes.len(), (f64::NEG_INFINITY, f64::INFINITY));
         self.axes = axes;
         self.system_id = self.read_system_id()?;
         Ok(())
+    }
+
+    /// `:GST<ch>`: the channel's sensor type (MCS ASCII; EPICS `getVal("GST")`).
+    fn sensor_type(&mut self, ch: i64) -> Result<i64, HwError> {
+        let command = format!(":GST{ch}");
+        match self.request(&command)? {
+            McsReply::SensorType { channel, sensor } if channel == ch => Ok(sensor),
+            McsReply::Error(e) => Err(self.mcs(&command, e)),
+            other => Err(self.bad(&command, &format!("{other:?}"), &format!("`:ST{ch},<type>`"))),
+        }
+    }
+
+    /// A sensor type this driver does not know: `:GP` answers on a linear positioner, `:GA` (after
+    /// error 143, wrong sensor type) on a rotary one.
+    fn probe_unit(&mut self, ch: i64) -> Result<AxisUnit, HwError> {
+        match self.request(&format!(":GP{ch}"))? {
+            McsReply::Position { channel, .. } if channel == ch => Ok(AxisUnit::Micrometre),
+            McsReply::Error(e) if e.code == 143 => match self.request(&format!(":GA{ch}"))? {
+                McsReply::Angle { channel, .. } if channel == ch => Ok(AxisUnit::Degree),
+                McsReply::Error(e) => Err(self.mcs(&format!(":GA{ch}"), e)),
+                other => Err(self.bad(&format!(":GA{ch}"), &format!("{other:?}"), "`:A<ch>,<µ°>,<rev>`")),
+            },
+            McsReply::Error(e) => Err(self.mcs(&format!(":GP{ch}"), e)),
+            other => Err(self.bad(&format!(":GP{ch}"), &format!("{other:?}"), "`:P<ch>,<nm>`")),
+        }
+    }
+
+    /// Each channel's sensor type read at connect (`:GST`; 0 for none).
+    pub fn sensor_types(&self) -> &[i64] {
+        &self.sensors
     }
 
     /// `:GSI`: the system ID, or `None` from a controller that answers it with an error (an
@@ -240,11 +311,12 @@ impl SmarActMcs {
         self.link.send(command)?;
         let line = self.link.read_line(command)?;
         parse_reply(&line)
-            .ok_or_else(|| self.bad(command, &line, "an MCS reply `:E`, `:P`, `:A`, `:S`, `:PPK`, `:N` or `:ID`"))
+            .ok_or_else(|| self.bad(command, &line, "an MCS reply `:E`, `:P`, `:A`, `:S`, `:ST`, `:PPK`, `:N` or `:ID`"))
     }
 
     /// Send a command whose only reply is the acknowledgement `:E<ch>,0`.
     fn ack(&mut self, command: &str, channel: i64) -> Result<(), HwError> {
+        tracing::debug!(controller = %self.name, "{command}");
         match self.request(command)? {
             McsReply::Error(e) if e.code == 0 && (e.channel == channel || e.channel == -1) => Ok(()),
             McsReply::Error(e) => Err(self.mcs(command, e)),
@@ -332,8 +404,12 @@ impl StageController for SmarActMcs {
     /// The system ID (`:GSI`) where the controller gives one, and the channels it found (`:GNC`,
     /// `:GP`/`:GA`).
     fn identification(&self) -> String {
-        let kinds: Vec<&str> =
-            self.axes.iter().map(|a| if a.unit == AxisUnit::Degree { "rotary" } else { "linear" }).collect();
+        let kinds: Vec<String> = self
+            .axes
+            .iter()
+            .zip(&self.sensors)
+            .map(|(a, s)| format!("{} sensor {s}", if a.unit == AxisUnit::Degree { "rotary" } else { "linear" }))
+            .collect();
         let id = self.system_id.map_or(String::new(), |id| format!(" system ID {id},"));
         format!("SmarAct MCS,{id} {} channels ({})", kinds.len(), kinds.join(", "))
     }
@@ -387,7 +463,10 @@ impl StageController for SmarActMcs {
                     true
                 }
                 status::TARGETING | status::MOVE_DELAY | status::FINDING_REFERENCE | status::CALIBRATING => false,
-                status::STEPPING | status::SCANNING => false,
+                status::STEPPING | status::SCANNING | status::OPENING => false,
+                status::LOCKED => {
+                    return Err(self.mcs(&format!(":GS{a}"), McsError { channel: a as i64, code: 146 }));
+                }
                 other => return Err(self.bad(&format!(":GS{a}"), &other.to_string(), "a status code 0 to 9")),
             };
             out.push(done);
@@ -448,6 +527,10 @@ impl StageController for SmarActMcs {
         self.link.reconnect()?;
         self.init()
     }
+
+    fn traffic(&self) -> Option<super::Traffic> {
+        Some(self.link.traffic())
+    }
 }
 
 #[cfg(test)]
@@ -466,6 +549,7 @@ mod tests {
         assert_eq!(parse_reply(":PPK0,1"), Some(McsReply::PhysicalPositionKnown { channel: 0, known: true }));
         assert_eq!(parse_reply(":N3"), Some(McsReply::Channels(3)));
         assert_eq!(parse_reply(":ID3118000001"), Some(McsReply::SystemId(3_118_000_001)));
+        assert_eq!(parse_reply(":ST1,16"), Some(McsReply::SensorType { channel: 1, sensor: 16 }));
         for bad in
             ["", ":", "P0,1", ":P0", ":P0,x", ":A0,1", ":E0,-5", ":Q0,1", ":PPK0,2", ":S1,2,3", ":ID", ":ID-4", ":IDx"]
         {
@@ -483,13 +567,16 @@ mod tests {
         let with = SmarActEmulator::start(clock.clone(), SmarActEmulatorConfig::default()).unwrap();
         let mcs = SmarActMcs::connect("MCS", &with.addr().to_string(), 1.0, &[]).unwrap();
         assert_eq!(mcs.system_id(), Some(3_118_000_001));
-        assert_eq!(mcs.identification(), "SmarAct MCS, system ID 3118000001, 3 channels (rotary, rotary, rotary)");
+        assert_eq!(
+            mcs.identification(),
+            "SmarAct MCS, system ID 3118000001, 3 channels (rotary sensor 16, rotary sensor 17, rotary sensor 26)"
+        );
         // An older firmware answers `:GSI` with an error: the controller still connects, named by its channels.
         let config = SmarActEmulatorConfig { system_id: None, ..Default::default() };
         let without = SmarActEmulator::start(clock, config).unwrap();
         let mcs = SmarActMcs::connect("MCS", &without.addr().to_string(), 1.0, &[]).unwrap();
         assert_eq!(mcs.system_id(), None);
-        assert_eq!(mcs.identification(), "SmarAct MCS, 3 channels (rotary, rotary, rotary)");
+        assert_eq!(mcs.identification(), "SmarAct MCS, 3 channels (rotary sensor 16, rotary sensor 17, rotary sensor 26)");
     }
 
     proptest::proptest! {

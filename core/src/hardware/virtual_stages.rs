@@ -6,7 +6,7 @@
 //! segment at once): `on_target` is then always true. While the recorder is armed, every move is
 //! recorded and its samples appended.
 
-use super::{AxisInfo, DataRecorder, HwError, RecordedBlock, StageController};
+use super::{AxisInfo, DataRecorder, HwError, RecordedBlock, RecorderRequest, RecorderSetup, StageController};
 use crate::bench::{AxisUnit, Bench, RunControl, VirtualBench};
 use crate::model::robot::JointType;
 use crate::plan::{JointTarget, Plan, Segment};
@@ -161,14 +161,14 @@ impl StageController for VirtualStages {
 impl DataRecorder for VirtualStages {
     /// The virtual bench samples at its preset's rate, whatever is asked.
     /// Inputs: the first is the photodiode, any other the laser wavelength (nm).
-    fn arm(&mut self, axes: &[usize], inputs: &[String], _sample_period_s: f64) -> Result<f64, HwError> {
-        for &a in axes {
+    fn arm(&mut self, request: &RecorderRequest) -> Result<RecorderSetup, HwError> {
+        for &a in &request.axes {
             self.check(a)?;
         }
-        self.recorded_axes = axes.to_vec();
-        self.recorded_inputs = inputs.len();
+        self.recorded_axes = request.axes.clone();
+        self.recorded_inputs = request.inputs.len();
         self.recording = Some(Trace::new(TraceMeta::default()));
-        Ok(self.bench.sample_period_s())
+        Ok(RecorderSetup { sample_period_s: self.bench.sample_period_s(), capacity: None })
     }
 
     fn recorded_len(&mut self) -> Result<usize, HwError> {

@@ -6,6 +6,10 @@
 //! (the observability report, the multistart branches, the translation signs), none is listed
 //! by hand.
 //!
+//! A sweep measured but whose analysis was refused is lost the same way ([`lost`]): the same
+//! observations are analysed with an absolute gap where each lost sweep was (the value the
+//! estimate predicts there) and without it.
+//!
 //! Before a measurement the cost is predicted ([`predict`]): the plans run once on a pilot
 //! virtual bench misaligned as the paper measured its bench ([`pilot_truth`]), and the same
 //! traces are analysed with and without their sweeps. Not at the square design: there a
@@ -15,7 +19,9 @@
 
 use crate::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use crate::identify::joint::{self, analyse_estimate, JointOptions};
-use crate::identify::measurements::observations_from_traces;
+use crate::identify::measurements::{observations_from_traces, ExtractOptions};
+use crate::identify::{Observation, ObservationKind};
+use crate::model::optics::FabryPerot;
 use crate::identify::multistart::extract_options;
 use crate::identify::observability::IdentifiabilityReport;
 use crate::identify::signs::{translation_signs, SignSource, TranslationSign};
@@ -44,9 +50,28 @@ pub struct LostParameter {
     pub reason: String,
 }
 
+/// A sweep measured whose analysis was refused.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LostSweep {
+    /// The trace's label.
+    pub label: String,
+    /// Where it was measured (µm, °).
+    pub at_display: [f64; 6],
+    /// Its middle wavelength (nm).
+    pub wavelength_nm: f64,
+    /// Bench time of its start and end (s).
+    pub time_s: [f64; 2],
+    /// Why its analysis was refused.
+    pub why: String,
+}
+
 /// The cost of leaving out the sweeps.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct SweepCost {
+    /// The sweeps measured but lost (their analysis refused); empty when the sweeps were left out
+    /// of the plans.
+    #[serde(default)]
+    pub lost: Vec<LostSweep>,
     /// Parameters determined with the sweeps and not without them.
     pub undetermined: Vec<LostParameter>,
     /// The combinations the data without sweeps do not see, or see too weakly, that the data
@@ -101,7 +126,7 @@ impl SweepCost {
             .filter(|l| without.signs.iter().find(|s| &s.label == *l).is_none_or(|s| s.evidence.is_empty()))
             .cloned()
             .collect();
-        SweepCost { undetermined, unseen, sign_open: sign_open(fit), signed_by_sweeps, unsigned, predicted }
+        SweepCost { lost: vec![], undetermined, unseen, sign_open: sign_open(fit), signed_by_sweeps, unsigned, predicted }
     }
 
     /// Leaving the sweeps out costs nothing these analyses can see.
@@ -113,11 +138,15 @@ impl SweepCost {
     pub fn sentences(&self) -> Vec<String> {
         let mut out = Vec::new();
         let (rests, are_not) = if self.predicted { ("will rest", "will not be") } else { ("rest", "are not") };
+        let without = if self.lost.is_empty() { "without wavelength sweeps" } else { "without the lost sweeps" };
+        if !self.lost.is_empty() {
+            let each: Vec<String> = self.lost.iter().map(|l| format!("`{}` ({})", l.label, l.why)).collect();
+            out.push(format!("{} sweep(s) measured but not analysed: {}", self.lost.len(), each.join("; ")));
+        }
         if !self.undetermined.is_empty() {
             let names: Vec<&str> = self.undetermined.iter().map(|p| p.name.as_str()).collect();
             out.push(format!(
-                "without wavelength sweeps the absolute gaps are not measured: {} {are_not} determined \
-                 (the sweeps would determine {})",
+                "{without} the absolute gaps are not measured: {} {are_not} determined (the sweeps would determine {})",
                 names.join(", "),
                 if names.len() == 1 { "it" } else { "them" }
             ));
@@ -125,10 +154,10 @@ impl SweepCost {
                 out.push(format!("{}: {}", p.name, p.reason));
             }
         }
-        out.extend(self.unseen.iter().map(|u| format!("without sweeps: {u}")));
+        out.extend(self.unseen.iter().map(|u| format!("{without}: {u}")));
         if !self.sign_open.is_empty() {
             out.push(format!(
-                "the sign of {} is not fixed: branches of opposite sign fit the sweep-less data equally well",
+                "the sign of {} is not fixed: branches of opposite sign fit the data {without} equally well",
                 self.sign_open.join(", ")
             ));
         }
@@ -142,11 +171,62 @@ impl SweepCost {
                 self.unsigned.len()
             ));
         }
-        if out.is_empty() {
-            out.push("leaving the sweeps out loses no parameter and no sign these plans determine".into());
+        if out.len() == self.lost.len().min(1) {
+            out.push(if self.lost.is_empty() {
+                "leaving the sweeps out loses no parameter and no sign these plans determine".into()
+            } else {
+                "losing them loses no parameter and no sign these data determine".into()
+            });
         }
         out
     }
+}
+
+/// What losing the sweeps `lost` cost a measurement analysed without them (`observations`, its
+/// estimate `at`, the verdict `fit` on it): the identifier's analyses of the same observations
+/// with an absolute gap where each lost sweep was (the value the estimate predicts there, with
+/// the σ of the sweeps kept, or the analysis's floor) and without, compared.
+pub fn lost(
+    model: &PhaseModel,
+    observations: &[Observation],
+    at: &Extrinsics,
+    lost: Vec<LostSweep>,
+    fit: Option<&FitCheck>,
+) -> SweepCost {
+    let mut sigmas: Vec<f64> = observations
+        .iter()
+        .filter(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. }))
+        .map(|o| o.sigma)
+        .collect();
+    sigmas.sort_by(f64::total_cmp);
+    let sigma = sigmas.get(sigmas.len() / 2).copied().unwrap_or(ExtractOptions::default().gap_sigma_floor_um);
+    let mut with = observations.to_vec();
+    for l in &lost {
+        let mut o = Observation {
+            label: l.label.clone(),
+            kind: ObservationKind::AbsoluteGap { at_display: l.at_display, gap_um: 0.0 },
+            sigma,
+            wavelength_nm: l.wavelength_nm,
+            time_s: l.time_s,
+            approach: Default::default(),
+        };
+        let Ok(fp) = FabryPerot::new(&model.optics, l.wavelength_nm, model.n_air) else { continue };
+        let v = crate::identify::predict(model, &fp, at, &o, 1.0);
+        if let ObservationKind::AbsoluteGap { gap_um, .. } = &mut o.kind {
+            *gap_um = v;
+        }
+        if v.is_finite() {
+            with.push(o);
+        }
+    }
+    let analyse = |obs: &[Observation]| {
+        let est = joint::evaluate(model, obs, at, &JointOptions::default());
+        PilotAnalysis { identifiability: analyse_estimate(&est), signs: translation_signs(obs, &est) }
+    };
+    let (w, wo) = (analyse(&with), analyse(observations));
+    let mut cost = SweepCost::assess(w.evidence(), wo.evidence(), fit, false);
+    cost.lost = lost;
+    cost
 }
 
 /// Parameters whose sign differs between the chosen branch and one that ties with it.

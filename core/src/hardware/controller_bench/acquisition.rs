@@ -1,8 +1,10 @@
 //! Recording during a segment: the recorder of the photodiode's controller samples its joints and
-//! the photodiode, the other controllers' joints are polled and interpolated at the sample times.
+//! the photodiode, the other controllers' joints are polled and interpolated at the sample times;
+//! a recorder that fills its tables before the segment ends is a fault, and each recording's cost
+//! on the wire and its timing are logged once, at its end.
 
 use super::ControllerBench;
-use crate::hardware::HwError;
+use crate::hardware::{HwError, RecordTrigger, RecorderRequest, Traffic};
 use crate::plan::TimedSegment;
 use crate::trace::{Trace, TraceMeta};
 
@@ -12,7 +14,20 @@ const MAX_POLL_RTT_S: f64 = 0.002;
 /// Samples read from the recorder, not yet turned into trace rows.
 pub(super) struct Acquisition {
     pub(super) t_trigger_s: f64,
+    /// The trigger's bench time is known: at the move command, or (an external trigger) from the
+    /// first samples recorded.
+    pub(super) t_trigger_known: bool,
+    /// Started by an external trigger (the laser's trigger output), not by the move command.
+    pub(super) external: bool,
+    /// Bench time the recorder was armed.
+    pub(super) t_armed_s: f64,
     pub(super) dt_s: f64,
+    /// Samples each table holds.
+    pub(super) capacity: Option<usize>,
+    /// `read` calls made.
+    pub(super) reads: usize,
+    /// Each controller's and the laser's link traffic when the recorder was armed.
+    pub(super) traffic_at_arm: Vec<Option<Traffic>>,
     pub(super) read: usize,
     /// Recorder joints (joint index, column).
     pub(super) recorded_joints: Vec<usize>,
@@ -58,22 +73,43 @@ impl ControllerBench {
         (0..6).filter(|&j| self.joints[j].controller == self.recorder_controller).collect()
     }
 
+    /// Each controller's and the laser's traffic now.
+    pub(super) fn traffic_now(&self) -> Vec<Option<Traffic>> {
+        self.controllers.iter().map(|c| c.traffic()).chain(std::iter::once(self.laser.traffic())).collect()
+    }
+
     /// Arm the recorder of the photodiode's controller for the recorded joints and the inputs
-    /// (photodiode, then the wavelength monitor if wired); the acquisition starts empty.
-    pub(super) fn arm_recorder(&mut self, meta: &TraceMeta) -> Result<Acquisition, HwError> {
+    /// (photodiode, then the wavelength monitor if wired), started by `trigger`, for a recording
+    /// of at most `duration_s`; the acquisition starts empty.
+    pub(super) fn arm_recorder(
+        &mut self,
+        meta: &TraceMeta,
+        trigger: RecordTrigger,
+        duration_s: f64,
+    ) -> Result<Acquisition, HwError> {
         let recorded_joints = self.recorded_joints();
         let axes: Vec<usize> = recorded_joints.iter().map(|&j| self.joints[j].axis).collect();
         let mut inputs = vec![self.config.photodiode.input.clone()];
         inputs.extend(self.config.photodiode.wavelength_input.clone());
-        let period = self.config.sample_period_s;
+        let external = matches!(trigger, RecordTrigger::External { .. });
+        let request =
+            RecorderRequest { axes, inputs, sample_period_s: self.config.sample_period_s, duration_s, trigger };
+        let traffic_at_arm = self.traffic_now();
         let rec = self.controllers[self.recorder_controller].recorder().ok_or_else(|| HwError::Usage {
             controller: self.config.photodiode.controller.clone(),
             problem: "no data recorder".into(),
         })?;
-        let dt_s = rec.arm(&axes, &inputs, period)?;
+        let setup = rec.arm(&request)?;
+        let inputs = request.inputs;
         Ok(Acquisition {
             t_trigger_s: 0.0,
-            dt_s,
+            t_trigger_known: false,
+            external,
+            t_armed_s: self.bench_now(),
+            dt_s: setup.sample_period_s,
+            capacity: setup.capacity,
+            reads: 0,
+            traffic_at_arm,
             read: 0,
             columns: vec![vec![]; recorded_joints.len()],
             inputs: vec![vec![]; inputs.len()],
@@ -120,16 +156,35 @@ impl ControllerBench {
         Ok(())
     }
 
-    pub(super) fn read_recorder(&mut self, acq: &mut Acquisition, up_to_s: Option<f64>) -> Result<(), HwError> {
+    /// Read what the recorder holds (up to bench time `up_to_s`), at most `max_rows` rows: while
+    /// the segment runs, the reads stay short so that the polls and the progress keep their pace.
+    pub(super) fn read_recorder(
+        &mut self,
+        acq: &mut Acquisition,
+        up_to_s: Option<f64>,
+        max_rows: usize,
+    ) -> Result<(), HwError> {
+        let asked_s = self.bench_now();
         let Some(rec) = self.controllers[self.recorder_controller].recorder() else { return Ok(()) };
         let mut available = rec.recorded_len()?;
+        if !acq.t_trigger_known {
+            if available == 0 {
+                return Ok(());
+            }
+            // Started by an external edge: its samples, counted when asked, date it to a sample
+            // and an exchange (the sweeps it times run at rest).
+            acq.t_trigger_s = (asked_s - (available - 1) as f64 * acq.dt_s).max(acq.t_armed_s);
+            acq.t_trigger_known = true;
+        }
         if let Some(end) = up_to_s {
             let last = ((end - acq.t_trigger_s) / acq.dt_s).floor().max(0.0) as usize + 1;
             available = available.min(last);
         }
+        let available = available.min(acq.read.saturating_add(max_rows));
         while acq.read < available {
             let count = (available - acq.read).min(50_000);
             let block = rec.read(acq.read, count)?;
+            acq.reads += 1;
             for (col, new) in acq.columns.iter_mut().zip(block.axes) {
                 col.extend(new);
             }
@@ -143,11 +198,15 @@ impl ControllerBench {
 
     /// Turn recorded samples into trace rows, up to the last poll (or all of them with `all`).
     pub(super) fn emit(&self, acq: &mut Acquisition, seg: &TimedSegment, all: bool) {
+        if !acq.t_trigger_known {
+            return;
+        }
         // Samples up to the earliest reading of the last poll: every polled joint is known there.
         let polled: Vec<usize> = (0..6).filter(|j| !acq.recorded_joints.contains(j)).collect();
         let last_poll = acq.polls.last().map(|p| polled.iter().map(|&j| p.t_s[j]).fold(f64::INFINITY, f64::min));
-        let wavelength_recorded = self.config.photodiode.wavelength_input.is_some();
-        let mw = self.config.photodiode.mw_per_unit;
+        let pd = &self.config.photodiode;
+        let wavelength_recorded = pd.wavelength_input.is_some();
+        let (mw, nm_per_unit, offset_nm) = (pd.mw_per_unit, pd.wavelength_nm_per_unit, pd.wavelength_offset_nm);
         while acq.emitted < acq.read {
             let k = acq.emitted;
             let t = acq.t_trigger_s + k as f64 * acq.dt_s;
@@ -164,7 +223,7 @@ impl ControllerBench {
                 q[j] = (acq.columns[c][k] - m.zero) * m.sign;
             }
             let wavelength = if wavelength_recorded {
-                acq.inputs[1][k]
+                offset_nm + nm_per_unit * acq.inputs[1][k]
             } else {
                 seg.wavelength_at(t - acq.t_trigger_s).unwrap_or(self.laser.nominal_nm())
             };
@@ -183,51 +242,85 @@ impl ControllerBench {
     ) -> Result<(), HwError> {
         self.poll(a, true)?;
         // The recorder may lag a poll behind: wait for the last samples.
-        let needed = ((end - a.t_trigger_s) / a.dt_s).floor().max(0.0) as usize + 1;
         let wait_until = self.bench_now() + 1.0;
         loop {
-            let rec = self.controllers[self.recorder_controller].recorder();
-            let have = match rec {
-                Some(r) => r.recorded_len()?,
-                None => needed,
-            };
-            if have >= needed || self.bench_now() > wait_until {
+            self.read_recorder(a, Some(end), usize::MAX)?;
+            let needed = ((end - a.t_trigger_s) / a.dt_s).floor().max(0.0) as usize + 1;
+            let have_all = a.t_trigger_known && a.read >= needed.min(a.capacity.unwrap_or(usize::MAX));
+            if have_all || self.bench_now() > wait_until {
                 break;
             }
             self.sleep_poll();
         }
-        self.read_recorder(a, Some(end))?;
+        if !a.t_trigger_known {
+            return Err(HwError::Usage {
+                controller: self.config.photodiode.controller.clone(),
+                problem: format!(
+                    "the data recorder was never started by the laser's trigger output (digital input {}): is it wired, and the laser's trigger output on?",
+                    self.config.photodiode.laser_trigger_input.as_deref().unwrap_or("?")
+                ),
+            });
+        }
         self.emit(a, seg, true);
+        // Rows read while the loop had not yet noticed the end belong to no segment.
+        let keep = a.trace.t_s.partition_point(|&t| t <= end + 1e-9);
+        keep_range(&mut a.trace, 0, keep);
+        self.log_recording(a);
+        Ok(())
+    }
+
+    /// A recorder that has filled its tables while the segment still runs loses the rest: a fault.
+    pub(super) fn check_capacity(&self, a: &Acquisition, label: &str) -> Result<(), HwError> {
+        match a.capacity {
+            Some(c) if a.read >= c => Err(HwError::Usage {
+                controller: self.config.photodiode.controller.clone(),
+                problem: format!(
+                    "the data recorder filled its {c} samples per table ({:.1} s at {:.2} ms) before segment `{label}` ended: the segment ran longer than planned",
+                    c as f64 * a.dt_s,
+                    a.dt_s * 1e3
+                ),
+            }),
+            _ => Ok(()),
+        }
+    }
+
+    /// One debug line per recording: its samples and reads, what it cost on each link, and how
+    /// well its polls were timed (the rows themselves are at trace level).
+    fn log_recording(&self, a: &Acquisition) {
+        let now = self.traffic_now();
+        let names = self.config.controllers.iter().map(|c| c.name.clone()).chain(std::iter::once(self.laser.name()));
+        let links: Vec<String> = names
+            .zip(now.iter().zip(&a.traffic_at_arm))
+            .filter_map(|(name, (now, then))| {
+                let d = now.as_ref()?.since(then.as_ref()?);
+                Some(format!("{name}: {} commands, {} B out, {} B in, {} lines", d.commands, d.bytes_out, d.bytes_in, d.lines_in))
+            })
+            .collect();
         let t = a.timing;
         tracing::debug!(
             label = %a.trace.meta.label,
+            rows = a.trace.len(),
+            samples_read = a.read,
+            recorder_reads = a.reads,
+            sample_ms = a.dt_s * 1e3,
+            duration_s = a.trace.len() as f64 * a.dt_s,
             trigger_ms = t.trigger_rtt_s * 1e3,
             polls_kept = t.kept,
             polls_dropped = t.dropped,
             worst_kept_poll_ms = t.worst_kept_rtt_s * 1e3,
             longest_gap_ms = t.longest_gap_s * 1e3,
-            "recording timed"
+            "recording: {}",
+            links.join("; ")
         );
-        Ok(())
     }
 }
 
-/// Keep the samples of a sweep trace from the last one at the start wavelength to the first one at
-/// the end wavelength: the laser rests before the sweep starts and after it ends, and sweep analysis
-/// needs a strictly monotonic wavelength.
-pub(super) fn trim_to_sweep(t: &mut Trace) {
-    let w = &t.wavelength_nm;
-    let n = w.len();
-    if n < 3 {
-        return;
-    }
-    let first = (0..n - 1).find(|&i| w[i + 1] != w[i]).unwrap_or(0);
-    let last = (1..n).rev().find(|&i| w[i] != w[i - 1]).unwrap_or(n - 1);
-    if last <= first {
-        return;
-    }
+/// Keep samples `first..first + len` of a trace (every column).
+pub(super) fn keep_range(t: &mut Trace, first: usize, len: usize) {
+    let end = (first + len).min(t.len());
+    let first = first.min(end);
     let keep = |c: &mut Vec<f64>| {
-        c.truncate(last + 1);
+        c.truncate(end);
         c.drain(..first);
     };
     keep(&mut t.t_s);
@@ -263,14 +356,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn sweep_traces_are_trimmed_to_the_sweep() {
+    fn a_range_of_samples_is_kept_in_every_column() {
         let mut t = Trace::new(TraceMeta::default());
         for (i, w) in [1550.0, 1550.0, 1550.0, 1550.5, 1551.0, 1551.5, 1552.0, 1552.0].iter().enumerate() {
-            t.push_sample(i as f64, [0.0; 6], *w, i as f64);
+            t.push_sample(i as f64, [i as f64; 6], *w, i as f64);
         }
-        trim_to_sweep(&mut t);
+        keep_range(&mut t, 2, 5);
         assert_eq!(t.wavelength_nm, [1550.0, 1550.5, 1551.0, 1551.5, 1552.0]);
         assert_eq!(t.irradiance, [2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(t.q6_deg, [2.0, 3.0, 4.0, 5.0, 6.0]);
     }
 
     /// Each joint is interpolated on its own stamps: two joints moving at constant speed, read

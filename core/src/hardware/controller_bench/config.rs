@@ -14,8 +14,10 @@ pub const FEMTO_HARDWARE_RON: &str = include_str!("../../../../assets/benches/fe
 pub enum ControllerKind {
     /// PI GCS 2 over TCP (E-712).
     PiGcs,
-    /// SmarAct MCS ASCII over TCP.
+    /// SmarAct MCS (first generation) ASCII over TCP (port 5000).
     SmarActMcs,
+    /// SmarAct MCS2 ASCII (SCPI-like) over TCP (port 55551).
+    SmarActMcs2,
 }
 
 /// One controller on the network.
@@ -31,7 +33,7 @@ pub struct ControllerConfig {
     /// Reply timeout (s, real time). Default 2 s.
     #[serde(default = "default_timeout")]
     pub timeout_s: f64,
-    /// Travel range per channel (µm or °) for controllers that cannot report it (MCS); default
+    /// Travel range per channel (µm or °) for controllers that cannot report it (MCS, MCS2); default
     /// unlimited (the robot's joint limits are checked before any move anyway).
     #[serde(default)]
     pub travel: Vec<(f64, f64)>,
@@ -79,10 +81,22 @@ pub struct PhotodiodeConfig {
     /// Optical power per input unit (mW per unit). Default 1.
     #[serde(default = "one")]
     pub mw_per_unit: f64,
-    /// Input channel of the laser's wavelength monitor (nm per unit 1), if wired; otherwise the
-    /// trace's wavelength column is the commanded sweep.
+    /// Input channel of the laser's wavelength monitor, if wired: the time base of the laser's
+    /// sweeps (its readings, fitted, time the laser's log on the recorder's clock).
     #[serde(default)]
     pub wavelength_input: Option<String>,
+    /// The monitor's scale: nm per input unit (default 1).
+    #[serde(default = "one")]
+    pub wavelength_nm_per_unit: f64,
+    /// The monitor's offset: nm at input 0 (default 0).
+    #[serde(default)]
+    pub wavelength_offset_nm: f64,
+    /// Digital input line of the same controller wired to the laser's trigger output, if any:
+    /// the recorder of a sweep then starts at the laser's first logged point (E-712 `DRT` with an
+    /// external trigger). A bench whose laser has neither this nor the monitor cannot time its
+    /// sweeps and runs its plans without them.
+    #[serde(default)]
+    pub laser_trigger_input: Option<String>,
 }
 
 /// Which command set a tunable laser speaks (SCPI over a raw TCP socket).
@@ -186,6 +200,12 @@ impl HardwareConfig {
                 format!("expected bench seconds per real second in (0, {MAX_TIME_SCALE}], found {}", c.time_scale),
             ));
         }
+        let p = &c.photodiode;
+        for (name, v) in [("photodiode.mw_per_unit", p.mw_per_unit), ("photodiode.wavelength_nm_per_unit", p.wavelength_nm_per_unit)] {
+            if !(v.is_finite() && v != 0.0) {
+                return Err(bad(name, format!("expected a finite non-zero scale, found {v}")));
+            }
+        }
         for (i, j) in c.joints.iter().enumerate() {
             if j.sign != 1.0 && j.sign != -1.0 {
                 return Err(bad(&format!("joints[{i}].sign"), format!("expected 1.0 or -1.0, found {}", j.sign)));
@@ -238,6 +258,16 @@ mod tests {
         }
         assert_eq!(c.photodiode.wavelength_input.as_deref(), Some("6"));
         assert_eq!(c.time_scale, 1.0, "real hardware runs in real time");
+    }
+
+    #[test]
+    fn the_mcs2_bench_file_names_an_mcs2_where_femto_hardware_has_an_mcs() {
+        let text = include_str!("../../../../assets/benches/femto-mcs2-hardware.ron");
+        let c = HardwareConfig::from_ron_str(text, Path::new("assets/benches/femto-mcs2-hardware.ron")).unwrap();
+        let femto = HardwareConfig::femto();
+        assert_eq!((c.controllers[1].kind, femto.controllers[1].kind), (ControllerKind::SmarActMcs2, ControllerKind::SmarActMcs));
+        assert_eq!(c.controllers[1].address, "127.0.0.1:55551");
+        assert_eq!((c.joints.clone(), c.photodiode.clone()), (femto.joints, femto.photodiode), "the same wiring");
     }
 
     #[test]

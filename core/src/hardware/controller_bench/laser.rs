@@ -15,10 +15,13 @@ pub trait Laser: Send {
     fn name(&self) -> String {
         "laser".into()
     }
-    /// Configure a sweep without starting it, so that [`Laser::start_sweep`] with the same
-    /// parameters only has to start it. The default does nothing.
-    fn prepare_sweep(&mut self, _from_nm: f64, _to_nm: f64, _rate_nm_per_s: f64) -> Result<(), HwError> {
-        Ok(())
+    /// Configure a sweep over the span of `from_nm` → `to_nm` at about `rate_nm_per_s` without
+    /// starting it, and say what the laser will do: its start and stop (a laser that sweeps one way
+    /// only sweeps the span that way), the speed it accepted and the log step, as read back from it.
+    /// [`Laser::start_sweep`] with the setup's values then only has to start it. The default sweeps
+    /// as asked and keeps no log.
+    fn prepare_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<SweepSetup, HwError> {
+        Ok(SweepSetup { from_nm, to_nm, rate_nm_per_s, step_nm: 0.0 })
     }
     /// True while a started sweep runs. The default (a laser without a state query) says no: the
     /// sweep is taken as done when the segment's time is up.
@@ -45,11 +48,37 @@ pub trait Laser: Send {
     fn tunable(&self) -> bool {
         true
     }
+    /// The traffic on the laser's link so far, for the log's summaries (`None`: no link).
+    fn traffic(&self) -> Option<crate::hardware::Traffic> {
+        None
+    }
+}
+
+/// A sweep as the laser will run it (read back from it): start, stop (nm), speed (nm/s) and the
+/// distance between logged points (nm; 0 for a laser without a log).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SweepSetup {
+    /// Start (nm).
+    pub from_nm: f64,
+    /// Stop (nm).
+    pub to_nm: f64,
+    /// Speed (nm/s, positive).
+    pub rate_nm_per_s: f64,
+    /// Log step (nm, positive; 0 without a log).
+    pub step_nm: f64,
+}
+
+impl SweepSetup {
+    /// Bench time the sweep takes at its speed, start to stop (s).
+    pub fn duration_s(&self) -> f64 {
+        (self.to_nm - self.from_nm).abs() / self.rate_nm_per_s.max(f64::MIN_POSITIVE)
+    }
 }
 
 /// The wavelengths a laser logged during a continuous sweep: one point per trigger, every `step_nm`
 /// of the sweep from `from_nm`, so point `k` was logged `k·|step_nm| / rate_nm_per_s` seconds after
-/// the sweep started.
+/// the first one while the laser sweeps at constant speed. The log has no time stamps: its time
+/// base is the trigger output or a wavelength monitor on the recorder.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LambdaLog {
     /// Start of the sweep (nm).
@@ -70,15 +99,26 @@ impl LambdaLog {
         ((self.to_nm - self.from_nm).abs() / self.step_nm + 1e-6).floor() as usize + 1
     }
 
-    /// The wavelength `t_s` seconds after the sweep started: linear between the logged points
-    /// (taken at their trigger times), the first or last point outside them; `None` for an empty log.
+    /// The wavelength `t_s` seconds after the first logged point: linear between the logged
+    /// points (taken at their trigger times), the first or last point outside them; `None` for an
+    /// empty log.
     pub fn wavelength_at(&self, t_s: f64) -> Option<f64> {
+        self.at_index(t_s * self.rate_nm_per_s / self.step_nm)
+    }
+
+    /// The logged wavelength at fractional point index `x` (linear between points, clamped).
+    pub fn at_index(&self, x: f64) -> Option<f64> {
         let w = &self.wavelengths_nm;
         let last = w.len().checked_sub(1)?;
-        let x = (t_s * self.rate_nm_per_s / self.step_nm).clamp(0.0, last as f64);
+        let x = x.clamp(0.0, last as f64);
         let k = (x.floor() as usize).min(last);
         let f = x - k as f64;
         Some(if k == last { w[last] } else { w[k] + f * (w[k + 1] - w[k]) })
+    }
+
+    /// Bench time from the first logged point to the last (s).
+    pub fn duration_s(&self) -> f64 {
+        self.wavelengths_nm.len().saturating_sub(1) as f64 * self.step_nm / self.rate_nm_per_s
     }
 }
 

@@ -13,21 +13,37 @@ mod config;
 mod laser;
 mod run;
 mod sweep;
+pub mod sweep_timing;
 
 use super::clock::EmuClock;
-use super::{HwError, PiGcs, SmarActMcs, StageController};
+use super::{HwError, PiGcs, SmarActMcs, SmarActMcs2, StageController};
 use crate::bench::{AxisStatus, AxisUnit, Bench, BenchError, LaserStatus, RunControl};
 use crate::model::air::AmbientConditions;
 use crate::model::robot::{JointType, LinkDescription, RobotDescription};
-use crate::plan::{MotionLimits, TimedMotion, TimedSegment};
+use crate::plan::{MotionLimits, TimedSegment};
 use crate::trace::{Trace, TraceMeta};
-use acquisition::{trim_to_sweep, Acquisition};
+use acquisition::Acquisition;
 use run::Stop;
 use std::sync::Arc;
 
 pub use config::{ControllerConfig, ControllerKind, HardwareConfig, JointConfig, PhotodiodeConfig, FEMTO_HARDWARE_RON};
 pub use config::{LaserConfig, LaserFamily, MAX_TIME_SCALE};
-pub use laser::{FixedLaser, LambdaLog, Laser};
+pub use laser::{FixedLaser, LambdaLog, Laser, SweepSetup};
+
+/// What times a laser sweep on the recorder's clock.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SweepTimeBase {
+    /// The laser's wavelength monitor, recorded on an analog input.
+    Monitor {
+        /// The input.
+        input: String,
+    },
+    /// The laser's trigger output, starting the recorder from a digital input.
+    Trigger {
+        /// The digital input line.
+        line: String,
+    },
+}
 
 /// Where a joint is driven.
 #[derive(Debug, Clone, Copy)]
@@ -84,6 +100,9 @@ impl ControllerBench {
                 ControllerKind::PiGcs => Box::new(PiGcs::connect(&c.name, &c.address, c.timeout_s).map_err(fault)?),
                 ControllerKind::SmarActMcs => {
                     Box::new(SmarActMcs::connect(&c.name, &c.address, c.timeout_s, &c.travel).map_err(fault)?)
+                }
+                ControllerKind::SmarActMcs2 => {
+                    Box::new(SmarActMcs2::connect(&c.name, &c.address, c.timeout_s, &c.travel).map_err(fault)?)
                 }
             };
             controllers.push(driver);
@@ -146,7 +165,25 @@ impl ControllerBench {
             last_errors: vec![None; n_controllers],
         };
         bench.q_display = bench.read_joints().map_err(fault)?;
+        if bench.laser.tunable() && bench.sweep_time_base().is_none() {
+            tracing::warn!(
+                "{}: the laser's sweeps have no time base (neither `photodiode.wavelength_input` nor \
+                 `photodiode.laser_trigger_input` is wired): the plans run without their sweeps",
+                bench.config.name
+            );
+        }
         Ok(bench)
+    }
+
+    /// What times the laser's sweeps on the recorder's clock: its wavelength monitor on an input,
+    /// or its trigger output starting the recorder; `None` when neither is wired.
+    pub fn sweep_time_base(&self) -> Option<SweepTimeBase> {
+        let p = &self.config.photodiode;
+        match (&p.wavelength_input, &p.laser_trigger_input) {
+            (Some(input), _) => Some(SweepTimeBase::Monitor { input: input.clone() }),
+            (None, Some(line)) => Some(SweepTimeBase::Trigger { line: line.clone() }),
+            (None, None) => None,
+        }
     }
 
     /// The controllers (for diagnostics and tests).
@@ -327,8 +364,9 @@ impl Bench for ControllerBench {
         self.clock.now_s()
     }
 
+    /// A driven laser whose sweeps this bench can time.
     fn tunable_laser(&self) -> bool {
-        self.laser.tunable()
+        self.laser.tunable() && self.sweep_time_base().is_some()
     }
 
     fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
@@ -365,11 +403,7 @@ impl Bench for ControllerBench {
         match result {
             Ok(Stop::Done) => {
                 self.q_display = self.read_joints().unwrap_or(segment.to_display);
-                let mut trace = take_trace(acq);
-                if let (Some(t), TimedMotion::Sweep { .. }) = (trace.as_mut(), segment.motion) {
-                    trim_to_sweep(t);
-                }
-                Ok(trace)
+                Ok(take_trace(acq))
             }
             Ok(Stop::Cancelled) => {
                 self.stop_all();
@@ -383,7 +417,7 @@ impl Bench for ControllerBench {
                 self.remember(&e);
                 // Keep whatever the recorder still holds (its link may be the healthy one).
                 if let Some(a) = acq.as_mut() {
-                    let _ = self.read_recorder(a, None);
+                    let _ = self.read_recorder(a, None, usize::MAX);
                     self.emit(a, segment, true);
                 }
                 let stops = self.stop_all();

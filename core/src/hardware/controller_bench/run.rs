@@ -3,7 +3,8 @@
 //! joint got there, and stopping everything after a fault.
 
 use super::acquisition::Acquisition;
-use super::sweep::sweep_rate;
+use super::laser::SweepSetup;
+use super::sweep::SWEEP_ALLOWANCE_S;
 use super::ControllerBench;
 use crate::bench::RunControl;
 use crate::hardware::HwError;
@@ -11,6 +12,9 @@ use crate::model::robot::JointType;
 use crate::plan::{TimedMotion, TimedSegment};
 use crate::trace::TraceMeta;
 use std::time::Duration;
+
+/// Most recorder rows read per turn of the loop that follows a segment.
+const READ_ROWS_WHILE_MOVING: usize = 10_000;
 
 /// The slowest speed a joint is commanded, as a fraction of its limit: controllers print speeds
 /// with six decimals and refuse 0 (PI GCS error 8).
@@ -34,14 +38,10 @@ impl ControllerBench {
         control: &mut RunControl<'_>,
     ) -> Result<Stop, HwError> {
         self.set_speeds(seg)?;
-        if let TimedMotion::Sweep { from_nm, .. } = seg.motion {
-            self.laser.set_wavelength(from_nm)?;
-        }
-        if let Some((from_nm, to_nm, rate)) = sweep_rate(seg) {
-            self.laser.prepare_sweep(from_nm, to_nm, rate)?;
-        }
+        let sweep = self.prepare_sweep(seg)?;
         if seg.record {
-            *acq = Some(self.arm_recorder(meta)?);
+            let (trigger, duration_s) = self.recording_plan(seg, sweep.as_ref());
+            *acq = Some(self.arm_recorder(meta, trigger, duration_s)?);
             if let Some(a) = acq.as_mut() {
                 self.poll(a, true)?;
             }
@@ -49,50 +49,55 @@ impl ControllerBench {
         let t_start = self.bench_now();
         let (t_trigger, trigger_rtt_s) = self.start_motion(seg)?;
         if let Some(a) = acq.as_mut() {
-            a.t_trigger_s = t_trigger;
+            if !a.external {
+                a.t_trigger_s = t_trigger;
+                a.t_trigger_known = true;
+            }
             a.timing.trigger_rtt_s = trigger_rtt_s;
         }
-        let mut t_sweep = None;
-        if let Some((from_nm, to_nm, rate)) = sweep_rate(seg) {
-            t_sweep = Some(self.bench_now());
-            self.laser.start_sweep(from_nm, to_nm, rate)?;
+        if let Some(s) = &sweep {
+            self.laser.start_sweep(s.from_nm, s.to_nm, s.rate_nm_per_s)?;
         }
-        let Some(done_at) = self.follow_motion(seg, acq, control, t_start)? else {
+        let Some(done_at) = self.follow_motion(seg, acq, control, t_start, sweep.as_ref())? else {
             return Ok(Stop::Cancelled);
         };
-        let log = if t_sweep.is_some() { self.finish_sweep(seg)? } else { None };
+        let log = if sweep.is_some() { self.finish_sweep()? } else { None };
         if matches!(seg.motion, TimedMotion::Move { .. }) {
             self.check_arrival(seg)?;
         }
         if let Some(a) = acq.as_mut() {
             self.finish_acquisition(a, seg, done_at)?;
-            if let (Some(log), Some(t0)) = (&log, t_sweep) {
-                self.apply_lambda_log(a, log, t0);
+            if let Some(s) = &sweep {
+                self.apply_sweep(a, s, log.as_ref())?;
             }
         }
-        if matches!(seg.motion, TimedMotion::Sweep { .. }) {
+        if sweep.is_some() {
             let nominal = self.laser.nominal_nm();
             self.laser.set_wavelength(nominal)?;
         }
         Ok(Stop::Done)
     }
 
-    /// Follow the motion started at bench time `t_start` until it has ended and settled, streaming
-    /// the samples and the progress: the bench time it settled at, or `None` when the user cancelled.
+    /// Follow the motion started at bench time `t_start` until it has ended and settled (a sweep:
+    /// until the laser reports it done, at its real speed and latency), streaming the samples and
+    /// the progress: the bench time it ended at, or `None` when the user cancelled.
     fn follow_motion(
         &mut self,
         seg: &TimedSegment,
         acq: &mut Option<Acquisition>,
         control: &mut RunControl<'_>,
         t_start: f64,
+        sweep: Option<&SweepSetup>,
     ) -> Result<Option<f64>, HwError> {
         let settle_s = match seg.motion {
             TimedMotion::Move { settle_s, .. } => settle_s,
             _ => 0.0,
         };
-        let deadline = t_start + 2.0 * seg.duration_s + self.config.timeout_margin_s;
+        let expected_s = sweep.map_or(seg.duration_s, |s| s.duration_s());
+        let deadline = t_start + 2.0 * (expected_s + sweep.map_or(0.0, |_| SWEEP_ALLOWANCE_S)) + self.config.timeout_margin_s;
         let mut done_at: Option<f64> = None;
         let mut reported = 0;
+        let mut laser_asked = std::time::Instant::now();
         loop {
             let now = self.bench_now();
             if control.cancelled() {
@@ -100,22 +105,37 @@ impl ControllerBench {
             }
             if let Some(a) = acq.as_mut() {
                 self.poll(a, false)?;
-                self.read_recorder(a, None)?;
+                self.read_recorder(a, None, READ_ROWS_WHILE_MOVING)?;
                 self.emit(a, seg, false);
                 if a.trace.len() > reported {
                     (control.on_samples)(&a.trace, reported);
                     reported = a.trace.len();
                 }
             }
-            (control.on_progress)(((now - t_start) / seg.duration_s.max(1e-9)).clamp(0.0, 1.0));
+            (control.on_progress)(((now - t_start) / expected_s.max(1e-9)).clamp(0.0, 1.0));
             match done_at {
                 Some(t) if now >= t => return Ok(Some(t)),
                 Some(_) => {}
                 None => {
                     let finished = match seg.motion {
                         TimedMotion::Move { .. } => self.all_on_target()?,
-                        _ => now >= t_start + seg.duration_s,
+                        TimedMotion::Sweep { .. } => {
+                            // The laser's state, asked every 10 ms of real time once its time is up.
+                            now >= t_start + expected_s
+                                && laser_asked.elapsed().as_secs_f64() >= 0.01
+                                && {
+                                    laser_asked = std::time::Instant::now();
+                                    !self.laser.sweep_running()?
+                                }
+                        }
+                        TimedMotion::Dwell => now >= t_start + seg.duration_s,
                     };
+                    if !finished {
+                        // Still running with the recorder full: the rest of the segment is lost.
+                        if let Some(a) = acq.as_ref() {
+                            self.check_capacity(a, &seg.label)?;
+                        }
+                    }
                     if finished {
                         // The stages stand still from here: a poll now is exact whatever its round
                         // trip, and bounds the interpolation at the end of the motion (polls during
@@ -123,21 +143,33 @@ impl ControllerBench {
                         if let Some(a) = acq.as_mut() {
                             self.poll(a, true)?;
                         }
-                        done_at = Some(now + settle_s);
-                    } else if now > deadline {
-                        return Err(HwError::WaitTimeout {
-                            controller: self.config.name.clone(),
-                            axes: (0..6)
-                                .filter(|&j| seg.to_display[j] != seg.from_display[j])
-                                .map(|j| self.robot.links[j].name.clone())
-                                .collect::<Vec<_>>()
-                                .join(","),
-                            timeout_s: deadline - t_start,
+                        // A dwell ends on time, however late the loop notices.
+                        done_at = Some(match seg.motion {
+                            TimedMotion::Dwell => t_start + seg.duration_s,
+                            _ => now + settle_s,
                         });
+                    } else if now > deadline {
+                        return Err(self.overdue(seg, sweep.is_some(), deadline - t_start));
                     }
                 }
             }
             self.sleep_poll();
+        }
+    }
+
+    /// The segment ran past its deadline: the axes (or the sweep) that did not finish.
+    fn overdue(&self, seg: &TimedSegment, sweep: bool, timeout_s: f64) -> HwError {
+        if sweep {
+            return HwError::WaitTimeout { controller: self.laser.name(), axes: "wavelength sweep".into(), timeout_s };
+        }
+        HwError::WaitTimeout {
+            controller: self.config.name.clone(),
+            axes: (0..6)
+                .filter(|&j| seg.to_display[j] != seg.from_display[j])
+                .map(|j| self.robot.links[j].name.clone())
+                .collect::<Vec<_>>()
+                .join(","),
+            timeout_s,
         }
     }
 

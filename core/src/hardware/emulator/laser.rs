@@ -1,18 +1,47 @@
 //! Tunable-laser emulator on loopback TCP, for either command family of [`crate::hardware::laser`]:
-//! the wavelength (an [`EmuLaser`] a photodiode closure may read), a continuous sweep running on the
-//! emulator clock, the lambda log it keeps (one point per log step reached), `*IDN?`, an SCPI error
-//! queue read by `:SYST:ERR?` (an unknown command queues -113 "Undefined header"), and fault
-//! injection: [`Fault::DropConnection`], [`Fault::NoReply`], [`Fault::ErrorCode`] (queued, the
-//! command ignored) and [`Fault::Limit`], which aborts a running sweep where it is.
+//! the wavelength (an [`EmuLaser`] a photodiode closure may read), `*IDN?`, an SCPI error queue
+//! read by `:SYST:ERR?`, the sweep ([`super::laser_sweep`]), and fault injection:
+//! [`Fault::DropConnection`], [`Fault::NoReply`], [`Fault::ErrorCode`] (queued, the command ignored)
+//! and [`Fault::Limit`], which aborts a running sweep where it is.
+//!
+//! As strict as the manuals describe the instruments (see `crate::hardware::laser::keysight` and
+//! `santec`): numbers with unit suffixes (Keysight's units table), the Santec's two command sets
+//! (it starts in SCPI: metres and 8-byte logs; Legacy: nm and 0.1 pm integers) and its CR-ended
+//! replies with no terminator after a binary block, and a Keysight that starts with amplitude
+//! modulation on and its trigger output off.
 
-use super::{EmuClock, EmuLaser, Fault, FaultSpec, Faults, Server, Trigger};
+use super::emu_laser::{EmuLaser, SweepProfile};
+use super::laser_sweep::{self, Sweep};
+use super::{EmuClock, Fault, FaultSpec, Faults, Server, Trigger};
 use crate::hardware::controller_bench::LaserFamily;
-use crate::hardware::laser::scpi::encode_block;
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
+
+/// What the emulated laser does that an ideal one would not.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LaserRealism {
+    /// Start latency and acceleration of a sweep.
+    pub profile: SweepProfile,
+    /// From the end of a sweep to its lambda log being ready (s; Keysight `FLAG?` turns 2).
+    pub post_processing_s: f64,
+}
+
+impl LaserRealism {
+    /// As slow as an instrument: tens of ms to start, a run-up at 1000 nm/s², a log ready 50 ms
+    /// after the sweep (emulator assumptions, to be measured on the device).
+    pub fn realistic(family: LaserFamily) -> Self {
+        let latency_s = if family == LaserFamily::Santec { 0.06 } else { 0.04 };
+        LaserRealism { profile: SweepProfile { latency_s, accel_nm_per_s2: 1000.0 }, post_processing_s: 0.05 }
+    }
+
+    /// A sweep that starts at once at full speed, its log ready at its end.
+    pub fn ideal() -> Self {
+        LaserRealism { profile: SweepProfile::INSTANT, post_processing_s: 0.0 }
+    }
+}
 
 /// The emulated laser's tuning range and limits.
 #[derive(Debug, Clone)]
@@ -23,63 +52,91 @@ pub struct LaserEmulatorConfig {
     pub min_nm: f64,
     /// Tuning range (nm).
     pub max_nm: f64,
-    /// Fastest sweep (nm/s).
+    /// Slowest sweep (nm/s; Keysight `:WAV:SWE:SPE? MIN`).
+    pub min_speed_nm_per_s: f64,
+    /// Fastest sweep (nm/s; Keysight `:WAV:SWE:SPE? MAX`).
     pub max_speed_nm_per_s: f64,
+    /// What is not ideal.
+    pub realism: LaserRealism,
 }
 
 impl LaserEmulatorConfig {
-    /// A C+L-band laser (1450-1650 nm, sweeps up to 200 nm/s) of `family`.
+    /// A C+L-band laser (1450-1650 nm) of `family`, realistic; Keysight sweeps 0.5 to 80 nm/s
+    /// (an 81600B-like module; assumed), Santec at its eight speeds.
     pub fn new(family: LaserFamily) -> Self {
-        LaserEmulatorConfig { family, min_nm: 1450.0, max_nm: 1650.0, max_speed_nm_per_s: 200.0 }
+        LaserEmulatorConfig {
+            family,
+            min_nm: 1450.0,
+            max_nm: 1650.0,
+            min_speed_nm_per_s: 0.5,
+            max_speed_nm_per_s: if family == LaserFamily::Santec { 200.0 } else { 80.0 },
+            realism: LaserRealism::realistic(family),
+        }
+    }
+
+    /// The same laser without latency or run-up.
+    pub fn ideal(family: LaserFamily) -> Self {
+        LaserEmulatorConfig { realism: LaserRealism::ideal(), ..Self::new(family) }
     }
 }
 
-/// A sweep: from, to (nm), speed (nm/s), log step (nm), started at `t0_s`, ended (done or aborted)
-/// at `end_s`.
-#[derive(Debug, Clone, Copy)]
-struct Sweep {
-    from: f64,
-    to: f64,
-    rate: f64,
-    step: f64,
-    t0_s: f64,
-    end_s: f64,
-}
-
-impl Sweep {
-    fn planned_end_s(&self) -> f64 {
-        self.t0_s + (self.to - self.from).abs() / self.rate
-    }
-
-    /// The logged wavelengths (nm): every step reached before the sweep ended.
-    fn log(&self) -> Vec<f64> {
-        let total = ((self.to - self.from).abs() / self.step + 1e-6).floor() as usize + 1;
-        let dir = (self.to - self.from).signum();
-        (0..total)
-            .take_while(|&k| self.t0_s + k as f64 * self.step / self.rate <= self.end_s + 1e-12)
-            .map(|k| self.from + dir * k as f64 * self.step)
-            .collect()
-    }
-}
-
-struct State {
-    config: LaserEmulatorConfig,
-    /// Sweep settings: start, stop (nm), speed (nm/s), log step (nm), continuous mode set.
-    start_nm: f64,
-    stop_nm: f64,
-    speed: f64,
-    step: f64,
-    continuous: bool,
+/// The laser's settings and state.
+pub(super) struct State {
+    pub(super) config: LaserEmulatorConfig,
+    pub(super) start_nm: f64,
+    pub(super) stop_nm: f64,
+    pub(super) speed: f64,
+    pub(super) step: f64,
+    /// Keysight `:WAV:SWE:MODE CONT` / Santec `:WAV:SWE:MOD` 1 or 3.
+    pub(super) continuous: bool,
+    /// Keysight `:WAV:SWE:REP TWOW` / Santec mode 3.
+    pub(super) two_way: bool,
+    /// Keysight `:AM:STAT`.
+    pub(super) modulation: bool,
+    /// Trigger output mode: Keysight `STF` etc., Santec `0`..`3`.
+    pub(super) trigger_out: String,
+    /// Keysight `:WAV:SWE:LLOG`.
+    pub(super) lambda_logging: bool,
+    /// Santec `:SYST:COMM:COD 1` (SCPI: metres); Keysight always speaks SCPI.
+    pub(super) scpi_units: bool,
     power_mw: f64,
-    sweep: Option<Sweep>,
+    pub(super) sweep: Option<Sweep>,
     errors: VecDeque<(i64, String)>,
     faults: Faults,
     /// A sweep abort armed for an emulated time ([`Fault::Limit`] at [`Trigger::AtTime`]).
     abort_at_s: Option<f64>,
 }
 
-struct Shared {
-    laser: Arc<EmuLaser>,
+impl State {
+    fn new(config: LaserEmulatorConfig) -> Self {
+        let keysight = config.family == LaserFamily::Keysight;
+        State {
+            config,
+            start_nm: 1540.0,
+            stop_nm: 1560.0,
+            speed: 10.0,
+            step: 0.001,
+            continuous: false,
+            two_way: false,
+            modulation: keysight,
+            trigger_out: if keysight { "DIS".into() } else { "0".into() },
+            lambda_logging: false,
+            scpi_units: true,
+            power_mw: 1.0,
+            sweep: None,
+            errors: VecDeque::new(),
+            faults: Faults::default(),
+            abort_at_s: None,
+        }
+    }
+
+    pub(super) fn keysight(&self) -> bool {
+        self.config.family == LaserFamily::Keysight
+    }
+}
+
+pub(super) struct Shared {
+    pub(super) laser: Arc<EmuLaser>,
     state: Mutex<State>,
 }
 
@@ -89,7 +146,7 @@ pub struct LaserEmulator {
     shared: Arc<Shared>,
 }
 
-enum Reply {
+pub(super) enum Reply {
     None,
     Text(String),
     Bytes(Vec<u8>),
@@ -97,30 +154,17 @@ enum Reply {
 }
 
 /// Why a command fails: an SCPI error code and message.
-type Scpi<T> = Result<T, (i64, &'static str)>;
-const UNDEFINED_HEADER: (i64, &str) = (-113, "Undefined header");
-const DATA_TYPE: (i64, &str) = (-104, "Data type error");
-const OUT_OF_RANGE: (i64, &str) = (-222, "Data out of range");
-const CONFLICT: (i64, &str) = (-221, "Settings conflict");
+pub(super) type Scpi<T> = Result<T, (i64, &'static str)>;
+pub(super) const UNDEFINED_HEADER: (i64, &str) = (-113, "Undefined header");
+pub(super) const DATA_TYPE: (i64, &str) = (-104, "Data type error");
+pub(super) const OUT_OF_RANGE: (i64, &str) = (-222, "Data out of range");
+pub(super) const CONFLICT: (i64, &str) = (-221, "Settings conflict");
 
 impl LaserEmulator {
     /// Start on `port` of 127.0.0.1 (0: any free port), driving `laser` (its clock is the
     /// emulator's; a photodiode closure may read its wavelength).
     pub fn start_on(port: u16, laser: Arc<EmuLaser>, config: LaserEmulatorConfig) -> std::io::Result<Self> {
-        let state = State {
-            config,
-            start_nm: 1540.0,
-            stop_nm: 1560.0,
-            speed: 10.0,
-            step: 0.001,
-            continuous: false,
-            power_mw: 1.0,
-            sweep: None,
-            errors: VecDeque::new(),
-            faults: Faults::default(),
-            abort_at_s: None,
-        };
-        let shared = Arc::new(Shared { laser, state: Mutex::new(state) });
+        let shared = Arc::new(Shared { laser, state: Mutex::new(State::new(config)) });
         let s2 = shared.clone();
         let server = Server::start(port, move |stream| serve(&s2, stream))?;
         Ok(LaserEmulator { server, shared })
@@ -159,7 +203,7 @@ impl LaserEmulator {
     /// True while a sweep runs.
     pub fn sweeping(&self) -> bool {
         let now = self.shared.laser.clock().now_s();
-        self.lock().sweep.is_some_and(|s| now < s.end_s)
+        self.lock().sweep.is_some_and(|s| now < s.busy_until_s)
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, State> {
@@ -169,29 +213,58 @@ impl LaserEmulator {
 
 fn serve(shared: &Shared, stream: TcpStream) {
     let Ok(mut writer) = stream.try_clone() else { return };
+    let santec = shared.state.lock().unwrap_or_else(|e| e.into_inner()).config.family == LaserFamily::Santec;
     let mut reader = BufReader::new(stream);
     let mut line = Vec::new();
     loop {
         line.clear();
-        match reader.read_until(b'\n', &mut line) {
+        // Commands end with LF, CR or CR LF.
+        match read_until_either(&mut reader, &mut line) {
             Ok(0) | Err(_) => return,
             Ok(_) => {}
         }
         let command = String::from_utf8_lossy(&line).trim().to_string();
+        if command.is_empty() {
+            continue;
+        }
+        let end: &[u8] = if santec { b"\r" } else { b"\n" };
         let bytes = match handle(shared, &command) {
             Reply::None => continue,
             Reply::Drop => {
                 let _ = writer.shutdown(std::net::Shutdown::Both);
                 return;
             }
-            Reply::Text(t) => (t + "\n").into_bytes(),
-            Reply::Bytes(mut b) => {
-                b.push(b'\n');
-                b
-            }
+            Reply::Text(t) => [t.as_bytes(), end].concat(),
+            // The Santec sends its block with no terminator after it (QMI reads it so).
+            Reply::Bytes(b) if santec => b,
+            Reply::Bytes(b) => [b.as_slice(), end].concat(),
         };
         if writer.write_all(&bytes).is_err() {
             return;
+        }
+    }
+}
+
+/// Read up to and including the first CR or LF.
+fn read_until_either(reader: &mut impl BufRead, out: &mut Vec<u8>) -> std::io::Result<usize> {
+    let mut read = 0;
+    loop {
+        let available = reader.fill_buf()?;
+        if available.is_empty() {
+            return Ok(read);
+        }
+        match available.iter().position(|&b| b == b'\n' || b == b'\r') {
+            Some(i) => {
+                out.extend_from_slice(&available[..i]);
+                reader.consume(i + 1);
+                return Ok(read + i + 1);
+            }
+            None => {
+                let n = available.len();
+                out.extend_from_slice(available);
+                reader.consume(n);
+                read += n;
+            }
         }
     }
 }
@@ -203,7 +276,7 @@ fn handle(shared: &Shared, command: &str) -> Reply {
     if let Some(t) = st.abort_at_s.filter(|&t| now >= t) {
         st.abort_at_s = None;
         st.faults.fired.push((command.to_string(), Fault::Limit));
-        abort(shared, &mut st, t);
+        laser_sweep::abort(shared, &mut st, t);
     }
     match st.faults.take(command, now) {
         Some(Fault::DropConnection) => return Reply::Drop,
@@ -212,11 +285,8 @@ fn handle(shared: &Shared, command: &str) -> Reply {
             st.errors.push_back((c, "Injected error".into()));
             return Reply::None;
         }
-        Some(Fault::Limit) => abort(shared, &mut st, now),
+        Some(Fault::Limit) => laser_sweep::abort(shared, &mut st, now),
         None => {}
-    }
-    if command.is_empty() {
-        return Reply::None;
     }
     match execute(shared, &mut st, now, command) {
         Ok(r) => r,
@@ -229,17 +299,6 @@ fn handle(shared: &Shared, command: &str) -> Reply {
     }
 }
 
-/// Stop a running sweep where it is at `at_s` (now, or an armed abort's time already passed).
-fn abort(shared: &Shared, st: &mut State, at_s: f64) {
-    if let Some(s) = st.sweep.as_mut().filter(|s| at_s < s.end_s && at_s >= s.t0_s) {
-        s.end_s = at_s;
-        let w = shared.laser.wavelength_at(at_s);
-        let mut schedule = shared.laser.schedule.lock().unwrap_or_else(|e| e.into_inner());
-        let k = schedule.partition_point(|e| e.0 <= at_s);
-        schedule.insert(k, (at_s, w, w, 0.0));
-    }
-}
-
 /// Known SCPI nodes, short form then long form: a node is either form or anything between.
 const NODES: &[(&str, &str)] = &[
     ("SOUR", "SOURCE"),
@@ -249,22 +308,29 @@ const NODES: &[(&str, &str)] = &[
     ("STOP", "STOP"),
     ("SPE", "SPEED"),
     ("STEP", "STEP"),
-    ("MODE", "MODE"),
+    ("MOD", "MODE"),
     ("CYCL", "CYCLES"),
     ("LLOG", "LLOGGING"),
+    ("REP", "REPEAT"),
+    ("CHEC", "CHECKPARAMS"),
+    ("FLAG", "FLAG"),
+    ("STAT", "STATE"),
     ("READ", "READOUT"),
     ("POIN", "POINTS"),
     ("DATA", "DATA"),
     ("SYST", "SYSTEM"),
+    ("COMM", "COMMUNICATE"),
+    ("COD", "CODE"),
     ("ERR", "ERROR"),
     ("POW", "POWER"),
     ("UNIT", "UNIT"),
+    ("AM", "AM"),
     ("TRIG", "TRIGGER"),
     ("OUTP", "OUTPUT"),
 ];
 
 /// A header (`:SOURce0:WAVelength:SWEep?`) in short form without the source/trigger number
-/// (`SOUR:WAV:SWE?`), or `None` for an unknown node.
+/// (`SOUR:WAV:SWE?`), the optional `:STATe` of the sweep dropped, or `None` for an unknown node.
 pub fn normalize_header(header: &str) -> Option<String> {
     let upper = header.to_ascii_uppercase();
     let (path, query) = match upper.strip_suffix('?') {
@@ -280,7 +346,53 @@ pub fn normalize_header(header: &str) -> Option<String> {
         let short = NODES.iter().find(|(s, l)| node.starts_with(s) && l.starts_with(node))?.0;
         out.push(short);
     }
-    Some(out.join(":") + query)
+    let joined = out.join(":");
+    let joined = joined.strip_suffix(":SWE:STAT").map_or(joined.clone(), |p| format!("{p}:SWE"));
+    Some(joined + query)
+}
+
+/// A number with an optional unit suffix, in nm (wavelengths, `per_s` false) or nm/s (`per_s`
+/// true): the Keysight guide's "Units and allowed Mnemonics" (PM, NM, UM, MM, M; NM/S, UM/S,
+/// MM/S, M/S), unitless values in `default_nm` nm per unit.
+pub(super) fn quantity(arg: &str, default_nm: f64, per_s: bool) -> Scpi<f64> {
+    let arg = arg.trim().to_ascii_uppercase();
+    let split = arg.find(|c: char| c.is_ascii_alphabetic() && c != 'E').unwrap_or(arg.len());
+    let (number, unit) = arg.split_at(split);
+    let unit = unit.trim();
+    let scale = match (unit, per_s) {
+        ("", _) => default_nm,
+        ("PM", false) => 1e-3,
+        ("NM", false) | ("NM/S", true) => 1.0,
+        ("UM", false) | ("UM/S", true) => 1e3,
+        ("MM", false) | ("MM/S", true) => 1e6,
+        ("M", false) | ("M/S", true) => 1e9,
+        _ => return Err(DATA_TYPE),
+    };
+    number.trim().parse::<f64>().ok().filter(|v| v.is_finite()).map(|v| v * scale).ok_or(DATA_TYPE)
+}
+
+/// nm per unitless wavelength argument or reply: metres for Keysight and the Santec SCPI set.
+pub(super) fn unit_nm(st: &State) -> f64 {
+    if st.scpi_units {
+        1e9
+    } else {
+        1.0
+    }
+}
+
+pub(super) fn wavelength_arg(st: &State, arg: &str) -> Scpi<f64> {
+    let nm = quantity(arg, unit_nm(st), false)?;
+    if nm < st.config.min_nm || nm > st.config.max_nm {
+        return Err(OUT_OF_RANGE);
+    }
+    Ok(nm)
+}
+
+fn identity(family: LaserFamily) -> &'static str {
+    match family {
+        LaserFamily::Santec => "SANTEC,TSL-570 (emulated),00000000,1.0",
+        _ => "Keysight Technologies,8164B (emulated),MY00000000,V5.25(72637)",
+    }
 }
 
 /// Run one well-formed command.
@@ -290,7 +402,7 @@ fn execute(shared: &Shared, st: &mut State, now: f64, command: &str) -> Scpi<Rep
         None => (command, ""),
     };
     let key = normalize_header(header).ok_or(UNDEFINED_HEADER)?;
-    let keysight = st.config.family == LaserFamily::Keysight;
+    let keysight = st.keysight();
     // The Keysight set addresses the laser as SOURce0 and its trigger as TRIGger0; the Santec set has no SOURce.
     let key = match key.strip_prefix("SOUR:") {
         Some(rest) if keysight => rest.to_string(),
@@ -298,6 +410,11 @@ fn execute(shared: &Shared, st: &mut State, now: f64, command: &str) -> Scpi<Rep
         None => key,
     };
     let text = |s: String| Ok(Reply::Text(s));
+    let bool_word = |arg: &str| match arg.to_ascii_uppercase().as_str() {
+        "1" | "ON" => Ok(true),
+        "0" | "OFF" => Ok(false),
+        _ => Err(DATA_TYPE),
+    };
     match key.as_str() {
         "*IDN?" => text(identity(st.config.family).into()),
         "*CLS" => {
@@ -308,134 +425,47 @@ fn execute(shared: &Shared, st: &mut State, now: f64, command: &str) -> Scpi<Rep
             let (code, message) = st.errors.pop_front().unwrap_or((0, "No error".into()));
             text(if keysight { format!("{code:+},\"{message}\"") } else { format!("{code},\"{message}\"") })
         }
+        "SYST:COMM:COD" if !keysight => {
+            st.scpi_units = bool_word(arg)?;
+            Ok(Reply::None)
+        }
+        "SYST:COMM:COD?" if !keysight => text(u8::from(st.scpi_units).to_string()),
         "WAV?" => text(format!("{}", shared.laser.wavelength_at(now) / unit_nm(st))),
         "WAV" => {
             let nm = wavelength_arg(st, arg)?;
-            if st.sweep.is_some_and(|s| now < s.end_s) {
+            if laser_sweep::busy(st, now) {
                 return Err(CONFLICT);
             }
             shared.laser.set(nm);
             Ok(Reply::None)
         }
         "POW" => {
-            st.power_mw = number(arg.trim_end_matches("MW"))?;
+            st.power_mw = quantity(arg.trim_end_matches(|c: char| c.is_ascii_alphabetic()), 1.0, false)?;
             Ok(Reply::None)
         }
         "POW?" => text(format!("{}", st.power_mw)),
-        "POW:UNIT" | "TRIG:OUTP" => Ok(Reply::None),
-        "READ:POIN?" | "READ:DATA?" => log_readout(st, now, &key, arg),
-        _ => sweep_command(shared, st, now, &key, arg),
-    }
-}
-
-/// Sweep settings, start, stop and state.
-fn sweep_command(shared: &Shared, st: &mut State, now: f64, key: &str, arg: &str) -> Scpi<Reply> {
-    let keysight = st.config.family == LaserFamily::Keysight;
-    match key {
-        "WAV:SWE:STAR" => st.start_nm = wavelength_arg(st, arg)?,
-        "WAV:SWE:STOP" => st.stop_nm = wavelength_arg(st, arg)?,
-        "WAV:SWE:SPE" => {
-            let v = number(arg)? * unit_nm(st);
-            if !(v > 0.0 && v <= st.config.max_speed_nm_per_s) {
-                return Err(OUT_OF_RANGE);
-            }
-            st.speed = v;
+        "POW:UNIT" => Ok(Reply::None),
+        "AM:STAT" if keysight => {
+            st.modulation = bool_word(arg)?;
+            Ok(Reply::None)
         }
-        "WAV:SWE:STEP" if keysight => st.step = step_arg(st, arg)?,
-        "TRIG:OUTP:STEP" if !keysight => st.step = step_arg(st, arg)?,
-        "WAV:SWE:MODE" => {
-            let want = if keysight { "CONT" } else { "1" };
-            let long_form = keysight && arg.eq_ignore_ascii_case("CONTINUOUS");
-            if !(arg.eq_ignore_ascii_case(want) || long_form) {
-                return Err(OUT_OF_RANGE);
+        "AM:STAT?" if keysight => text(u8::from(st.modulation).to_string()),
+        "TRIG:OUTP" => {
+            let ok = if keysight {
+                ["DIS", "AVG", "MEAS", "MOD", "STF", "SWF", "SWST"].contains(&arg.to_ascii_uppercase().as_str())
+            } else {
+                ["0", "1", "2", "3"].contains(&arg)
+            };
+            if !ok {
+                return Err(DATA_TYPE);
             }
-            st.continuous = true;
+            st.trigger_out = arg.to_ascii_uppercase();
+            Ok(Reply::None)
         }
-        "WAV:SWE:CYCL" | "WAV:SWE:LLOG" if keysight => {
-            if arg != "1" {
-                return Err(OUT_OF_RANGE);
-            }
-        }
-        "WAV:SWE?" => {
-            let running = st.sweep.is_some_and(|s| now < s.end_s);
-            let v = u8::from(running);
-            return Ok(Reply::Text(if keysight { format!("+{v}") } else { v.to_string() }));
-        }
-        "WAV:SWE" => match arg.to_ascii_uppercase().as_str() {
-            "1" | "STAR" | "START" => {
-                if !st.continuous || st.start_nm == st.stop_nm || st.sweep.is_some_and(|s| now < s.end_s) {
-                    return Err(CONFLICT);
-                }
-                let (from, to, rate) = (st.start_nm, st.stop_nm, st.speed);
-                let t0_s = shared.laser.sweep(from, to, rate);
-                let mut s = Sweep { from, to, rate, step: st.step, t0_s, end_s: 0.0 };
-                s.end_s = s.planned_end_s();
-                st.sweep = Some(s);
-            }
-            "0" | "STOP" => abort(shared, st, now),
-            _ => return Err(DATA_TYPE),
-        },
-        _ => return Err(UNDEFINED_HEADER),
+        "TRIG:OUTP?" => text(st.trigger_out.clone()),
+        "READ:POIN?" | "READ:DATA?" => laser_sweep::log_readout(st, now, &key, arg),
+        _ => laser_sweep::command(shared, st, now, &key, arg),
     }
-    Ok(Reply::None)
-}
-
-/// The lambda log of the last sweep: its number of points or its data as a binary block.
-fn log_readout(st: &State, now: f64, key: &str, arg: &str) -> Scpi<Reply> {
-    let keysight = st.config.family == LaserFamily::Keysight;
-    if keysight != arg.eq_ignore_ascii_case("LLOG") && !(keysight && arg.eq_ignore_ascii_case("LLOGGING")) {
-        return Err(DATA_TYPE);
-    }
-    let sweep = st.sweep.ok_or(CONFLICT)?;
-    if now < sweep.end_s {
-        return Err(CONFLICT);
-    }
-    let log = sweep.log();
-    if key == "READ:POIN?" {
-        return Ok(Reply::Text(if keysight { format!("+{}", log.len()) } else { log.len().to_string() }));
-    }
-    let data: Vec<u8> = if keysight {
-        log.iter().flat_map(|nm| (nm * 1e-9).to_le_bytes()).collect()
-    } else {
-        log.iter().flat_map(|nm| ((nm * 1e4).round() as u32).to_le_bytes()).collect()
-    };
-    Ok(Reply::Bytes(encode_block(&data)))
-}
-
-fn identity(family: LaserFamily) -> &'static str {
-    match family {
-        LaserFamily::Santec => "SANTEC,TSL-570 (emulated),00000000,1.0",
-        _ => "Keysight Technologies,8164B (emulated),MY00000000,V5.25(72637)",
-    }
-}
-
-/// nm per unit of the family's wavelength arguments (metres or nm).
-fn unit_nm(st: &State) -> f64 {
-    if st.config.family == LaserFamily::Keysight {
-        1e9
-    } else {
-        1.0
-    }
-}
-
-fn number(s: &str) -> Scpi<f64> {
-    s.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or(DATA_TYPE)
-}
-
-fn wavelength_arg(st: &State, arg: &str) -> Scpi<f64> {
-    let nm = number(arg)? * unit_nm(st);
-    if nm < st.config.min_nm || nm > st.config.max_nm {
-        return Err(OUT_OF_RANGE);
-    }
-    Ok(nm)
-}
-
-fn step_arg(st: &State, arg: &str) -> Scpi<f64> {
-    let nm = number(arg)? * unit_nm(st);
-    if !(1e-4 - 1e-9..=10.0).contains(&nm) {
-        return Err(OUT_OF_RANGE);
-    }
-    Ok(nm)
 }
 
 /// The family's usual raw-socket port: 5025 (Keysight), 5000 (Santec TSL-570).
@@ -447,19 +477,19 @@ pub fn default_port(family: LaserFamily) -> u16 {
 }
 
 /// Serve a laser emulator of `family` on 127.0.0.1:`port` (the family's default for `None`) on a
-/// clock `time_scale` times faster than real time, resting at 1550 nm, until `stop` is set. `on_ready` gets the address once listening.
+/// clock `time_scale` times faster than real time, resting at 1550 nm, realistic or ideal, until
+/// `stop` is set. `on_ready` gets the address once listening.
 pub fn run_laser_emulator(
     family: LaserFamily,
     port: Option<u16>,
     time_scale: f64,
+    realistic: bool,
     stop: &AtomicBool,
     on_ready: &mut dyn FnMut(SocketAddr),
 ) -> std::io::Result<()> {
-    let emu = LaserEmulator::start_on(
-        port.unwrap_or(default_port(family)),
-        EmuLaser::new(EmuClock::new(time_scale), 1550.0),
-        LaserEmulatorConfig::new(family),
-    )?;
+    let config = if realistic { LaserEmulatorConfig::new(family) } else { LaserEmulatorConfig::ideal(family) };
+    let emu =
+        LaserEmulator::start_on(port.unwrap_or(default_port(family)), EmuLaser::new(EmuClock::new(time_scale), 1550.0), config)?;
     on_ready(emu.addr());
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(std::time::Duration::from_millis(50));
@@ -475,29 +505,36 @@ mod tests {
     #[test]
     fn headers_normalize_to_short_forms() {
         assert_eq!(normalize_header(":SOURce0:WAVelength:SWEep?").as_deref(), Some("SOUR:WAV:SWE?"));
+        assert_eq!(normalize_header(":WAV:SWE:STAT?").as_deref(), Some("WAV:SWE?"));
         assert_eq!(normalize_header(":READout:POINts?").as_deref(), Some("READ:POIN?"));
         assert_eq!(normalize_header(":TRIG0:OUTP").as_deref(), Some("TRIG:OUTP"));
         assert_eq!(normalize_header(":WAVX"), None);
+    }
+
+    #[test]
+    fn numbers_take_the_units_of_the_keysight_table() {
+        assert_eq!(quantity("1555.5NM", 1e9, false), Ok(1555.5));
+        assert!((quantity("1.5555E-6", 1e9, false).unwrap() - 1555.5).abs() < 1e-9);
+        assert!((quantity("1.5555um", 1e9, false).unwrap() - 1555.5).abs() < 1e-9);
+        assert_eq!(quantity("10NM/S", 1e9, true), Ok(10.0));
+        assert_eq!(quantity("10NM/S", 1e9, false), Err(DATA_TYPE));
+        assert_eq!(quantity("10 furlongs", 1e9, false), Err(DATA_TYPE));
     }
 
     proptest! {
         /// Any command line leaves the emulator answering (no panic, no poisoned lock).
         #[test]
         fn arbitrary_command_lines_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..48)) {
-            let laser = EmuLaser::new(EmuClock::new(1.0), 1550.0);
-            let shared = Shared {
-                laser,
-                state: Mutex::new(State {
-                    config: LaserEmulatorConfig::new(LaserFamily::Santec),
-                    start_nm: 1540.0, stop_nm: 1560.0, speed: 10.0, step: 0.001, continuous: false,
-                    power_mw: 1.0, sweep: None, errors: VecDeque::new(), faults: Faults::default(),
-                    abort_at_s: None,
-                }),
-            };
-            let line = String::from_utf8_lossy(&bytes).trim().to_string();
-            let _ = handle(&shared, &line);
-            let _ = normalize_header(&line);
-            prop_assert!(matches!(handle(&shared, "*IDN?"), Reply::Text(_)));
+            for family in [LaserFamily::Santec, LaserFamily::Keysight] {
+                let shared = Shared {
+                    laser: EmuLaser::new(EmuClock::new(1.0), 1550.0),
+                    state: Mutex::new(State::new(LaserEmulatorConfig::new(family))),
+                };
+                let line = String::from_utf8_lossy(&bytes).trim().to_string();
+                let _ = handle(&shared, &line);
+                let _ = normalize_header(&line);
+                prop_assert!(matches!(handle(&shared, "*IDN?"), Reply::Text(_)));
+            }
         }
     }
 }

@@ -1,5 +1,6 @@
-//! Protocol emulators of the PI E-712 and the SmarAct MCS on loopback TCP: stage state, finite-speed
-//! motion on a (time-scaled) clock, a photodiode fed by a closure, and fault injection.
+//! Protocol emulators of the PI E-712, the SmarAct MCS and MCS2 and the tunable lasers on loopback
+//! TCP: stage state, finite-speed motion on a (time-scaled) clock, a photodiode fed by a closure,
+//! and fault injection; as strict and as imperfect as the instruments by default.
 //! Owns what the drivers are tested against; [`run_emulator`] serves one from the command line.
 //!
 //! Motion is analytic: every axis keeps the history of its moves (trapezoidal profiles), so its
@@ -7,10 +8,15 @@
 //! are read, at their own sample times, and a photodiode closure can ask any emulator where its axes
 //! were at that time.
 
+pub mod adc;
+pub mod emu_laser;
 pub mod laser;
+mod laser_sweep;
 pub mod local;
+pub mod mcs2;
 pub mod optical_bench;
 pub mod pi;
+mod pi_recorder;
 pub mod smaract;
 
 pub use crate::hardware::clock::EmuClock;
@@ -21,9 +27,11 @@ use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-pub use laser::{LaserEmulator, LaserEmulatorConfig};
+pub use emu_laser::{EmuLaser, SweepProfile};
+pub use laser::{LaserEmulator, LaserEmulatorConfig, LaserRealism};
 pub use local::LocalEmulators;
-pub use pi::{PiEmulator, PiEmulatorConfig};
+pub use mcs2::{Mcs2Emulator, Mcs2EmulatorConfig};
+pub use pi::{PiEmulator, PiEmulatorConfig, PiRealism};
 pub use smaract::{SmarActEmulator, SmarActEmulatorConfig};
 
 /// One move of an axis: from `from` at `t0_s` to `to`, trapezoidal.
@@ -302,55 +310,6 @@ impl Drop for Server {
     }
 }
 
-/// An emulated tunable laser on the emulator clock: a fixed wavelength or a linear sweep.
-#[derive(Debug)]
-pub struct EmuLaser {
-    clock: Arc<EmuClock>,
-    /// (start time, from nm, to nm, rate nm/s) of the sweeps; a fixed wavelength is a sweep of rate 0.
-    schedule: Mutex<Vec<(f64, f64, f64, f64)>>,
-}
-
-impl EmuLaser {
-    /// A laser at `wavelength_nm`.
-    pub fn new(clock: Arc<EmuClock>, wavelength_nm: f64) -> Arc<Self> {
-        Arc::new(EmuLaser { clock, schedule: Mutex::new(vec![(f64::NEG_INFINITY, wavelength_nm, wavelength_nm, 0.0)]) })
-    }
-
-    /// Wavelength (nm) at emulated time `t_s`.
-    pub fn wavelength_at(&self, t_s: f64) -> f64 {
-        let s = self.schedule.lock().unwrap_or_else(|e| e.into_inner());
-        let k = s.partition_point(|e| e.0 <= t_s).saturating_sub(1);
-        let (t0, from, to, rate) = s[k];
-        if rate == 0.0 {
-            return to;
-        }
-        let done = (t_s - t0) * rate;
-        if done >= (to - from).abs() {
-            to
-        } else {
-            from + done * (to - from).signum()
-        }
-    }
-
-    /// Start a sweep now; returns the emulated start time.
-    pub fn sweep(&self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> f64 {
-        let t = self.clock.now_s();
-        self.schedule.lock().unwrap_or_else(|e| e.into_inner()).push((t, from_nm, to_nm, rate_nm_per_s.abs()));
-        t
-    }
-
-    /// Set a fixed wavelength now.
-    pub fn set(&self, wavelength_nm: f64) {
-        let t = self.clock.now_s();
-        self.schedule.lock().unwrap_or_else(|e| e.into_inner()).push((t, wavelength_nm, wavelength_nm, 0.0));
-    }
-
-    /// The clock.
-    pub fn clock(&self) -> &Arc<EmuClock> {
-        &self.clock
-    }
-}
-
 /// The emulated laser ([`EmuLaser`]) as a [`Laser`].
 pub struct EmulatedLaser {
     laser: Arc<EmuLaser>,
@@ -385,6 +344,8 @@ pub enum EmulatorKind {
     Pi,
     /// SmarAct MCS (ASCII), default port 5000.
     SmarAct,
+    /// SmarAct MCS2 (ASCII, SCPI-like), default port 55551.
+    Mcs2,
 }
 
 impl EmulatorKind {
@@ -393,6 +354,7 @@ impl EmulatorKind {
         match text.to_ascii_lowercase().as_str() {
             "pi" | "e-712" | "e712" => Some(EmulatorKind::Pi),
             "smaract" | "mcs" => Some(EmulatorKind::SmarAct),
+            "mcs2" => Some(EmulatorKind::Mcs2),
             _ => None,
         }
     }
@@ -402,18 +364,20 @@ impl EmulatorKind {
         match self {
             EmulatorKind::Pi => super::pi_gcs::DEFAULT_PORT,
             EmulatorKind::SmarAct => super::smaract::DEFAULT_PORT,
+            EmulatorKind::Mcs2 => super::smaract_mcs2::DEFAULT_PORT,
         }
     }
 }
 
 /// Serve an emulator of `kind` on 127.0.0.1:`port` (the default port for `None`) on a clock
-/// `time_scale` times faster than real time (1: real time), with
+/// `time_scale` times faster than real time (1: real time), realistic or ideal, with
 /// the femto-6dof bench's axes, until `stop` is set. `on_ready` gets the address once listening.
-/// The PI emulator's photodiode input reads a slow test signal (a sine of its first axis).
+/// The PI emulator's photodiode input reads a slow test signal (a sine of its first axis, volts).
 pub fn run_emulator(
     kind: EmulatorKind,
     port: Option<u16>,
     time_scale: f64,
+    realistic: bool,
     stop: &AtomicBool,
     on_ready: &mut dyn FnMut(SocketAddr),
 ) -> std::io::Result<()> {
@@ -421,11 +385,12 @@ pub fn run_emulator(
     let port = port.unwrap_or(kind.default_port());
     match kind {
         EmulatorKind::Pi => {
-            let emu = PiEmulator::start_on(port, clock, pi::PiEmulatorConfig::default())?;
+            let config = if realistic { PiEmulatorConfig::default() } else { PiEmulatorConfig::ideal() };
+            let emu = PiEmulator::start_on(port, clock, config)?;
             let axes = emu.axes();
             emu.set_photodiode(Arc::new(move |t| {
                 let x = axes.lock().map(|a| a.first().map_or(0.0, |a| a.position_at(t))).unwrap_or(0.0);
-                0.5 + 0.2 * (x * 2.0 * std::f64::consts::PI / 0.78).cos()
+                2.5 + 1.0 * (x * 2.0 * std::f64::consts::PI / 0.78).cos()
             }));
             on_ready(emu.addr());
             while !stop.load(Ordering::Relaxed) {
@@ -434,6 +399,13 @@ pub fn run_emulator(
         }
         EmulatorKind::SmarAct => {
             let emu = SmarActEmulator::start_on(port, clock, smaract::SmarActEmulatorConfig::default())?;
+            on_ready(emu.addr());
+            while !stop.load(Ordering::Relaxed) {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+        }
+        EmulatorKind::Mcs2 => {
+            let emu = Mcs2Emulator::start_on(port, clock, mcs2::Mcs2EmulatorConfig::default())?;
             on_ready(emu.addr());
             while !stop.load(Ordering::Relaxed) {
                 std::thread::sleep(std::time::Duration::from_millis(50));

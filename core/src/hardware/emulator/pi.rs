@@ -1,17 +1,46 @@
-//! PI E-712 emulator: the GCS 2 subset of [`crate::hardware::pi_gcs`], with closed-loop axes moving at
-//! finite speed, `ERR?` semantics (a failed command is silent and leaves its error pending), and a data
-//! recorder that samples axis positions and the photodiode input at their own sample times.
+//! PI E-712 emulator: the GCS 2 subset of [`crate::hardware::pi_gcs`], with closed-loop axes moving
+//! at finite speed, `ERR?` semantics (a failed command is silent and leaves its error pending),
+//! analog inputs read through an ADC, and a data recorder ([`super::pi_recorder`]).
+//!
+//! As strict as the instrument as the sources describe it (see `crate::hardware::pi_gcs`): `VEL`
+//! acts only with velocity control on (`VCO`), otherwise a `MOV` is a step the servo follows at
+//! once; an E-712 with absolute sensors does not know `FRF?` (GCS error 2); `TAV?` (volts), `TNS?`
+//! (normalised, what record option 17 records) and `TSP?` (linearised, physical units) differ.
 
+use super::adc::Adc;
+use super::pi_recorder::{self, Recorder};
 use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, PhotodiodeFn, Server, SharedAxes};
-use crate::hardware::pi_gcs::{RECORD_ACTUAL_POSITION, RECORD_INPUT_SIGNAL, SERVO_CYCLE_S, TRIGGER_ON_MOVE};
 use std::io::{BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::sync::{Arc, Mutex};
 
-/// Most samples a record table holds.
-pub const MAX_RECORD_POINTS: usize = 1 << 21;
-/// Number of record tables.
-pub const RECORD_TABLES: usize = 8;
+/// The first rising edge on a digital input line after an emulated time (s), if one came.
+pub type EdgeFn = Arc<dyn Fn(f64) -> Option<f64> + Send + Sync>;
+
+/// What the emulated E-712 does that an ideal one would not.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PiRealism {
+    /// The ADC of the analog inputs (`None`: exact readings).
+    pub adc: Option<Adc>,
+    /// `VEL` acts only with `VCO` on; otherwise moves are steps at `step_speed_um_per_s`.
+    pub velocity_needs_vco: bool,
+    /// How fast the servo follows a step (µm/s).
+    pub step_speed_um_per_s: f64,
+    /// The controller knows `FRF?`/`FRF`.
+    pub frf_supported: bool,
+}
+
+impl PiRealism {
+    /// As strict and as imperfect as the instrument.
+    pub fn realistic(seed: u64) -> Self {
+        PiRealism { adc: Some(Adc::e712(seed)), velocity_needs_vco: true, step_speed_um_per_s: 50_000.0, frf_supported: false }
+    }
+
+    /// An ideal controller: exact inputs, `VEL` always acts, `FRF?` answers.
+    pub fn ideal() -> Self {
+        PiRealism { adc: None, velocity_needs_vco: false, step_speed_um_per_s: 50_000.0, frf_supported: true }
+    }
+}
 
 /// The emulated controller.
 #[derive(Debug, Clone)]
@@ -22,46 +51,69 @@ pub struct PiEmulatorConfig {
     pub speed_um_per_s: f64,
     /// Acceleration (µm/s²).
     pub accel_um_per_s2: f64,
-    /// Analog input channel identifiers (the photodiode).
+    /// Analog input channel identifiers (the photodiode, the wavelength monitor).
     pub inputs: Vec<String>,
+    /// Digital input lines (an external recorder trigger).
+    pub digital_lines: Vec<String>,
+    /// Servo cycle (s), `SPA? 1 0x0E000200`.
+    pub servo_cycle_s: f64,
+    /// Points of recorder memory, `SPA? 1 0x16000200`.
+    pub record_points: usize,
+    /// Record tables at power-up (`TNR?`), `SPA 1 0x16000300` changes it.
+    pub record_tables: usize,
+    /// What is not ideal.
+    pub realism: PiRealism,
 }
 
 impl Default for PiEmulatorConfig {
     /// Three axes "1", "2", "3" of a P-563.3CD (0-300 µm, at the centre 150 µm), 100 µm/s,
-    /// 1000 µm/s², analog inputs "5" (the photodiode) and "6" (the laser's wavelength monitor).
+    /// 1000 µm/s², analog inputs "5" (the photodiode) and "6" (the laser's wavelength monitor),
+    /// digital inputs "1" to "4", a 20 µs servo cycle and 2^18 recorder points in 8 tables;
+    /// realistic.
     fn default() -> Self {
         PiEmulatorConfig {
             axes: ["1", "2", "3"].iter().map(|id| (id.to_string(), 150.0, 0.0, 300.0)).collect(),
             speed_um_per_s: 100.0,
             accel_um_per_s2: 1000.0,
             inputs: vec!["5".into(), "6".into()],
+            digital_lines: ["1", "2", "3", "4"].iter().map(|s| s.to_string()).collect(),
+            servo_cycle_s: 20e-6,
+            record_points: 1 << 18,
+            record_tables: 8,
+            realism: PiRealism::realistic(712),
         }
     }
 }
 
-#[derive(Debug, Default)]
-struct Recorder {
-    tables: [Option<(String, u32)>; RECORD_TABLES],
-    rate: u32,
-    armed: bool,
-    t_trigger: Option<f64>,
+impl PiEmulatorConfig {
+    /// The default controller with ideal behaviour.
+    pub fn ideal() -> Self {
+        PiEmulatorConfig { realism: PiRealism::ideal(), ..Default::default() }
+    }
 }
 
-struct PiState {
-    ids: Vec<String>,
-    inputs: Vec<String>,
+pub(super) struct PiState {
+    pub(super) ids: Vec<String>,
+    pub(super) inputs: Vec<String>,
+    pub(super) lines: Vec<String>,
     servo: Vec<bool>,
+    vco: Vec<bool>,
+    /// Speed set by `VEL` per axis (µm/s).
+    vel: Vec<f64>,
     last_error: i64,
-    recorder: Recorder,
+    pub(super) recorder: Recorder,
     faults: Faults,
 }
 
-struct Shared {
-    clock: Arc<EmuClock>,
+pub(super) struct Shared {
+    pub(super) clock: Arc<EmuClock>,
     state: Mutex<PiState>,
-    axes: SharedAxes,
-    /// Signal sources of the analog inputs, by input identifier.
+    pub(super) axes: SharedAxes,
+    /// Signal sources of the analog inputs (volts), by input identifier.
     inputs: Mutex<Vec<(String, PhotodiodeFn)>>,
+    /// Edge sources of the digital inputs, by line.
+    edges: Mutex<Vec<(String, EdgeFn)>>,
+    pub(super) config: PiEmulatorConfig,
 }
 
 /// A running E-712 emulator.
@@ -89,18 +141,24 @@ impl PiEmulator {
             .iter()
             .map(|(_, p, min, max)| EmuAxis::new(*p, *min, *max, config.speed_um_per_s, config.accel_um_per_s2))
             .collect();
+        let n = config.axes.len();
         let shared = Arc::new(Shared {
             clock,
             state: Mutex::new(PiState {
                 ids: config.axes.iter().map(|a| a.0.clone()).collect(),
                 inputs: config.inputs.clone(),
-                servo: vec![false; config.axes.len()],
+                lines: config.digital_lines.clone(),
+                servo: vec![false; n],
+                vco: vec![false; n],
+                vel: vec![config.speed_um_per_s; n],
                 last_error: 0,
-                recorder: Recorder { rate: 1, ..Default::default() },
+                recorder: Recorder::new(config.record_tables),
                 faults: Faults::default(),
             }),
             axes: Arc::new(Mutex::new(axes)),
             inputs: Mutex::new(vec![]),
+            edges: Mutex::new(vec![]),
+            config,
         });
         let s2 = shared.clone();
         let server = Server::start(port, move |stream| serve(&s2, stream))?;
@@ -117,19 +175,25 @@ impl PiEmulator {
         self.shared.axes.clone()
     }
 
-    /// Feed the first analog input (the photodiode) from `f` (emulated time → input value).
+    /// Feed the first analog input (the photodiode) from `f` (emulated time → volts).
     pub fn set_photodiode(&self, f: PhotodiodeFn) {
-        let first = self.shared.state.lock().unwrap_or_else(|e| e.into_inner()).inputs.first().cloned();
-        if let Some(id) = first {
+        if let Some(id) = self.shared.config.inputs.first().cloned() {
             self.set_input(&id, f);
         }
     }
 
-    /// Feed the analog input `id` from `f` (emulated time → input value); inputs without a source read 0.
+    /// Feed the analog input `id` from `f` (emulated time → volts); inputs without a source read 0.
     pub fn set_input(&self, id: &str, f: PhotodiodeFn) {
         let mut inputs = self.shared.inputs.lock().unwrap_or_else(|e| e.into_inner());
         inputs.retain(|(i, _)| i != id);
         inputs.push((id.to_string(), f));
+    }
+
+    /// Wire the digital input `line` to an edge source (the laser's trigger output).
+    pub fn set_digital_input(&self, line: &str, f: EdgeFn) {
+        let mut edges = self.shared.edges.lock().unwrap_or_else(|e| e.into_inner());
+        edges.retain(|(l, _)| l != line);
+        edges.push((line.to_string(), f));
     }
 
     /// Arm a fault.
@@ -156,8 +220,7 @@ impl PiEmulator {
 }
 
 fn serve(shared: &Shared, stream: TcpStream) {
-    let Ok(write_half) = stream.try_clone() else { return };
-    let mut writer = write_half;
+    let Ok(mut writer) = stream.try_clone() else { return };
     let mut reader = BufReader::new(stream);
     let mut buf = Vec::new();
     loop {
@@ -184,7 +247,7 @@ fn reply_text(shared: &Shared, command: &str) -> Option<String> {
         Reply::Drop => None,
         Reply::Lines(lines) => {
             let n = lines.len();
-            let mut text = String::new();
+            let mut text = String::with_capacity(n * 48);
             for (i, l) in lines.iter().enumerate() {
                 text.push_str(l);
                 text.push_str(if i + 1 < n { " \n" } else { "\n" });
@@ -195,7 +258,7 @@ fn reply_text(shared: &Shared, command: &str) -> Option<String> {
 }
 
 /// Why a command fails: a GCS error number.
-type Gcs<T> = Result<T, i64>;
+pub(super) type Gcs<T> = Result<T, i64>;
 
 fn handle(shared: &Shared, command: &str) -> Reply {
     let now = shared.clock.now_s();
@@ -220,8 +283,7 @@ fn handle(shared: &Shared, command: &str) -> Reply {
     let mut parts = command.split_whitespace();
     let name = parts.next().unwrap_or("").to_ascii_uppercase();
     let args: Vec<&str> = parts.collect();
-    let result = execute(shared, &mut st, now, &name, &args);
-    match result {
+    match execute(shared, &mut st, now, &name, &args) {
         Ok(lines) => lines.map_or(Reply::None, Reply::Lines),
         Err(code) => {
             st.last_error = code;
@@ -258,22 +320,51 @@ fn query_axes(st: &PiState, args: &[&str]) -> Gcs<Vec<usize>> {
 fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
     match name {
         "*IDN?" | "ERR?" | "SAI?" => identify(st, name),
-        "SVO" | "SVO?" => servo(st, name, args),
+        "SVO" | "SVO?" | "VCO" | "VCO?" => flags(st, name, args),
+        "FRF" | "FRF?" if !shared.config.realism.frf_supported => Err(2),
         "MOV" | "MVR" | "VEL" | "FRF" | "STP" | "HLT" => motion(shared, st, now, name, args),
         "POS?" | "ONT?" | "VEL?" | "TMN?" | "TMX?" | "FRF?" => axis_query(shared, st, now, name, args),
-        "TSP?" => {
-            if args.len() != 1 || !st.inputs.iter().any(|i| i == args[0]) {
+        "TAV?" | "TNS?" | "TSP?" => {
+            let [input] = args else { return Err(1) };
+            if !st.inputs.iter().any(|i| i == input) {
                 return Err(14);
             }
-            let f = input_source(shared, args[0]);
-            let v = f.map_or(0.0, |f| f(now));
-            Ok(Some(vec![format!("{}={v}", args[0])]))
+            let v = input_value(shared, name, input, now, now.to_bits());
+            Ok(Some(vec![format!("{input}={v}")]))
         }
-        "DRC" | "RTR" | "RTR?" | "DRT" | "DRL?" => recorder_setup(st, now, name, args),
-        "DRR?" => recorded_data(shared, st, now, args),
+        "DRC" | "RTR" | "RTR?" | "DRT" | "DRL?" | "TNR?" | "SPA" | "SPA?" | "HDR?" => {
+            pi_recorder::setup(shared, st, now, name, args)
+        }
+        "DRR?" => pi_recorder::recorded_data(shared, st, now, args),
         "" => Err(1),
         _ => Err(2),
     }
+}
+
+/// An analog input's value at emulated time `t_s` through the ADC (`key` names the sample):
+/// `TAV?` volts, `TNS?` normalised (gain 1 here, what record option 17 records), `TSP?` the
+/// linearised value in physical units (100 per normalised unit here).
+pub(super) fn input_value(shared: &Shared, quantity: &str, input: &str, t_s: f64, key: u64) -> f64 {
+    let source = {
+        let inputs = shared.inputs.lock().unwrap_or_else(|e| e.into_inner());
+        inputs.iter().find(|(i, _)| i == input).map(|(_, f)| f.clone())
+    };
+    let volts = source.map_or(0.0, |f| f(t_s));
+    let id = input.bytes().fold(0u64, |h, b| h.wrapping_mul(31).wrapping_add(b as u64));
+    let read = match &shared.config.realism.adc {
+        Some(adc) => adc.read(volts, key ^ id.rotate_left(40)),
+        None => volts,
+    };
+    match quantity {
+        "TSP?" => 100.0 * read,
+        _ => read,
+    }
+}
+
+/// The first edge on digital `line` after `after_s`.
+pub(super) fn edge_after(shared: &Shared, line: &str, after_s: f64) -> Option<f64> {
+    let edges = shared.edges.lock().unwrap_or_else(|e| e.into_inner());
+    edges.iter().find(|(l, _)| l == line).and_then(|(_, f)| f(after_s))
 }
 
 /// A line `id=value` per axis of `axes`.
@@ -295,32 +386,32 @@ fn identify(st: &mut PiState, name: &str) -> Gcs<Option<Vec<String>>> {
     }
 }
 
-/// Closed-loop (servo) mode.
-fn servo(st: &mut PiState, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
-    match name {
-        "SVO" => {
-            let p = pairs(args)?;
-            let mut set = Vec::new();
-            for (a, v) in p {
-                let i = axis_index(st, a)?;
-                let on = match v {
-                    "0" => false,
-                    "1" => true,
-                    _ => return Err(1),
-                };
-                set.push((i, on));
-            }
-            for (i, on) in set {
-                st.servo[i] = on;
-            }
-            Ok(None)
-        }
-        "SVO?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(axes.iter().map(|&i| format!("{}={}", st.ids[i], u8::from(st.servo[i]))).collect()))
-        }
-        _ => Err(2),
+/// Closed-loop (servo) and velocity-control flags per axis.
+fn flags(st: &mut PiState, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
+    let query = name.ends_with('?');
+    if query {
+        let axes = query_axes(st, args)?;
+        let v = if name == "SVO?" { &st.servo } else { &st.vco };
+        return Ok(Some(axes.iter().map(|&i| format!("{}={}", st.ids[i], u8::from(v[i]))).collect()));
     }
+    let mut set = Vec::new();
+    for (a, v) in pairs(args)? {
+        let i = axis_index(st, a)?;
+        let on = match v {
+            "0" => false,
+            "1" => true,
+            _ => return Err(1),
+        };
+        set.push((i, on));
+    }
+    for (i, on) in set {
+        if name == "SVO" {
+            st.servo[i] = on;
+        } else {
+            st.vco[i] = on;
+        }
+    }
+    Ok(None)
 }
 
 /// Commands that move or stop the axes, set their speed or reference them.
@@ -342,18 +433,18 @@ fn motion(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str]
                 }
                 moves.push((i, target));
             }
+            let r = &shared.config.realism;
             for (i, target) in moves {
+                // Without velocity control the move is a step the servo follows as fast as it can.
+                ax[i].speed = if st.vco[i] || !r.velocity_needs_vco { st.vel[i] } else { r.step_speed_um_per_s };
                 ax[i].start_move(now, target);
             }
-            if st.recorder.armed && st.recorder.t_trigger.is_none() {
-                st.recorder.t_trigger = Some(now);
-            }
+            st.recorder.trigger_on_move(now);
             Ok(None)
         }
         "VEL" => {
-            let p = pairs(args)?;
             let mut set = Vec::new();
-            for (a, v) in p {
+            for (a, v) in pairs(args)? {
                 let i = axis_index(st, a)?;
                 let v = number(v)?;
                 if !(v > 0.0 && v <= 10_000.0) {
@@ -361,9 +452,8 @@ fn motion(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str]
                 }
                 set.push((i, v));
             }
-            let mut ax = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
             for (i, v) in set {
-                ax[i].speed = v;
+                st.vel[i] = v;
             }
             Ok(None)
         }
@@ -389,155 +479,18 @@ fn motion(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str]
 
 /// Queries of the axes' state: position, on target, speed, travel range, referenced.
 fn axis_query(shared: &Shared, st: &PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
-    match name {
-        "POS?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(shared, st, &axes, &|a| a.position_at(now).to_string())))
-        }
-        "ONT?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(shared, st, &axes, &|a| {
-                let on = !a.moving_at(now) && !a.at_limit && (a.position_at(now) - a.target_at(now)).abs() < 1e-9;
-                u8::from(on).to_string()
-            })))
-        }
-        "VEL?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(shared, st, &axes, &|a| a.speed.to_string())))
-        }
-        "TMN?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(shared, st, &axes, &|a| a.min.to_string())))
-        }
-        "TMX?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(shared, st, &axes, &|a| a.max.to_string())))
-        }
-        "FRF?" => {
-            let axes = query_axes(st, args)?;
-            Ok(Some(per_axis(shared, st, &axes, &|a| u8::from(a.referenced).to_string())))
-        }
-        _ => Err(2),
-    }
-}
-
-/// The data recorder's configuration: tables, rate, trigger, and the number of points recorded.
-fn recorder_setup(st: &mut PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
-    match name {
-        "DRC" => {
-            if args.len() != 3 {
-                return Err(1);
-            }
-            let table = args[0].parse::<usize>().map_err(|_| 1)?;
-            if table == 0 || table > RECORD_TABLES {
-                return Err(57);
-            }
-            let option = args[2].parse::<u32>().map_err(|_| 1)?;
-            let ok = match option {
-                RECORD_ACTUAL_POSITION => st.ids.iter().any(|i| i == args[1]),
-                RECORD_INPUT_SIGNAL => st.inputs.iter().any(|i| i == args[1]),
-                0 => true,
-                _ => false,
-            };
-            if !ok {
-                return Err(58);
-            }
-            st.recorder.tables[table - 1] = (option != 0).then(|| (args[1].to_string(), option));
-            Ok(None)
-        }
-        "RTR" => {
-            let rate = args.first().and_then(|a| a.parse::<u32>().ok()).filter(|&r| r >= 1 && args.len() == 1);
-            st.recorder.rate = rate.ok_or(17)?;
-            Ok(None)
-        }
-        "RTR?" => Ok(Some(vec![st.recorder.rate.to_string()])),
-        "DRT" => {
-            if args.len() != 3 || args[0] != "0" {
-                return Err(1);
-            }
-            if args[1].parse::<u32>().ok() != Some(TRIGGER_ON_MOVE) {
-                return Err(17);
-            }
-            st.recorder.armed = true;
-            st.recorder.t_trigger = None;
-            Ok(None)
-        }
-        "DRL?" => {
-            let table = args.first().and_then(|a| a.parse::<usize>().ok()).filter(|t| (1..=RECORD_TABLES).contains(t));
-            let table = table.ok_or(57)?;
-            Ok(Some(vec![format!("{table}={}", recorded(st, now))]))
-        }
-        _ => Err(2),
-    }
-}
-
-/// `DRR?`: the recorded samples of the given tables, a GCS data-recorder header then one row per sample.
-fn recorded_data(shared: &Shared, st: &PiState, now: f64, args: &[&str]) -> Gcs<Option<Vec<String>>> {
-    if args.len() < 3 {
-        return Err(1);
-    }
-    let start = args[0].parse::<usize>().map_err(|_| 1)?;
-    let count = args[1].parse::<usize>().map_err(|_| 1)?;
-    let tables: Vec<usize> = args[2..].iter().map(|t| t.parse::<usize>().map_err(|_| 1)).collect::<Gcs<_>>()?;
-    if start == 0 || tables.iter().any(|&t| t == 0 || t > RECORD_TABLES) {
-        return Err(17);
-    }
-    let sources: Vec<(String, u32)> =
-        tables.iter().map(|&t| st.recorder.tables[t - 1].clone().ok_or(78)).collect::<Gcs<_>>()?;
-    // Checked: a huge count from the wire is an error, not an overflow.
-    if (start - 1).checked_add(count).is_none_or(|end| end > recorded(st, now)) {
-        return Err(77);
-    }
-    let dt = st.recorder.rate as f64 * SERVO_CYCLE_S;
-    let t0 = st.recorder.t_trigger.unwrap_or(now);
-    let ids = st.ids.clone();
-    // Sample outside the locks: the photodiode closure reads the axes itself.
-    let axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner()).clone();
-    let sources_fn: Vec<Option<PhotodiodeFn>> = sources.iter().map(|(src, _)| input_source(shared, src)).collect();
-    let mut lines = vec![
-        "# REM E-712 data recorder (emulated)".to_string(),
-        "# VERSION = 1".into(),
-        "# TYPE = 1".into(),
-        "# SEPARATOR = 32".into(),
-        format!("# DIM = {}", tables.len()),
-        format!("# SAMPLE_TIME = {dt}"),
-        format!("# NDATA = {count}"),
-    ];
-    for (k, (src, opt)) in sources.iter().enumerate() {
-        lines.push(format!("# NAME{k} = {} of {src}", if *opt == 2 { "Actual Position" } else { "Input Signal" }));
-    }
-    lines.push("# END_HEADER".into());
-    for k in 0..count {
-        let t = t0 + (start - 1 + k) as f64 * dt;
-        let row: Vec<String> = sources
-            .iter()
-            .zip(&sources_fn)
-            .map(|((src, opt), f)| {
-                // Fixed precision, like the controller's: 1e-9 µm, 12 significant digits.
-                if *opt == RECORD_ACTUAL_POSITION {
-                    let p = ids.iter().position(|i| i == src).map_or(0.0, |i| axes[i].position_at(t));
-                    format!("{p:.9}")
-                } else {
-                    format!("{:.11e}", f.as_ref().map_or(0.0, |f| f(t)))
-                }
-            })
-            .collect();
-        lines.push(row.join(" "));
-    }
+    let axes = query_axes(st, args)?;
+    let lines = match name {
+        "POS?" => per_axis(shared, st, &axes, &|a| a.position_at(now).to_string()),
+        "ONT?" => per_axis(shared, st, &axes, &|a| {
+            let on = !a.moving_at(now) && !a.at_limit && (a.position_at(now) - a.target_at(now)).abs() < 1e-9;
+            u8::from(on).to_string()
+        }),
+        "VEL?" => axes.iter().map(|&i| format!("{}={}", st.ids[i], st.vel[i])).collect(),
+        "TMN?" => per_axis(shared, st, &axes, &|a| a.min.to_string()),
+        "TMX?" => per_axis(shared, st, &axes, &|a| a.max.to_string()),
+        "FRF?" => per_axis(shared, st, &axes, &|a| u8::from(a.referenced).to_string()),
+        _ => return Err(2),
+    };
     Ok(Some(lines))
-}
-
-fn recorded(st: &PiState, now: f64) -> usize {
-    match st.recorder.t_trigger {
-        None => 0,
-        Some(t0) => {
-            let dt = st.recorder.rate as f64 * SERVO_CYCLE_S;
-            ((((now - t0) / dt).floor() as usize) + 1).min(MAX_RECORD_POINTS)
-        }
-    }
-}
-
-fn input_source(shared: &Shared, id: &str) -> Option<PhotodiodeFn> {
-    let inputs = shared.inputs.lock().unwrap_or_else(|e| e.into_inner());
-    inputs.iter().find(|(i, _)| i == id).map(|(_, f)| f.clone())
 }

@@ -1,5 +1,6 @@
 //! SmarAct MCS emulator: the ASCII subset of [`crate::hardware::smaract`] in synchronous mode, with
-//! linear (nm) and rotary (µ° plus revolutions) channels moving at finite speed.
+//! linear (nm) and rotary (µ° plus revolutions) channels moving at finite speed, each with its
+//! sensor type (`:GST`), and a channel that can be locked (status 9, moves refused with error 146).
 
 use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, Server, SharedAxes};
 use crate::hardware::smaract::{angle_to_mcs, status};
@@ -31,11 +32,14 @@ pub struct SmarActEmulatorConfig {
     pub rotary_accel_udeg_per_s2: f64,
     /// The system ID `:GSI` answers; `None` emulates a firmware that refuses the query (error 2).
     pub system_id: Option<u64>,
+    /// Each channel's sensor type `:GST` answers (`SA_*_SENSOR_TYPE` of `MCSControl.h`).
+    pub sensor_types: Vec<i64>,
 }
 
 impl Default for SmarActEmulatorConfig {
-    /// The paper's wrist: two goniometers (SGO-60.5, SGO-77.5; ±12° of travel here) and a rotary
-    /// stage (SR-3610; ±360°), at 0°, 2 °/s, 20 °/s².
+    /// The paper's wrist: two goniometers (SGO-60.5, SGO-77.5; ±12° of travel here; sensor types
+    /// G605S = 16 and G775S = 17) and a rotary stage (SR-3610; ±360°; SR36M = 26), at 0°, 2 °/s,
+    /// 20 °/s².
     fn default() -> Self {
         SmarActEmulatorConfig {
             channels: vec![
@@ -48,14 +52,17 @@ impl Default for SmarActEmulatorConfig {
             linear_accel_nm_per_s2: 1e7,
             rotary_accel_udeg_per_s2: 20e6,
             system_id: Some(3_118_000_001),
+            sensor_types: vec![16, 17, 26],
         }
     }
 }
 
 struct Channel {
     kind: ChannelKind,
+    sensor: i64,
     holding: bool,
     referencing: bool,
+    locked: bool,
     max_speed: f64,
 }
 
@@ -94,7 +101,18 @@ impl SmarActEmulator {
         let channels = config
             .channels
             .iter()
-            .map(|&(kind, ..)| Channel { kind, holding: false, referencing: false, max_speed: speed(kind).0 * 10.0 })
+            .enumerate()
+            .map(|(i, &(kind, ..))| Channel {
+                kind,
+                sensor: config.sensor_types.get(i).copied().unwrap_or(match kind {
+                    ChannelKind::Linear => 1,
+                    ChannelKind::Rotary => 2,
+                }),
+                holding: false,
+                referencing: false,
+                locked: false,
+                max_speed: speed(kind).0 * 10.0,
+            })
             .collect();
         let shared = Arc::new(Shared {
             clock,
@@ -136,6 +154,14 @@ impl SmarActEmulator {
     pub fn any_moving(&self) -> bool {
         let t = self.shared.clock.now_s();
         self.shared.axes.lock().unwrap_or_else(|e| e.into_inner()).iter().any(|a| a.moving_at(t))
+    }
+
+    /// Lock a channel's movement (status 9; moves refused with error 146), or release it.
+    pub fn set_locked(&self, channel: usize, locked: bool) {
+        let mut st = self.shared.state.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(c) = st.channels.get_mut(channel) {
+            c.locked = locked;
+        }
     }
 
     /// Mark a channel as not referenced (its physical position unknown).
@@ -180,8 +206,8 @@ fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
         return Some(Some(":E-1,1".into()));
     };
     // Longer names before their prefixes (GSI before GS).
-    const NAMES: [&str; 14] =
-        ["SCLS", "SCM", "GNC", "GPPK", "GP", "GA", "GSI", "GS", "MPA", "MPR", "MAA", "MAR", "FRM", "S"];
+    const NAMES: [&str; 15] =
+        ["SCLS", "SCM", "GNC", "GPPK", "GP", "GA", "GSI", "GST", "GS", "MPA", "MPR", "MAA", "MAR", "FRM", "S"];
     let name = NAMES.iter().find(|n| body.starts_with(*n)).copied();
     let args = name.map_or("", |n| &body[n.len()..]);
     let fired = st.faults.take(command, now);
@@ -259,7 +285,7 @@ fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str)
     let fields = Fields::parse(args)?;
     let mut axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
     match name {
-        "SCM" | "GNC" | "GSI" | "GPPK" | "GP" | "GA" | "GS" => query(st, &mut axes, now, name, &fields),
+        "SCM" | "GNC" | "GSI" | "GST" | "GPPK" | "GP" | "GA" | "GS" => query(st, &mut axes, now, name, &fields),
         "MPA" | "MPR" | "MAA" | "MAR" => move_channel(st, &mut axes, now, name, &fields),
         "S" | "SCLS" | "FRM" => control(st, &mut axes, now, name, &fields),
         _ => Err((-1, 2)),
@@ -286,6 +312,11 @@ fn query(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, fields: 
             fields.count(0)?;
             st.system_id.map(|id| format!(":ID{id}")).ok_or((-1, 2))
         }
+        "GST" => {
+            fields.count(1)?;
+            let c = fields.channel(st)?;
+            Ok(format!(":ST{c},{}", st.channels[c].sensor))
+        }
         "GPPK" => {
             fields.count(1)?;
             let c = fields.channel(st)?;
@@ -308,7 +339,9 @@ fn query(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, fields: 
             fields.count(1)?;
             let c = fields.channel(st)?;
             let ch = &mut st.channels[c];
-            let code = if axes[c].moving_at(now) {
+            let code = if ch.locked {
+                status::LOCKED
+            } else if axes[c].moving_at(now) {
                 if ch.referencing {
                     status::FINDING_REFERENCE
                 } else {
@@ -338,6 +371,9 @@ fn move_channel(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, f
     fields.count(if rotary { 4 } else { 3 })?;
     let c = fields.channel(st)?;
     let kind = st.channels[c].kind;
+    if st.channels[c].locked {
+        return Err((c as i64, 146));
+    }
     if rotary != (kind == ChannelKind::Rotary) {
         return Err((c as i64, 143));
     }

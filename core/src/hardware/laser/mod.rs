@@ -1,99 +1,93 @@
-//! Tunable lasers over a raw SCPI socket (newline-terminated commands and replies, binary blocks
-//! for the wavelength log): the Keysight 816x / N777x and the Santec TSL-570 command sets, behind
-//! the bench's [`Laser`] trait. Owns the command sequences, the `:SYST:ERR?` check after every set
-//! command (as the PI driver checks `ERR?`), and the decoding of the lambda log.
+//! Tunable lasers over a raw SCPI socket (terminated commands and replies, binary blocks for the
+//! wavelength log): the Keysight 816x / N777x and the Santec TSL-570 command sets, behind the
+//! bench's [`Laser`] trait. Owns the connection sequence, the `:SYST:ERR?` check after every set
+//! command (as the PI driver checks `ERR?`), the sweep's set-up read back from the laser, and the
+//! lambda log. The sweep's rules (speeds, steps, direction) are in [`sweep`]; each family's
+//! commands in [`keysight`] and [`santec`].
 //!
-//! Every wavelength crossing the trait is in nm; the Keysight set speaks metres (and m/s), the
-//! Santec set nm (and nm/s). The family's commands are in [`keysight`] and [`santec`].
+//! Every wavelength crossing the trait is in nm; the Keysight set is sent with units and answers in
+//! metres, the Santec Legacy set speaks nm.
 
 pub mod keysight;
 pub mod santec;
 pub mod scpi;
+mod sweep;
 
-use super::controller_bench::{FixedLaser, HardwareConfig, LambdaLog, Laser, LaserFamily};
-use super::{parse_i64, HwError, Link};
+use super::controller_bench::{FixedLaser, HardwareConfig, LambdaLog, Laser, LaserFamily, SweepSetup};
+use super::{parse_f64, parse_i64, HwError, LineEnd, Link, Traffic};
+use std::time::{Duration, Instant};
 
-/// Most points a sweep logs: the step is the sweep's span over this less one (at least 0.1 pm).
-pub const LOG_POINTS_MAX: usize = 10_001;
-
-/// The commands of one family.
-pub(crate) struct Dialect {
-    /// Go to a fixed wavelength (nm).
-    pub set_wavelength: fn(f64) -> String,
-    /// Configure (not start) a continuous one-way sweep with lambda logging: from, to (nm), speed
-    /// (nm/s), log step (nm).
-    pub configure_sweep: fn(f64, f64, f64, f64) -> Vec<String>,
-    pub start_sweep: &'static str,
-    pub stop_sweep: &'static str,
-    pub sweep_state: &'static str,
-    pub log_points: &'static str,
-    pub log_data: &'static str,
-    /// The log's block data → wavelengths (nm).
-    pub decode_log: fn(&[u8]) -> Result<Vec<f64>, String>,
-    /// Read the wavelength back, and the unit of its reply (nm per reply unit).
-    pub wavelength_query: &'static str,
-    pub nm_per_unit: f64,
-    /// Set the output power (mW).
-    pub power: fn(f64) -> Vec<String>,
-    /// What an identification of this family contains (lower case, any of).
-    pub vendors: &'static [&'static str],
-}
-
-fn dialect(family: LaserFamily) -> Option<&'static Dialect> {
-    match family {
-        LaserFamily::Keysight => Some(&keysight::DIALECT),
-        LaserFamily::Santec => Some(&santec::DIALECT),
-        LaserFamily::None => None,
-    }
-}
-
-/// A sweep as configured: from, to (nm), speed (nm/s), log step (nm).
-type SweepSetup = (f64, f64, f64, f64);
+pub use sweep::LOG_POINTS_MAX;
 
 /// A tunable laser on a raw SCPI socket.
 pub struct ScpiLaser {
     name: String,
-    dialect: &'static Dialect,
+    family: LaserFamily,
     link: Link,
     nominal_nm: f64,
     idn: String,
+    /// The module's sweep speed range (nm/s), read once (Keysight `:WAV:SWE:SPE? MIN|MAX`).
+    speed_range: Option<(f64, f64)>,
     prepared: Option<SweepSetup>,
     started: Option<SweepSetup>,
 }
 
 impl ScpiLaser {
-    /// Connect to a laser of `family` at `address`, read `*IDN?` (refusing another vendor's), and
-    /// empty its error queue. `nominal_nm` is its resting wavelength.
+    /// Connect to a laser of `family` at `address`, read `*IDN?` (refusing another vendor's), empty
+    /// its error queue, and select the command set this driver speaks (Santec: Legacy, read back).
+    /// `nominal_nm` is its resting wavelength.
     pub fn connect(family: LaserFamily, address: &str, timeout_s: f64, nominal_nm: f64) -> Result<Self, HwError> {
         let name = format!("{family:?} laser");
-        let dialect = dialect(family)
-            .ok_or_else(|| HwError::Usage { controller: name.clone(), problem: "family None has no driver".into() })?;
-        let link = Link::connect(&name, address, timeout_s)?;
-        let mut laser =
-            ScpiLaser { name, dialect, link, nominal_nm, idn: String::new(), prepared: None, started: None };
+        let line_end = match family {
+            LaserFamily::Keysight => LineEnd::Lf,
+            LaserFamily::Santec => LineEnd::Cr,
+            LaserFamily::None => {
+                return Err(HwError::Usage { controller: name, problem: "family None has no driver".into() })
+            }
+        };
+        let link = Link::connect_with(&name, address, timeout_s, line_end)?;
+        let mut laser = ScpiLaser {
+            name,
+            family,
+            link,
+            nominal_nm,
+            idn: String::new(),
+            speed_range: None,
+            prepared: None,
+            started: None,
+        };
         laser.init()?;
         Ok(laser)
     }
 
+    fn keysight(&self) -> bool {
+        self.family == LaserFamily::Keysight
+    }
+
     fn init(&mut self) -> Result<(), HwError> {
         self.idn = self.query("*IDN?")?;
+        let vendors = if self.keysight() { keysight::VENDORS } else { santec::VENDORS };
         let lower = self.idn.to_ascii_lowercase();
-        if !self.dialect.vendors.iter().any(|v| lower.contains(v)) {
+        if !vendors.iter().any(|v| lower.contains(v)) {
             let idn = self.idn.clone();
             return Err(HwError::bad_reply(
                 &self.name,
                 "*IDN?",
                 &idn,
-                &format!(
-                    "an identification naming {} (is this the configured laser family?)",
-                    self.dialect.vendors.join(" or ")
-                ),
+                &format!("an identification naming {} (is this the configured laser family?)", vendors.join(" or ")),
             ));
         }
         // Errors left from before this connection are not ours.
         for _ in 0..64 {
             if self.error()?.0 == 0 {
                 break;
+            }
+        }
+        if !self.keysight() {
+            self.command(santec::LEGACY)?;
+            let set = self.query(santec::COMMAND_SET)?;
+            if !same_word(&set, "0") {
+                return Err(HwError::bad_reply(&self.name, santec::COMMAND_SET, &set, "0 (Legacy, just set)"));
             }
         }
         Ok(())
@@ -140,9 +134,23 @@ impl ScpiLaser {
         }
     }
 
+    /// A numeric reply (a leading `+` allowed).
+    fn query_f64(&mut self, command: &str) -> Result<f64, HwError> {
+        let reply = self.query(command)?;
+        let v = reply.trim();
+        parse_f64(&self.name, command, &reply, v.strip_prefix('+').unwrap_or(v))
+    }
+
+    fn query_int(&mut self, command: &str) -> Result<i64, HwError> {
+        let reply = self.query(command)?;
+        let v = reply.trim();
+        parse_i64(&self.name, command, &reply, v.strip_prefix('+').unwrap_or(v))
+    }
+
     /// Send a set command, then `:SYST:ERR?`; a non-zero code is an error naming the command and
     /// the laser's message.
     pub fn command(&mut self, command: &str) -> Result<(), HwError> {
+        tracing::debug!(controller = %self.name, "{command}");
         self.link.send(command)?;
         let (code, message) = self.error()?;
         if code != 0 {
@@ -158,16 +166,25 @@ impl ScpiLaser {
         }
     }
 
+    /// nm per unit of the family's replies (Keysight: metres).
+    fn nm_per_reply_unit(&self) -> f64 {
+        if self.keysight() {
+            1e9
+        } else {
+            1.0
+        }
+    }
+
     /// The laser's wavelength now (nm), read back.
     pub fn wavelength_nm(&mut self) -> Result<f64, HwError> {
-        let q = self.dialect.wavelength_query;
-        let reply = self.query(q)?;
-        Ok(super::parse_f64(&self.name, q, &reply, &reply)? * self.dialect.nm_per_unit)
+        let q = if self.keysight() { keysight::WAVELENGTH_QUERY } else { santec::WAVELENGTH_QUERY };
+        Ok(self.query_f64(q)? * self.nm_per_reply_unit())
     }
 
     /// Set the output power (mW).
     pub fn set_power_mw(&mut self, mw: f64) -> Result<(), HwError> {
-        for c in (self.dialect.power)(mw) {
+        let commands = if self.keysight() { keysight::power(mw) } else { santec::power(mw) };
+        for c in commands {
             self.command(&c)?;
         }
         Ok(())
@@ -175,9 +192,37 @@ impl ScpiLaser {
 
     /// The log step of a sweep over `span_nm`: at most [`LOG_POINTS_MAX`] points, in whole 0.1 pm.
     pub fn log_step_nm(span_nm: f64) -> f64 {
-        let step = span_nm.abs() / (LOG_POINTS_MAX - 1) as f64;
-        ((step / 1e-4).ceil() * 1e-4).max(1e-4)
+        sweep::log_step_nm(span_nm, 0.0, f64::INFINITY)
     }
+
+    /// After a sweep, the Keysight's lambda log is ready when `FLAG?` is even and at least 2
+    /// ("an even number when logging data may be read"); wait for it.
+    fn wait_for_log(&mut self) -> Result<(), HwError> {
+        if !self.keysight() {
+            return Ok(());
+        }
+        let deadline = Instant::now() + Duration::from_secs_f64(5.0 * self.link.timeout_s());
+        loop {
+            let flag = self.query_int(keysight::FLAG)?;
+            if flag >= 2 && flag % 2 == 0 {
+                return Ok(());
+            }
+            if Instant::now() > deadline {
+                return Err(HwError::Usage {
+                    controller: self.name.clone(),
+                    problem: format!("the lambda log never became ready after the sweep (`{}` stays {flag})", keysight::FLAG),
+                });
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+}
+
+/// A word reply equals `want` (case, a leading `+`, and ON/OFF for 1/0 aside).
+fn same_word(reply: &str, want: &str) -> bool {
+    let r = reply.trim().trim_start_matches('+').to_ascii_uppercase();
+    let w = want.to_ascii_uppercase();
+    r == w || (w == "0" && r == "OFF") || (w == "1" && r == "ON") || (w.len() >= 3 && r.starts_with(&w))
 }
 
 impl Laser for ScpiLaser {
@@ -194,71 +239,65 @@ impl Laser for ScpiLaser {
     }
 
     fn set_wavelength(&mut self, nm: f64) -> Result<(), HwError> {
-        self.command(&(self.dialect.set_wavelength)(nm))
+        let c = if self.keysight() { keysight::set_wavelength(nm) } else { santec::set_wavelength(nm) };
+        self.command(&c)
     }
 
-    fn prepare_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<(), HwError> {
-        if !(from_nm.is_finite() && to_nm.is_finite() && rate_nm_per_s.is_finite() && rate_nm_per_s > 0.0) {
-            return Err(HwError::Usage {
-                controller: self.name.clone(),
-                problem: format!("cannot sweep {from_nm} → {to_nm} nm at {rate_nm_per_s} nm/s"),
-            });
-        }
+    fn prepare_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<SweepSetup, HwError> {
         self.prepared = None;
-        let step = Self::log_step_nm(to_nm - from_nm);
-        for c in (self.dialect.configure_sweep)(from_nm, to_nm, rate_nm_per_s, step) {
-            self.command(&c)?;
-        }
-        self.prepared = Some((from_nm, to_nm, rate_nm_per_s, step));
-        Ok(())
+        let setup = self.configure_sweep(from_nm, to_nm, rate_nm_per_s)?;
+        self.prepared = Some(setup);
+        Ok(setup)
     }
 
     fn start_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<(), HwError> {
-        let same = |p: &SweepSetup| p.0 == from_nm && p.1 == to_nm && p.2 == rate_nm_per_s;
+        let same = |p: &SweepSetup| p.from_nm == from_nm && p.to_nm == to_nm && p.rate_nm_per_s == rate_nm_per_s;
         if !self.prepared.as_ref().is_some_and(same) {
             self.prepare_sweep(from_nm, to_nm, rate_nm_per_s)?;
         }
         self.started = self.prepared;
-        self.command(self.dialect.start_sweep)
+        self.command(if self.keysight() { keysight::START } else { santec::START })
     }
 
     fn sweep_running(&mut self) -> Result<bool, HwError> {
-        let q = self.dialect.sweep_state;
-        let reply = self.query(q)?;
-        let v = reply.trim();
-        Ok(parse_i64(&self.name, q, &reply, v.strip_prefix('+').unwrap_or(v))? != 0)
+        Ok(self.query_int(if self.keysight() { keysight::STATE } else { santec::STATE })? != 0)
     }
 
     fn lambda_log(&mut self) -> Result<Option<LambdaLog>, HwError> {
-        let Some((from_nm, to_nm, rate_nm_per_s, step_nm)) = self.started else { return Ok(None) };
-        let q = self.dialect.log_points;
-        let reply = self.query(q)?;
-        let v = reply.trim();
-        let points = parse_i64(&self.name, q, &reply, v.strip_prefix('+').unwrap_or(v))?;
-        let d = self.dialect.log_data;
+        let Some(setup) = self.started else { return Ok(None) };
+        self.wait_for_log()?;
+        let (q, d) = if self.keysight() {
+            (keysight::LOG_POINTS, keysight::LOG_DATA)
+        } else {
+            (santec::LOG_POINTS, santec::LOG_DATA)
+        };
+        let points = self.query_int(q)?;
+        let points = usize::try_from(points).map_err(|_| HwError::bad_reply(&self.name, q, &points.to_string(), "a count ≥ 0"))?;
         self.link.send(d)?;
         let data = scpi::read_block(&mut self.link, d)?;
-        let wavelengths_nm = (self.dialect.decode_log)(&data)
+        let wavelengths_nm = scpi::decode_log(&data, points)
             .map_err(|e| HwError::bad_reply(&self.name, d, &format!("{} bytes", data.len()), &e))?;
-        if wavelengths_nm.len() as i64 != points {
-            return Err(HwError::bad_reply(
-                &self.name,
-                d,
-                &format!("{} points", wavelengths_nm.len()),
-                &format!("the {points} points `{q}` announced"),
-            ));
-        }
-        Ok(Some(LambdaLog { from_nm, to_nm, step_nm, rate_nm_per_s, wavelengths_nm }))
+        Ok(Some(LambdaLog {
+            from_nm: setup.from_nm,
+            to_nm: setup.to_nm,
+            step_nm: setup.step_nm,
+            rate_nm_per_s: setup.rate_nm_per_s,
+            wavelengths_nm,
+        }))
     }
 
     fn stop_sweep(&mut self) -> Result<(), HwError> {
-        self.command(self.dialect.stop_sweep)
+        self.command(if self.keysight() { keysight::STOP } else { santec::STOP })
     }
 
     fn reconnect(&mut self) -> Result<(), HwError> {
         self.prepared = None;
         self.link.reconnect()?;
         self.init()
+    }
+
+    fn traffic(&self) -> Option<Traffic> {
+        Some(self.link.traffic())
     }
 }
 

@@ -1,7 +1,7 @@
-//! SCPI over a raw TCP socket, as the tunable lasers speak it: newline-terminated commands and
-//! replies, `:SYST:ERR?` answers `<code>,"<message>"`, and bulk data as IEEE 488.2 definite-length
-//! binary blocks `#<n><len><bytes>` followed by a newline. Owns the parsers of those replies; they
-//! take bytes from the network and never panic.
+//! SCPI over a raw TCP socket, as the tunable lasers speak it: terminated commands and replies,
+//! `:SYST:ERR?` answers `<code>,"<message>"`, and bulk data as IEEE 488.2 definite-length binary
+//! blocks `#<n><len><bytes>`, followed by a terminator or (the Santec, as QMI reads it) by nothing.
+//! Owns the parsers of those replies; they take bytes from the network and never panic.
 
 use crate::hardware::{HwError, Link};
 use std::io::{ErrorKind, Read};
@@ -71,6 +71,22 @@ pub fn decode_f64_le(data: &[u8]) -> Result<Vec<f64>, String> {
     Ok(data.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8]))).collect())
 }
 
+/// A wavelength log of `points` points (nm) from its block, whichever of the two encodings the
+/// byte count says: 8-byte little-endian doubles in metres (Keysight; Santec's SCPI command set) or
+/// 4-byte little-endian integers in 0.1 pm (Santec's Legacy set).
+pub fn decode_log(data: &[u8], points: usize) -> Result<Vec<f64>, String> {
+    if data.len() == 8 * points {
+        Ok(decode_f64_le(data)?.into_iter().map(|m| m * 1e9).collect())
+    } else if data.len() == 4 * points {
+        Ok(decode_u32_le(data)?.into_iter().map(|v| v as f64 * 1e-4).collect())
+    } else {
+        Err(format!(
+            "{points} points of 8 bytes (f64 metres) or 4 bytes (u32 0.1 pm), found {} bytes",
+            data.len()
+        ))
+    }
+}
+
 /// Little-endian u32 values (the Santec wavelength log: units of 0.1 pm).
 pub fn decode_u32_le(data: &[u8]) -> Result<Vec<u32>, String> {
     if data.len() % 4 != 0 {
@@ -87,11 +103,15 @@ pub fn encode_block(data: &[u8]) -> Vec<u8> {
     out
 }
 
-/// Read one binary block reply (and its trailing newline) from `link`, at most
-/// [`MAX_BLOCK_BYTES`]. Faults close the link as a line read does.
+/// Read one binary block reply from `link`, at most [`MAX_BLOCK_BYTES`]. A terminator after it, if
+/// the device sends one, is skipped by the next read. Faults close the link as a line read does.
 pub(crate) fn read_block(link: &mut Link, command: &str) -> Result<Vec<u8>, HwError> {
     let controller = link.controller.clone();
     let timeout_s = link.timeout_s;
+    if let Err(e) = link.skip_pending_terminator() {
+        link.reader = None;
+        return Err(io_error(e, &controller, command, timeout_s));
+    }
     let reader = link.reader.as_mut().ok_or(HwError::NotConnected { controller: controller.clone() })?;
     let mut buf = Vec::new();
     let bad = |reply: &[u8], expected: String| HwError::BadReply {
@@ -102,7 +122,7 @@ pub(crate) fn read_block(link: &mut Link, command: &str) -> Result<Vec<u8>, HwEr
     };
     let result = (|| -> Result<Vec<u8>, HwError> {
         let mut byte = [0u8; 1];
-        let (head, len) = loop {
+        let (_head, len) = loop {
             match parse_block_header(&buf) {
                 Ok(Some(h)) => break h,
                 Ok(None) => {}
@@ -113,20 +133,26 @@ pub(crate) fn read_block(link: &mut Link, command: &str) -> Result<Vec<u8>, HwEr
         };
         let mut data = vec![0u8; len];
         read_exact(reader, &mut data, &controller, command, timeout_s)?;
-        // The block ends with a newline (the SCPI message terminator).
-        read_exact(reader, &mut byte, &controller, command, timeout_s)?;
-        if byte[0] == b'\r' {
-            read_exact(reader, &mut byte, &controller, command, timeout_s)?;
-        }
-        if byte[0] != b'\n' {
-            return Err(bad(&buf, format!("a newline after the {len} bytes of the block (header {head} bytes)")));
-        }
         Ok(data)
     })();
-    if result.is_err() {
-        link.reader = None;
+    match &result {
+        Ok(data) => {
+            link.count_in(buf.len() + data.len());
+            link.after_block();
+            tracing::trace!(controller = %controller, "< #{} bytes", data.len());
+        }
+        Err(_) => link.reader = None,
     }
     result
+}
+
+fn io_error(e: std::io::Error, controller: &str, command: &str, timeout_s: f64) -> HwError {
+    match e.kind() {
+        ErrorKind::WouldBlock | ErrorKind::TimedOut => {
+            HwError::Timeout { controller: controller.into(), command: command.into(), timeout_s }
+        }
+        _ => HwError::Disconnected { controller: controller.into(), command: command.into(), reason: e.to_string() },
+    }
 }
 
 fn read_exact(
@@ -166,6 +192,12 @@ mod tests {
         assert!(parse_block(b"#0abc").unwrap_err().contains("indefinite"));
         assert!(parse_block(b"#2x1").unwrap_err().contains("decimal digits"));
         assert!(parse_block(b"#9999999999").unwrap_err().contains("at most"));
+        let metres: Vec<u8> = [1.55e-6f64, 1.551e-6].iter().flat_map(|m| m.to_le_bytes()).collect();
+        let nm = decode_log(&metres, 2).unwrap();
+        assert!((nm[0] - 1550.0).abs() < 1e-9 && (nm[1] - 1551.0).abs() < 1e-9);
+        let tenths: Vec<u8> = [15_500_000u32, 15_510_000].iter().flat_map(|v| v.to_le_bytes()).collect();
+        assert_eq!(decode_log(&tenths, 2).unwrap(), [1550.0, 1551.0]);
+        assert!(decode_log(&tenths, 3).unwrap_err().contains("found 8 bytes"));
     }
 
     proptest! {
@@ -175,6 +207,7 @@ mod tests {
             let _ = parse_block_header(&bytes);
             let _ = decode_f64_le(&bytes);
             let _ = decode_u32_le(&bytes);
+            let _ = decode_log(&bytes, bytes.len() / 4);
             let _ = parse_error_reply(&String::from_utf8_lossy(&bytes));
         }
 
