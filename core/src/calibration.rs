@@ -384,7 +384,7 @@ fn withhold_lost(rows: &mut [ParameterRow], cost: &crate::identify::sweep_cost::
     let labels: Vec<&str> = cost.lost.iter().map(|l| l.label.as_str()).collect();
     for row in rows.iter_mut().filter(|r| cost.undetermined.iter().any(|p| p.name == r.name)) {
         row.determined = false;
-        row.sigma = None;
+        (row.sigma, row.sigma_noise, row.sigma_systematic) = (None, None, None);
         row.reason = Some(format!("its sweeps were lost (their analysis refused): `{}`", labels.join("`, `")));
     }
 }
