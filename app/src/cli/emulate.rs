@@ -153,7 +153,10 @@ fn serve(a: &EmulateArgs, out: &mut dyn Write, stop: &AtomicBool) -> Result<(), 
             run_optical_bench(&preset, &hardware, (f, seed, !a.ideal), stop, &mut |addresses| {
                 let list: Vec<String> = addresses.iter().map(|(n, at)| format!("{n} at {at}")).collect();
                 let (name, pace, kind) = (&preset.name, pace(a.time_scale), realism(a.ideal));
-                say(format!("optical bench `{name}` emulated: {}; {pace}, {kind}, seed {seed}; Ctrl-C to stop", list.join(", ")))
+                say(format!(
+                    "optical bench `{name}` emulated: {}; {pace}, {kind}, seed {seed}; Ctrl-C to stop",
+                    list.join(", ")
+                ))
             })
             .map_err(|problem| CliError::Failed { what: "emulate all", problem })?;
             return ready_error.map_or(Ok(()), |e| Err(e.into()));
@@ -203,11 +206,15 @@ mod tests {
             let addr = line.split_whitespace().find(|w| w.starts_with("127.0.0.1:")).unwrap().trim_end_matches(',');
             let stream = std::net::TcpStream::connect(addr).unwrap();
             stream.set_read_timeout(Some(std::time::Duration::from_secs(2))).unwrap();
-            (&stream).write_all(b"*IDN?\n").unwrap();
-            let mut reply = String::new();
-            BufReader::new(&stream).read_line(&mut reply).unwrap();
-            assert!(reply.starts_with("SANTEC,TSL-570"), "{reply}");
+            // The Santec ends its replies with CR alone (TSL-570 manual, "Communication
+            // interface": delimiter CR), so the reply is read up to it, not to a line feed.
+            (&stream).write_all(b"*IDN?\r").unwrap();
+            let mut reply = Vec::new();
+            let read = BufReader::new(&stream).read_until(b'\r', &mut reply);
             stop.store(true, Ordering::Relaxed);
+            read.unwrap();
+            let reply = String::from_utf8_lossy(&reply);
+            assert!(reply.starts_with("SANTEC,TSL-570") && reply.ends_with('\r'), "{reply:?}");
             server.join().unwrap().unwrap();
         });
         let e = serve(&args(&["photorobot", "emulate", "all", "--port", "1"]), &mut Vec::new(), &stop).unwrap_err();
