@@ -86,7 +86,7 @@ fn start_emulators_and_identify_both(h: &mut Kittest) {
     let ids = h.state().connection.identities.clone();
     assert!(ids.iter().all(|r| r.as_ref().unwrap().is_ok()), "{ids:?}");
     h.get_by_label_contains("E-712 (emulated)");
-    h.get_by_label("SmarAct MCS, system ID 3118000001, 3 channels: 0 rotary (°), 1 rotary (°), 2 rotary (°)");
+    h.get_by_label("SmarAct MCS, system ID 3118000001, 3 channels: 0 rotary sensor 16 (°), 1 rotary sensor 17 (°), 2 rotary sensor 26 (°)");
     h.get_by_label("axes: 1 (µm), 2 (µm), 3 (µm)");
     // The laser row: the emulated Keysight on the emulators' optical bench, at the preset's wavelength.
     let laser = h.state().connection.laser_emulator.as_ref().expect("a laser emulator runs").addr();
