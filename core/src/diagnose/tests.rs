@@ -168,11 +168,11 @@ fn every_library_effect_at_typical_size_is_named_first_and_estimated() {
 /// A reversal error of a revolute stage (20 µrad) is not named: motions
 /// tracked from the motion do not show it (their observations start as if each moving stage
 /// had approached in its direction of motion), and the pool has no rotation tracked from the
-/// samples. Such rotations were tried: on the virtual bench's traces a q4
-/// reversal at q = 0 tracked from the samples missed the model by 6.2σ on average, and adding
-/// them to the pool changed the design enough that the hidden-pivot diagnosis of
-/// tests/cli_diagnose.rs found nothing. Before the observations modelled the tracking, this
-/// effect was named (0.0012 ± 0.0002°) from rotations whose start the traces cannot give.
+/// samples: on the virtual bench's traces a q4 reversal at q = 0 tracked from the samples
+/// misses the model by 6.2σ on average, and adding such rotations to the pool changes the
+/// design enough that the hidden-pivot diagnosis of tests/cli_diagnose.rs finds nothing.
+/// Observations that did not model the tracking would name this effect (0.0012 ± 0.0002°)
+/// from rotations whose start the traces cannot give.
 #[test]
 fn a_revolute_reversal_error_is_not_named_from_rotations_tracked_from_the_motion() {
     let e = Effect::ReversalError { joint: "q5".into(), step: 20e-6f64.to_degrees() };
