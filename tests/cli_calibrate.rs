@@ -59,7 +59,11 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
         assert!(err.abs() <= 3.0 * sigma, "{name}: error {err} beyond 3σ = {}", 3.0 * sigma);
         let ratio = sigma / stated_sigma;
         assert!((0.5..=2.0).contains(&ratio), "{name}: σ {sigma}, the docs state {stated_sigma}");
-        assert!((err / sigma - stated_error).abs() <= 0.5, "{name}: error {:+.2}σ, stated {stated_error:+.1}σ", err / sigma);
+        assert!(
+            (err / sigma - stated_error).abs() <= 0.5,
+            "{name}: error {:+.2}σ, stated {stated_error:+.1}σ",
+            err / sigma
+        );
     }
     // The gap y_wf − Z_et within 0.05 µm; the split honest: within 3σ, or flagged.
     let value = |n: &str| parameter(&doc, n)["value"].as_f64().unwrap();
@@ -89,7 +93,7 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
     }
     // Bench time of the default joint plans: 13.0 min.
     let minutes = doc["measurement_duration_s"].as_f64().unwrap() / 60.0;
-    assert!((minutes - 13.0).abs() < 0.05, "{minutes} min of bench time, the docs state 13.0"); 
+    assert!((minutes - 13.0).abs() < 0.05, "{minutes} min of bench time, the docs state 13.0");
     // The session: every trace, the extrinsics, the report.
     let traces = std::fs::read_dir(dir.path().join("traces")).unwrap().count();
     assert!(traces > 60, "{traces} traces written");

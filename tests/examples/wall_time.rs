@@ -117,8 +117,11 @@ fn main() {
         ("validate stage (the GUI's Validation)", stage(&calibrate, "validate"), 2.0),
         ("diagnose", diagnose.wall_s, 10.0),
     ];
-    let missed: Vec<String> =
-        checks.iter().filter(|c| c.1.is_nan() || c.1 > c.2).map(|(n, s, t)| format!("{n}: {s:.2} s, target {t} s")).collect();
+    let missed: Vec<String> = checks
+        .iter()
+        .filter(|c| c.1.is_nan() || c.1 > c.2)
+        .map(|(n, s, t)| format!("{n}: {s:.2} s, target {t} s"))
+        .collect();
     assert!(missed.is_empty(), "targets missed: {}", missed.join("; "));
     println!("every target met");
 }
