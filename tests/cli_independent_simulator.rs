@@ -26,8 +26,9 @@ fn calibrate(recorder: &Recorder) -> Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}: {text}"))
 }
 
-/// Every determined parameter within 3σ of Table II, the fit accepted at the noise floor;
-/// returns the names of the determined parameters.
+/// Every determined parameter within 2.5σ of Table II (the docs state 2.3σ at worst), the fit
+/// accepted with a residual of 0.05-0.2σ rms (stated: 0.09-0.14σ); returns the names of the
+/// determined parameters.
 fn assert_right(doc: &Value, seed: u64) -> Vec<String> {
     let verdict = doc["fit"]["verdict"].as_str().unwrap_or("missing");
     let rms = doc["residual_rms_sigma"].as_f64().unwrap_or(f64::NAN);
@@ -42,13 +43,13 @@ fn assert_right(doc: &Value, seed: u64) -> Vec<String> {
             continue;
         }
         determined.push(name.to_string());
-        if e.abs() > 3.0 {
+        if e.abs() > 2.5 {
             wrong.push(format!("{name} {value} ± {sigma} ({e:+.1}σ from {truth})"));
         }
     }
     assert!(wrong.is_empty(), "seed {seed}: determined and wrong: {wrong:?}");
     assert_eq!(verdict, "fits", "seed {seed}");
-    assert!(rms < 1.5, "seed {seed}: residual {rms}σ");
+    assert!((0.05..=0.2).contains(&rms), "seed {seed}: residual {rms}σ, the docs state 0.09-0.14σ");
     determined
 }
 
@@ -79,9 +80,10 @@ fn validation_on_the_truth(doc: &Value) -> Vec<(String, f64, f64, f64)> {
 
 /// Three seeds of the lab motions: one as recorded, one with a dark offset on the photodiode and
 /// twice the noise, one with smooth (raised-cosine) starts and stops. Table II recovered within
-/// 3σ in every parameter the data determine, the lamella normal and the beam's hit point among
+/// 2.5σ in every parameter the data determine, the lamella normal and the beam's hit point among
 /// them; the validation motions planned with the result keep the true gap within their targets
-/// (10 nm circle, 20 nm rotations), as the report forecasts.
+/// (10 nm circle, 20 nm rotations), as the report forecasts, and within twice what the docs
+/// state (0.11 nm on the circle, 2.2 nm on the rotations).
 #[test]
 fn independent_recordings_calibrate_to_table_two() {
     let mut offset = Recorder::new(12);
@@ -100,6 +102,8 @@ fn independent_recordings_calibrate_to_table_two() {
             eprintln!("  {motion}: true gap {true_nm:.2} nm, forecast ≤ {forecast_nm:.1} nm, target {target_nm} nm");
             assert!(forecast_nm <= target_nm, "seed {seed}: {motion} not promised: {forecast_nm} nm");
             assert!(true_nm <= target_nm, "seed {seed}: {motion} moves the true gap by {true_nm} nm");
+            let stated = if motion.starts_with("circle") { 0.11 } else { 2.2 };
+            assert!(true_nm <= 2.0 * stated, "seed {seed}: {motion}: true gap {true_nm} nm, the docs state ≤ {stated}");
         }
     }
 }

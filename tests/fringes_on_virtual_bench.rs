@@ -1,5 +1,5 @@
 //! End to end: the paper's strategy 1 and 2 run on the virtual bench, then every recorded trace
-//! goes through fringe analysis and is compared with the hidden truth (issue: optics, bench, fringes).
+//! goes through fringe analysis and is compared with the hidden truth.
 
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::measure::{self, Measurement};

@@ -1,4 +1,4 @@
-//! A second simulator of the bench, written from the physics alone (SPEC sections 2, 3 and 5)
+//! A second simulator of the bench, written from the physics alone (the paper's Tables I and II, Gaussian optics)
 //! and sharing no code with the core: its own kinematic chain, its own multi-beam optics with a
 //! tilt loss per pass, its own motions (raised-cosine velocity, rests before and after), sample
 //! rate, detector gain, offset and noise, one session-wide clock, and joint readings rounded as
@@ -141,7 +141,7 @@ pub fn cavity_with(e: &Extrinsics, q: [f64; 6], hidden: &Hidden) -> (f64, f64) {
 /// fiber and lamella frames in the world.
 #[derive(Debug, Clone, Copy)]
 pub struct Geometry {
-    /// Signed cavity length L (µm) of SPEC section 3.
+    /// Signed cavity length L (µm), as docs/conventions.md defines it.
     pub l_um: f64,
     /// The fiber's optical axis (the Y column of its frame) and its X and Z columns.
     pub n_f: Vector3<f64>,
@@ -531,9 +531,9 @@ pub fn lab_records() -> Vec<Record> {
 mod tests {
     use super::*;
 
-    /// SPEC section 3's derived figures, from this chain and this measurement equation.
+    /// The figures docs/conventions.md derives from Table II, from this chain and this measurement equation.
     #[test]
-    fn the_chain_gives_the_spec_figures() {
+    fn the_chain_gives_the_reference_figures() {
         let e = end_effector([0.0; 6]);
         let rows = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]];
         for (i, row) in rows.iter().enumerate() {
@@ -548,10 +548,10 @@ mod tests {
         assert!((l + 923.295).abs() < 1e-3, "L = {l}");
     }
 
-    /// SPEC section 5: first-pass tilt loss 0.88 at 1°, and a two-beam visibility near 0.2 at
+    /// The Gaussian closed forms: first-pass tilt loss 0.88 at 1°, and a two-beam visibility near 0.2 at
     /// |L| ≈ 900 µm.
     #[test]
-    fn the_optics_give_the_spec_figures() {
+    fn the_optics_give_the_reference_figures() {
         let o = Optics::default();
         let lambda_um: f64 = 1.56;
         let loss = (-(2.0 * PI * 5.2 * 1f64.to_radians() / lambda_um).powi(2)).exp();

@@ -32,7 +32,7 @@ pub fn session_plan() -> Plan {
     Plan { name: "diagnose e2e".into(), description: String::new(), segments: s }
 }
 
-/// One library effect at a time at its typical size (SPEC section 9), as hidden on a virtual
+/// One library effect at a time at its typical size (docs/diagnosis.md), as hidden on a virtual
 /// bench: (candidate name, hidden value in the candidate's unit, effects hidden); the first
 /// entry hides nothing.
 pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)> {
@@ -69,7 +69,7 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
         ),
         one("fringe nonlinearity cos φ", 2.0, Effect::FringeNonlinearity { in_phase_nm: 2.0, quadrature_nm: 0.0 }),
         // The observable direction of the q4 axis tilt (toward link x it turns the lamella about
-        // the beam, row 6), and a q4 reversal 2.5× row 8's (still µrad-level, SPEC section 9).
+        // the beam, row 6), and a q4 reversal 2.5× row 8's (still µrad-level).
         one("axis tilt q4 toward link y", 0.6, Effect::AxisTilt { joint: "q4".into(), tilt_mrad: [0.0, 0.6] }),
         one(
             "reversal error q4",

@@ -203,10 +203,10 @@ mod tests {
         }
     }
 
-    /// A circular Gaussian mode gives SPEC section 5's closed forms: power coupling
+    /// A circular Gaussian mode gives the closed forms: power coupling
     /// exp(−(2π·w0·θ/λ)²)/(1 + (L/z_R)²) whatever the gap, and the Gouy phase arctan(L/z_R).
     #[test]
-    fn a_circular_gaussian_gives_the_spec_coupling() {
+    fn a_circular_gaussian_gives_the_closed_form_coupling() {
         let o = TwoBeamOptics { air_index: 1.0, ..circular(5.2) };
         let lambda_um = 1.56;
         let z_r = PI * 5.2 * 5.2 / lambda_um;
@@ -224,8 +224,8 @@ mod tests {
     }
 
     /// The tilt shortens the round trip to the path along the lamella normal, 2|L|·cos θ: for one
-    /// Gaussian the coupling's phase grows by k·|L|·θ² exactly (paraxial, as SPEC section 5's
-    /// image geometry gives); the default mode's pedestal moves it by a few per cent near the fiber.
+    /// Gaussian the coupling's phase grows by k·|L|·θ² exactly (paraxial, as the mirror-image
+    /// geometry gives); the default mode's pedestal moves it by a few per cent near the fiber.
     #[test]
     fn a_tilt_shortens_the_path_to_the_one_along_the_normal() {
         let k = 2.0 * PI * TwoBeamOptics::default().air_index / 1.56;

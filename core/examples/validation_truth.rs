@@ -1,10 +1,10 @@
 //! The validation motions planned with a diagnosed model on the `hidden-pivot` virtual bench, their
 //! tracked gap against the real one (the bench's own extrinsics and hidden pivot at the recorded
-//! joints). The model is the one the workbench's diagnosis of that bench gave (GUI test
-//! `diagnosis_view_validates_with_and_without_the_named_effect`, before the fix of
-//! `validate::tests::a_validation_circle_tracks_its_small_gap_change`): its circle's figure was
-//! 39.5 nm where the real gap changed by 8 nm. Arguments pick the effects kept (indices into
-//! the four), all by default.
+//! joints). The model is the one the workbench's diagnosis of that bench gives (GUI test
+//! `diagnosis_view_validates_with_and_without_the_named_effect`); a circle tracked with the
+//! hint pulling its phase reads 39.5 nm where the real gap changes by 8 nm
+//! (`validate::tests::a_validation_circle_tracks_its_small_gap_change`). Arguments pick the
+//! effects kept (indices into the four), all by default.
 //! `cargo run --release -p photorobot-core --example validation_truth [-- 0 1 ...]`
 use photorobot_core::bench::{BenchPreset, VirtualBench};
 use photorobot_core::diagnose::validation::extended_model;

@@ -404,7 +404,7 @@ proptest! {
 }
 
 /// A `DRR?` asking for more points than a machine word holds is refused with GCS error 77 (not
-/// enough recorded data): the end index used to overflow and panic the emulator's thread.
+/// enough recorded data), not an end index that overflows and panics the emulator's thread.
 #[test]
 fn the_pi_emulator_refuses_a_data_request_past_the_word_size() {
     // Its own emulator: the fuzzing tests send the shared one anything, in parallel.
@@ -416,7 +416,7 @@ fn the_pi_emulator_refuses_a_data_request_past_the_word_size() {
 }
 
 /// Over TCP, a command with bytes that are not UTF-8 is refused as the controller would refuse an
-/// unknown command, and the connection stays open (it used to be dropped).
+/// unknown command, and the connection stays open.
 #[test]
 fn the_emulators_refuse_non_utf8_commands_and_keep_the_connection() {
     use std::io::{BufRead, BufReader, Write};

@@ -1,5 +1,5 @@
 //! Measures the discrepancy workflow from virtual-bench traces, one hidden library effect at a
-//! time at its typical size (SPEC section 9): records the short calibration-like session of
+//! time at its typical size (docs/diagnosis.md): records the short calibration-like session of
 //! `tests/cli_diagnose.rs` on `table2-ideal` with the effect hidden, runs
 //! `photorobot diagnose <session> --bench <that bench> --json`, and prints what was named,
 //! its estimate against the hidden value, and the residual before and after.
@@ -9,7 +9,8 @@
 //! Without an index, every effect of `photorobot_e2e::library_effects_at_typical_size`.
 //! `I+J` hides two effects at once. `--seeds A..B` runs every seed from A to B − 1 and ends
 //! each pick with a tally: in how many seeds anything was named (false alarms, for index 0),
-//! and in how many every hidden effect was named within 3σ of its value.
+//! and in how many every hidden effect was named within 3σ of its value. A pick that hides
+//! nothing asserts that no seed names anything (the README's `-- 0 --seeds 100..150` figure).
 
 use photorobot_core::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use photorobot_core::files::save_ron;
@@ -75,6 +76,12 @@ fn main() {
                 "[{label}] over {} seeds: something named in {}, every hidden effect named within 3σ in {}",
                 tally.0, tally.1, tally.2
             );
+        }
+        // With nothing hidden, nothing may be named (the README's figure: 0 over 50 seeds), and
+        // every seed must give a diagnosis.
+        if pick.iter().all(|k| all[*k].2.is_empty()) {
+            assert_eq!(tally.0 as u64, seeds.end - seeds.start, "[{label}] seeds without a diagnosis");
+            assert_eq!(tally.1, 0, "[{label}] effects named where nothing is hidden");
         }
     }
 }

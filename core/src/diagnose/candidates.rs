@@ -46,7 +46,7 @@ pub struct Candidate {
     pub name: String,
     /// Unit of the parameter.
     pub unit: String,
-    /// Typical size (SPEC section 9), in `unit`: what the design of discriminating motions aims to see.
+    /// Typical size, in `unit`: what the design of discriminating motions aims to see.
     pub typical: f64,
     /// Finite-difference step and internal scale of the parameter, in `unit`.
     pub step: f64,
@@ -115,7 +115,7 @@ impl Candidate {
 /// errors of the prismatic joints, reversal errors of every joint, zero offsets of the revolute
 /// joints (a prismatic zero offset is a translation of the whole tool: always an extrinsic
 /// change), pivot offsets of the revolute joints along each world axis, and axis tilts of every
-/// joint. Sizes from SPEC section 9.
+/// joint. Typical sizes as in docs/diagnosis.md.
 pub fn library(robot: &RobotDescription) -> Vec<Candidate> {
     let c = |name: String, unit: &str, typical: f64, step: f64, kind| Candidate {
         name,
@@ -145,7 +145,7 @@ pub fn library(robot: &RobotDescription) -> Vec<Candidate> {
                 out.push(c(format!("reversal error {j}"), "µm", 1.0, 0.02, CandidateKind::ReversalError(j.clone())));
             }
             JointType::Revolute => {
-                // µrad-level (SPEC section 9): 20 µrad.
+                // µrad-level: 20 µrad.
                 out.push(c(
                     format!("reversal error {j}"),
                     "°",

@@ -3,7 +3,7 @@
 //! Gauss-Newton with a truncated-SVD step. Owns the state of the model under diagnosis.
 //!
 //! The truncated SVD keeps the step out of directions the data do not determine (the split of
-//! the gap between y_wf and Z_et, SPEC section 6.4): such directions stay at their start values,
+//! the gap between y_wf and Z_et): such directions stay at their start values,
 //! as in the identifier, instead of wandering.
 
 use crate::diagnose::candidates::Candidate;

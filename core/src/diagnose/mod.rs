@@ -1,4 +1,4 @@
-//! The discrepancy workflow (SPEC section 9): replay the calibrated model against the recorded
+//! The discrepancy workflow (docs/diagnosis.md): replay the calibrated model against the recorded
 //! observations, score every candidate effect of the library against the residual, design and
 //! run discriminating motions, name, add and confirm effects. Owns the steps and the result.
 //!

@@ -54,9 +54,9 @@ pub struct DesignedMotion {
     pub free_start: bool,
 }
 
-/// σ of a gap change the templates assume (nm): a bench's stage noise (SPEC section 9).
+/// σ of a gap change the templates assume (nm): a bench's stage noise.
 pub const TEMPLATE_SIGMA_NM: f64 = 2.0;
-/// σ of an absolute gap the templates assume (µm) (SPEC section 9).
+/// σ of an absolute gap the templates assume (µm).
 pub const TEMPLATE_SIGMA_GAP_UM: f64 = 0.02;
 /// Laser wavelength of the templates (nm).
 pub const TEMPLATE_WAVELENGTH_NM: f64 = 1560.0;
@@ -366,7 +366,7 @@ impl MotionRunner for SimulatedBench {
     }
 }
 
-/// The calibration motions of the paper (SPEC section 4, section 9's "paper" set) as templates
+/// The calibration motions of the paper (section V.A) as templates
 /// for simulated benches: strategy 1 (X, Z translations at three lateral positions, Y moves),
 /// strategy 2 (q4, q5 sweeps of ±4° at five values of the other), q4/q5 rotations at two more
 /// gaps, five absolute gaps, and tilt scans of the fringe amplitude (one gain group).
@@ -630,9 +630,9 @@ mod tests {
     /// there) while the coupling, and with it the fringe amplitude, grows by half over the first
     /// fringe. Tracked with the true model (the motion hint exact), the tracked gap against
     /// the truth: with the levels of the fringe extrema interpolated along the path travelled,
-    /// which barely moves over that first fringe while the tilt does, it was 17-20 nm off at
+    /// which barely moves over that first fringe while the tilt does, it is 17-20 nm off at
     /// the quarters and 23 nm at worst (hint scale 1.0013; the same without noise), and the
-    /// diagnosis of that pivot named a spurious q1 scale error of 1290 ppm. Interpolated along
+    /// diagnosis of that pivot names a spurious q1 scale error of 1290 ppm. Interpolated along
     /// a coordinate that also advances with time (the tracker's envelope coordinate, `measure::track`): 7-9.5 nm
     /// at the quarters, 12.5 nm at worst, hint scale 1.0001.
     #[test]

@@ -28,8 +28,8 @@ use serde::{Deserialize, Serialize};
 /// Family-wise false-alarm probability of naming any candidate on data with no missing effect.
 pub const FAMILY_FALSE_ALARM: f64 = 0.01;
 
-/// Largest plausible estimate of a candidate, in multiples of its typical size (SPEC section 9's
-/// sizes are typical, the largest are a few times those).
+/// Largest plausible estimate of a candidate, in multiples of its typical size (the
+/// largest effects a bench shows are a few times the typical ones).
 pub const PLAUSIBLE_TYPICAL_MULTIPLE: f64 = 20.0;
 
 /// Cosine between two candidates' projected signatures above which they cannot be told apart.

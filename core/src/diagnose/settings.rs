@@ -8,7 +8,7 @@ pub const NOISE_FLOOR_FACTOR: f64 = 1.5;
 pub const DETECTABLE_SCORE: f64 = 25.0;
 /// Absorbed share from which a candidate counts as equivalent to an extrinsic change.
 pub const EQUIVALENT_SHARE: f64 = 0.999;
-/// How the diagnosis turns traces into observations: σ floors at SPEC section 9's noise (dL
+/// How the diagnosis turns traces into observations: σ floors at a bench's noise (dL
 /// 2 nm, absolute gaps 20 nm), what a bench reaches beyond the fringe analysis' own σ (stage
 /// noise, sweep-model limits); the identifier's floors are tighter.
 pub const EXTRACT_OPTIONS: ExtractOptions = ExtractOptions {

@@ -72,7 +72,7 @@ fn size_of(e: &Effect) -> f64 {
     }
 }
 
-/// One hidden effect of every variant of the library at a typical size (SPEC section 9).
+/// One hidden effect of every variant of the library at a typical size.
 fn typical_effects() -> Vec<Effect> {
     vec![
         Effect::PivotOffset { joint: "q4".into(), offset_world_um: [0.0, 0.0, 20.0] },
@@ -165,14 +165,14 @@ fn every_library_effect_at_typical_size_is_named_first_and_estimated() {
     }
 }
 
-/// A reversal error of a revolute stage (20 µrad, SPEC section 9) is not named: motions
+/// A reversal error of a revolute stage (20 µrad) is not named: motions
 /// tracked from the motion do not show it (their observations start as if each moving stage
 /// had approached in its direction of motion), and the pool has no rotation tracked from the
-/// samples. Such rotations were tried: on the virtual bench's traces a q4
-/// reversal at q = 0 tracked from the samples missed the model by 6.2σ on average, and adding
-/// them to the pool changed the design enough that the hidden-pivot diagnosis of
-/// tests/cli_diagnose.rs found nothing. Before the observations modelled the tracking, this
-/// effect was named (0.0012 ± 0.0002°) from rotations whose start the traces cannot give.
+/// samples: on the virtual bench's traces a q4 reversal at q = 0 tracked from the samples
+/// misses the model by 6.2σ on average, and adding such rotations to the pool changes the
+/// design enough that the hidden-pivot diagnosis of tests/cli_diagnose.rs finds nothing.
+/// Observations that did not model the tracking would name this effect (0.0012 ± 0.0002°)
+/// from rotations whose start the traces cannot give.
 #[test]
 fn a_revolute_reversal_error_is_not_named_from_rotations_tracked_from_the_motion() {
     let e = Effect::ReversalError { joint: "q5".into(), step: 20e-6f64.to_degrees() };
@@ -261,8 +261,8 @@ fn joint6_zero_offset_is_equivalent_to_an_extrinsic_change() {
 
 #[test]
 fn joint5_pivot_offset_along_x_is_absorbed_by_the_calibration_and_seen_by_optical_axis_rotations() {
-    // On the paper's motions a joint-5 pivot offset along X_w is a shift of the beam along X_w
-    // (SPEC section 9); a rotation about the optical axis away from the beam tells them apart.
+    // On the paper's motions a joint-5 pivot offset along X_w is a shift of the beam along X_w;
+    // a rotation about the optical axis away from the beam tells them apart.
     let hidden = Effect::PivotOffset { joint: "q5".into(), offset_world_um: [20.0, 0.0, 0.0] };
     let (r, _) = diagnose(vec![hidden.clone()], 11, false);
     assert_eq!(r.verdict, Verdict::None);

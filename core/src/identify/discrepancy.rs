@@ -153,7 +153,7 @@ fn pinv_sym(h: &DMatrix<f64>) -> (DMatrix<f64>, Vec<f64>) {
     for (k, &l) in eig.eigenvalues.iter().enumerate() {
         let v = eig.eigenvectors.column(k);
         if l > tol {
-            inv += &v * v.transpose() / l;
+            inv += v * v.transpose() / l;
         } else {
             for (i, share) in null_share.iter_mut().enumerate() {
                 *share += v[i] * v[i];

@@ -686,7 +686,7 @@ mod tests {
             worst = worst.max((amplitude_mw / amplitude(fringes) - 1.0).abs());
         }
         // Between two extrema the level moves by 2.5 % of the amplitude: the half peak-to-peak
-        // of a pair was off by 1.25 %.
+        // of a pair would be off by 1.25 %.
         assert!(worst < 1e-3, "worst relative amplitude error {worst:.2e}");
     }
 

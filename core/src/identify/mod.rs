@@ -27,8 +27,8 @@ use serde::{Deserialize, Serialize};
 /// Number of extrinsic parameters.
 pub const N_EXTRINSICS: usize = 8;
 
-/// Scale of each parameter in the estimators' internal units: angles in mrad, lengths in µm
-/// (SPEC section 6.4), so the Jacobian columns are comparable. `internal = value / scale`
+/// Scale of each parameter in the estimators' internal units: angles in mrad, lengths in µm,
+/// so the Jacobian columns are comparable. `internal = value / scale`
 /// with values in ° and µm.
 pub fn parameter_scale(i: usize) -> f64 {
     if PARAMETER_NAMES[i].1 == "°" {

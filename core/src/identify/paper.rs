@@ -63,7 +63,7 @@ pub fn step_a(chain: &Chain, observations: &[Observation], start: &Extrinsics) -
 }
 
 /// Step A with the fiber direction held at `start` when `hold_fiber`: eq. 14 sees n_f only
-/// through n_t·n_f, so the paper's data cannot place it (SPEC section 6.4); holding it at the
+/// through n_t·n_f, so the paper's data cannot place it (docs/method.md); holding it at the
 /// design value keeps step B on a sane beam instead of one the solver wandered to.
 pub fn step_a_with(chain: &Chain, observations: &[Observation], start: &Extrinsics, hold_fiber: bool) -> StepA {
     struct P<'a> {
@@ -256,7 +256,7 @@ mod tests {
         let a = step_a(&Chain::femto_6dof(), &obs, &start);
         assert!(a.converged);
         assert!((a.angles_deg[0] - 0.744).abs() < 1e-4 && (a.angles_deg[1] + 0.595).abs() < 1e-4, "{:?}", a.angles_deg);
-        // SPEC 6.4: singular values per mrad (σ = 2 nm weighting ×2): 0.735, 0.735, 9.5e-4, ~0.
+        // Singular values per mrad (σ = 2 nm weighting ×2): 0.735, 0.735, 9.5e-4, ~0.
         let sv: Vec<f64> = a.singular_values.iter().map(|s| s * 2.0 / 1e3).collect();
         assert!(sv[3] < 1e-6 * sv[0], "{sv:?}");
     }
@@ -270,7 +270,7 @@ mod tests {
         let b = step_b(&Chain::femto_6dof(), &obs, [t[0], t[1], t[2], t[3]]);
         // Rotations see the beam line, not where the fiber sits on it: O_f slides along n_f
         // without changing any dL (an exact null direction), so the minimum-norm solution puts
-        // O_f elsewhere on the true line. Z_et is seen only at second order (SPEC 6.4).
+        // O_f elsewhere on the true line. Z_et is seen only at second order.
         let of = Vector3::new(b.origins_um[1], b.origins_um[2], b.origins_um[3]);
         let true_of = Vector3::new(112.40, 900.0, 113.3);
         let n_f = truth.n_f().into_inner();

@@ -197,8 +197,8 @@ pub fn analyse_with(trace: &Trace, model: &PhaseModel, options: &AnalyseOptions)
     // better when the model is right (table2-ideal, tracked dL against the truth: rotations
     // 2.3 → 0.18 nm rms, tilt scans 9.6 → 0.06 nm), but fragile when it is not: with the
     // design extrinsics the modelled tilt is off by ~1°, the 2nd harmonic's phase (it turns by
-    // 2k·θ²·L) by radians, and lateral moves came out 4 nm off instead of 0.07 nm; on the
-    // hidden-pivot diagnosis the discriminating rotations went wrong.
+    // 2k·θ²·L) by radians, and lateral moves come out 4 nm off instead of 0.07 nm; on the
+    // hidden-pivot diagnosis the discriminating rotations go wrong.
     // `AnalyseOptions::shaped` is for a model already fitted (the diagnosis's re-analysis,
     // `diagnose::REANALYSE_OPTIONS`).
     // A trace the shaped tracker fails on is tracked the default way: the caller asked for the

@@ -2,7 +2,7 @@
 //! Owns the ambient-conditions record, its validation, and the saturation vapour pressure it needs.
 //!
 //! The cavity between the fiber and the lamella is in air: one fringe is λ/(2·n_air), so
-//! leaving n_air out is a 268 ppm scale error at 1560 nm (80 nm over 300 µm, SPEC §5).
+//! leaving n_air out is a 268 ppm scale error at 1560 nm (80 nm over 300 µm).
 //!
 //! References:
 //! - P. E. Ciddor, "Refractive index of air: new equations for the visible and near
@@ -229,7 +229,7 @@ mod tests {
         for (got, want, what) in
             [(per_kelvin, -0.94, "ppm/K"), (per_hpa, 0.265, "ppm/hPa"), (per_percent_rh, -0.0087, "ppm/%RH")]
         {
-            assert!(((got - want) / want).abs() < 0.10, "sensitivity {got} {what}, SPEC {want}");
+            assert!(((got - want) / want).abs() < 0.10, "sensitivity {got} {what}, expected {want}");
         }
     }
 

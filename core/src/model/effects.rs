@@ -364,7 +364,7 @@ mod tests {
 
     #[test]
     fn pivot_offset_in_world_terms_moves_the_rotation_centre() {
-        // Joint 4 (about X_w at q = 0) with its axis 20 µm off along Y_w (SPEC section 9).
+        // Joint 4 (about X_w at q = 0) with its axis 20 µm off along Y_w (a typical size).
         let e = Effect::PivotOffset { joint: "q4".into(), offset_world_um: [0.0, 20.0, 0.0] };
         let robot = apply_all(&[e], &RobotDescription::femto_6dof()).unwrap();
         let c = Chain::new(robot);

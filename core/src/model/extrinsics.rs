@@ -1,7 +1,7 @@
 //! The extrinsic parameters: where the fiber is in the world and how the lamella sits on the end effector,
 //! and the measurement equation they define (signed cavity length L, reflection point P_r).
 //!
-//! Conventions (SPEC section 3, paper eq. 6-7, 22-23):
+//! Conventions (docs/conventions.md, paper eq. 6-7, 22-23):
 //! - Fiber frame: `wTf = Trans(x_wf, y_wf, z_wf) · RotX(β_wf) · RotZ(θ_wf)`. The optical axis
 //!   `n_f` is the **Y column** of that rotation, `(-sin θ_wf, cos θ_wf cos β_wf, cos θ_wf sin β_wf)`.
 //!   The paper calls this axis Z_f; we keep its matrix (and so its parameter values) and call the

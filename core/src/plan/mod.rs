@@ -10,7 +10,7 @@
 //!
 //! Units are in the field names, as in the trace CSV header: µm for q1..q3, degrees for q4..q6,
 //! nm, seconds. The shipped plans ([`STRATEGY1_RON`], [`STRATEGY2_RON`]) are the paper's two
-//! measurement strategies (SPEC section 4).
+//! measurement strategies (Bettahar et al. 2020, section V.A).
 
 mod error;
 mod limits;

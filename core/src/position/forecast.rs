@@ -80,6 +80,7 @@ pub fn forecast_at(
     };
     // g[k][i]: coordinate k per unit of parameter i.
     let mut g = [[0.0; 8]; 6];
+    #[allow(clippy::needless_range_loop)]
     for i in 0..8 {
         let h = 1e-4;
         let (plus, minus) = (reached(i, h)?, reached(i, -h)?);

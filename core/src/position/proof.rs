@@ -94,7 +94,7 @@ pub fn gap_from_sweep(sweep: &Trace, model: &PhaseModel, target: &Target) -> Res
 /// The fringes follow the phase-equivalent gap, which differs from the gap along the beam by
 /// the tilt's path term and the Gouy phase; the change of that difference along the path is
 /// the model's (as the validation's tilt correction): 0.25 nm of Gouy phase over 29 µm of gap
-/// at 880 µm, which the test below measured as a bias before it was taken out.
+/// at 880 µm, which the test below would see as a bias if it were left in.
 pub fn gap_from_fringes(
     path: &Trace,
     real: Option<&Trace>,

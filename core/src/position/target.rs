@@ -173,7 +173,7 @@ mod tests {
         PhaseModel::of_preset(&preset, preset.truth).unwrap()
     }
 
-    /// At q = 0 with Table II: the gap is |L| = 898.830 µm (SPEC section 3), the tilt's angle
+    /// At q = 0 with Table II: the gap is |L| = 898.830 µm (docs/conventions.md), the tilt's angle
     /// the 19.46 mrad between n_t and n_f, and the lamella's origin sits about (−104, −102) µm
     /// from the beam (P_r = (104.243, 1.280, 101.818) µm in the world).
     #[test]

@@ -550,7 +550,7 @@ mod tests {
         run_validation(&mut bench, &model, &planned_with, motion, [0.0; 6]).unwrap().peak_to_peak_nm
     }
 
-    /// SPEC 6.6: a 100 µm circle in the nominal plane gives 3.33 µm peak to peak with Table II tilts.
+    /// A 100 µm circle in the nominal plane gives 3.33 µm peak to peak with Table II tilts.
     #[test]
     fn circle_in_the_nominal_plane_varies_by_3_33_um() {
         let p = figure(Extrinsics::nominal_design(), Extrinsics::table2(), ValidationMotion::Circle);
@@ -608,7 +608,7 @@ mod tests {
     /// fringes (the tilt term) while the real |L| should stand still: the validation figure is
     /// the small difference of two large ones. Tracked with a harmonic profile estimated from
     /// the data (the default tracker), whose envelope lags the tilt's fivefold change of the
-    /// fringe's contrast, the tracked gap was 9-12 nm off the truth at worst and the
+    /// fringe's contrast, the tracked gap is 9-12 nm off the truth at worst and the
     /// calibration's rotations read 14 nm; tracked with the calibrated model's fringe shape,
     /// under a nanometre. Planned and measured with the lamella's tilt off by +0.0025° (the
     /// calibrated model is never exact): the tracked phase-equivalent gap against the bench's

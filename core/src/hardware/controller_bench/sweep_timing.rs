@@ -111,7 +111,7 @@ pub fn from_monitor(
 /// sample `k`, `k·dt` after it, gets the log at that time (its points `step / speed` apart at
 /// constant speed); samples after the last logged point are left out.
 pub fn from_trigger(samples: usize, dt_s: f64, log: &LambdaLog) -> Result<SweepSamples, String> {
-    if log.wavelengths_nm.len() < 2 || !(log.step_nm > 0.0) {
+    if log.wavelengths_nm.len() < 2 || log.step_nm.is_nan() || log.step_nm <= 0.0 {
         return Err(format!("the laser logged {} points: no sweep to time", log.wavelengths_nm.len()));
     }
     let end_s = log.duration_s();

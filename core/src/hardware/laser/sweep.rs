@@ -67,6 +67,7 @@ impl ScpiLaser {
         rate_nm_per_s: f64,
     ) -> Result<SweepSetup, HwError> {
         let want = self.plan(from_nm, to_nm, rate_nm_per_s)?;
+        #[allow(clippy::type_complexity)]
         let (commands, numbers, words, speed_q): (Vec<String>, [(&str, f64); 3], &[(&str, &str)], &str) =
             if self.keysight() {
                 (
@@ -106,7 +107,7 @@ impl ScpiLaser {
             }
         }
         let rate = self.query_f64(speed_q)? * unit;
-        if !(rate > 0.0) || (rate - want.rate_nm_per_s).abs() > 0.01 * want.rate_nm_per_s {
+        if rate.is_nan() || rate <= 0.0 || (rate - want.rate_nm_per_s).abs() > 0.01 * want.rate_nm_per_s {
             return Err(HwError::bad_reply(
                 &self.name,
                 speed_q,

@@ -28,7 +28,7 @@ pub struct DesignOptions {
 
 impl Default for DesignOptions {
     fn default() -> Self {
-        Self { targets: Target::issue_targets(), margin: 0.8, prior: Extrinsics::nominal_design(), seed: 1 }
+        Self { targets: Target::acceptance_targets(), margin: 0.8, prior: Extrinsics::nominal_design(), seed: 1 }
     }
 }
 

@@ -40,7 +40,7 @@ impl Target {
     /// ≤ 0.01° for β_wf, θ_wf, ≤ 0.2 µm for x_wf, z_wf, and the gap y_wf − Z_et within 0.05 µm,
     /// read as 3σ ≤ 0.05 µm; plus the bootstrap: the sweeps alone must fix the lamella normal to
     /// 0.05° (a rough start for the motion hints, [`Target::bootstrap`]).
-    pub fn issue_targets() -> Vec<Self> {
+    pub fn acceptance_targets() -> Vec<Self> {
         let mut gap = [0.0; N_EXTRINSICS];
         gap[6] = 1.0;
         gap[4] = -1.0;

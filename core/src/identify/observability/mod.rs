@@ -4,12 +4,12 @@
 //! Generic over the parameters: the input is a weighted Jacobian `J` (row `r` already divided by the standard
 //! uncertainty σ_r of observation `r`, columns in the estimator's internal units, e.g. mrad and µm), the weighted
 //! residual vector, and [`ParamInfo`] metadata (name, display unit, scale internal → display, free or masked,
-//! a "useful" uncertainty bound). [`analyse`] returns an [`IdentifiabilityReport`] (SPEC section 8).
+//! a "useful" uncertainty bound). [`analyse`] returns an [`IdentifiabilityReport`] (docs/identification.md, "The verdict").
 //!
 //! # Method
 //!
 //! * **SVD.** `J_F = U·S·Vᵀ` over the free columns `F`, in internal units (the units are chosen so the columns are
-//!   comparable, SPEC section 6.4, and the reported singular values are the SPEC's numbers). When `J_F` has fewer
+//!   comparable: mrad and µm). When `J_F` has fewer
 //!   rows than columns it is padded with zero rows, so `V` is always complete and the missing directions appear
 //!   as zero singular values.
 //! * **Numerical rank.** A direction `v_k` is *null* when `s_k ≤ relative_tolerance · s_max · max(m, n)`.
@@ -47,7 +47,7 @@
 //! * **Unobservable combinations.** The null directions (an orthonormal basis of the null space, made sparse by
 //!   Gauss-Jordan elimination with largest-entry pivoting) and the weak directions, each written as a sparse
 //!   combination (largest |coefficient| normalised to +1, |coefficients| below `coefficient_cutoff` dropped) and
-//!   described with the physical interpretations of SPEC section 6.4 where the parameter names match (fiber
+//!   described with their physical interpretations where the parameter names match (fiber
 //!   direction β_wf/θ_wf, gap split y_wf/Z_et, beam origin x_wf/z_wf against beam angles), or a generic sentence.
 
 mod analysis;

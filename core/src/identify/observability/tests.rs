@@ -114,7 +114,7 @@ fn gap_split_is_named_and_others_unaffected() {
     assert!(rep.warnings.iter().any(|w| w.contains("not determined")));
 }
 
-/// End-effector rotation at q4 = q5 = q6 = 0 (SPEC section 2), rows (1,0,0), (0,0,1), (0,-1,0).
+/// End-effector rotation at q4 = q5 = q6 = 0 (docs/conventions.md), rows (1,0,0), (0,0,1), (0,-1,0).
 fn r_e() -> Matrix3<f64> {
     Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0)
 }
@@ -135,7 +135,7 @@ fn table2_mrad() -> [f64; 4] {
     [0.744f64, -0.595, 0.732, -0.520].map(|d| d.to_radians() * 1e3)
 }
 
-/// The 18 strategy-1 moves (SPEC section 4) as displacements dp (µm) from the DGM at fixed orientation:
+/// The 18 strategy-1 moves (paper section V.A.1) as displacements dp (µm) from the DGM at fixed orientation:
 /// position = (q3, q2, q1) in the world (+q1 along +Z_w, +q2 along +Y_w, +q3 along +X_w).
 fn strategy1_moves() -> Vec<Vector3<f64>> {
     let pos = |q: [f64; 3]| Vector3::new(q[2], q[1], q[0]);
@@ -172,9 +172,9 @@ fn strategy1_jacobian() -> DMatrix<f64> {
     })
 }
 
-// (3) SPEC 6.4: strategy 1 on (β_et, θ_et, β_wf, θ_wf).
+// (3) Strategy 1 on (β_et, θ_et, β_wf, θ_wf).
 #[test]
-fn strategy1_reproduces_spec_singular_values_and_names_fiber_direction() {
+fn strategy1_reproduces_the_reference_singular_values_and_names_fiber_direction() {
     // The measurement equation used here agrees with the crate's model at Table II.
     let (n_t, n_f) = normals(&table2_mrad());
     let e = Extrinsics::from_array([0.744, -0.595, 0.732, -0.520, 1.52, 112.4, 900.0, 113.3]);
@@ -184,7 +184,7 @@ fn strategy1_reproduces_spec_singular_values_and_names_fiber_direction() {
 
     let j = strategy1_jacobian();
     assert_eq!(j.nrows(), 18);
-    let sigma_dl_um = 0.002; // 2 nm per gap change (SPEC 6.4 Fisher study)
+    let sigma_dl_um = 0.002; // 2 nm per gap change (a Fisher study's weighting)
     let jw = &j / sigma_dl_um;
     let params: Vec<ParamInfo> = ParamInfo::extrinsics().into_iter().take(4).collect();
     let rep = analyse(&jw, &DVector::zeros(18), &params, &Options::default()).unwrap();

@@ -48,7 +48,7 @@ pub(super) fn sparse_coefficients(c: &DVector<f64>, names: &[&str], cutoff: f64)
     out.into_iter().map(|(i, x)| (names[i].to_string(), x)).collect()
 }
 
-/// A sentence for a combination: the physical readings of SPEC section 6.4 when the names match, else generic.
+/// A sentence for a combination: the physical readings when the names match, else generic.
 pub(super) fn describe(coefficients: &[(String, f64)], kind: CombinationKind) -> String {
     let cs = coefficient_text(coefficients);
     let names: Vec<&str> = coefficients.iter().map(|(n, _)| n.as_str()).collect();

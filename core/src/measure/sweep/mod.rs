@@ -527,7 +527,7 @@ fn fft_estimate(sp: &Spectrum, n_air: f64) -> Result<GapEstimate, SweepError> {
     })
 }
 
-/// Cramér-Rao bound on the gap from the fringe frequency across a sweep (SPEC §5):
+/// Cramér-Rao bound on the gap from the fringe frequency across a sweep:
 /// σ_L ≥ √3/(n·K·√(η·N)), K = 2π·Δλ/λ², η = B²/(2σ²). nm.
 pub fn crlb_frequency_nm(span_nm: f64, center_nm: f64, eta: f64, samples: usize, n_air: f64) -> f64 {
     let k = TAU * span_nm / (center_nm * center_nm);

@@ -6,7 +6,7 @@ use nalgebra::Vector3;
 use std::f64::consts::TAU;
 
 /// The paper's method: free spectral range from the spacing of the reflection peaks,
-/// Δλ_FSR = λ²/(2·n·L) (SPEC eq. 35/36). Each peak is located by a quadratic fit in λ to
+/// Δλ_FSR = λ²/(2·n·L) (paper eq. 35/36). Each peak is located by a quadratic fit in λ to
 /// its top; L comes from a weighted regression of 1/λ_peak on the peak order
 /// (1/λ_j = const - j/(2nL)). σ from the peak-position uncertainties, scaled by the
 /// regression's χ² when there are three peaks or more. It ignores the offset slope and the

@@ -38,8 +38,8 @@ fn cfg() -> SweepConfig {
 }
 
 #[test]
-fn crlb_matches_the_spec_example() {
-    // SPEC §5: 40 nm sweep, N = 4000, η = 1000 → 8.4 nm (frequency), 62 pm (phase)
+fn crlb_matches_a_worked_example() {
+    // A worked example: 40 nm sweep, N = 4000, η = 1000 → 8.4 nm (frequency), 62 pm (phase)
     let f = crlb_frequency_nm(40.0, 1560.0, 1000.0, 4000, 1.0);
     let p = crlb_phase_nm(1560.0, 1000.0, 4000, 1.0);
     assert!((f - 8.38).abs() < 0.05, "{f}");
@@ -70,7 +70,7 @@ fn fit_recovers_the_gap_within_20nm_with_honest_sigma() {
 
 #[test]
 fn reported_sigma_is_of_the_order_of_the_crlb_and_of_the_scatter() {
-    // η = B²/(2σ²) = 1000 as in the SPEC example: CRLB 8.4 nm
+    // η = B²/(2σ²) = 1000 as in the worked example: CRLB 8.4 nm
     let noise_rel = (1.0f64 / 2000.0).sqrt();
     let crlb = crlb_frequency_nm(SPAN, CENTER, 1000.0, 4000, N_AIR);
     let mut errs = Vec::new();

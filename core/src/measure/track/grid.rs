@@ -198,8 +198,8 @@ pub(super) struct GridRecord<'a> {
 /// The one full pass over the hint, block by block: a branch-free pass over the steps
 /// (finite check, extremes, largest step), the running path and grid coordinate, then the
 /// rare events of the block (knots, extrema, decimated samples) from the block's path
-/// buffer; the same operations in the same order as one sample loop. The extrema were found
-/// before: this pass records the hint and the path at each of them, so nothing later reads
+/// buffer; the same operations in the same order as one sample loop. The extrema are found
+/// beforehand: this pass records the hint and the path at each of them, so nothing later reads
 /// the big arrays at random. Returns the hint's largest excursion from its first sample.
 #[inline(always)]
 pub(super) fn grid_pass(

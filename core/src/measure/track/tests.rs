@@ -578,8 +578,8 @@ fn shaped_tracking_follows_a_rotation_within_1nm() {
     assert!(matches!(track_phase_shaped(&y, &truth, &short, WL, N_AIR, &cfg), Err(FringeError::LengthMismatch { .. })));
 }
 
-/// A hint-scale error of 0.1 % over a two-fringe window biased the harmonic by 2.5 %
-/// of itself before the trend terms: now the estimate is unbiased.
+/// A hint-scale error of 0.1 % over a two-fringe window biases the harmonic by 2.5 % of itself
+/// without the trend terms; with them the estimate is unbiased.
 #[test]
 fn window_harmonic_is_unbiased_by_a_hint_scale_error() {
     let n = 12_500;

@@ -45,7 +45,7 @@ fn wrist_rotation_is_eq_25() {
 fn joint_six_axis_is_the_beam_direction_at_zero() {
     let axes = Chain::femto_6dof().joint_axes(&[0.0; 6]);
     assert_relative_eq!(axes[5].1.into_inner(), Vector3::y(), epsilon = 1e-15);
-    // Joints 4 and 5 turn about X_w and Z_w at q = 0 (SPEC section 9).
+    // Joints 4 and 5 turn about X_w and Z_w at q = 0.
     assert_relative_eq!(axes[3].1.into_inner(), Vector3::x(), epsilon = 1e-15);
     assert_relative_eq!(axes[4].1.into_inner().abs(), Vector3::z(), epsilon = 1e-15);
 }

@@ -1,4 +1,4 @@
-//! Fabry-Perot signal model: the power the fiber/lamella cavity reflects back into the fiber (SPEC §5).
+//! Fabry-Perot signal model: the power the fiber/lamella cavity reflects back into the fiber.
 //! Owns the optical parameters, the Gaussian-beam couplings (defocus, tilt, Gouy phase) and the multi-beam sum.
 //!
 //! Units: lengths in µm, wavelengths in nm (vacuum unless a name says otherwise), angles in
@@ -26,14 +26,14 @@
 //!   propagations gives this closed form exactly (paraxial): the walk-off does not change
 //!   the magnitude, which is the overlap of two Gaussians at an angle 2mθ, and the phase
 //!   a_m·k·θ²·|L| is the path shortening of the tilted beams (for m = 1, the round trip is
-//!   2·|L|·cos θ: the gap measured along the lamella normal). For m = 1, |T_1|² is SPEC's
-//!   tilt loss exp(-(2π·w0·θ/λ)²): SPEC's θ is the angle between the normals, and the
+//!   2·|L|·cos θ: the gap measured along the lamella normal). For m = 1, |T_1|² is the usual
+//!   tilt loss exp(-(2π·w0·θ/λ)²): its θ is the angle between the normals, and the
 //!   doubling of the angle on reflection is inside the formula. The test
 //!   `round_trip_coupling_matches_paraxial_angular_spectrum` checks c_m·T_m against a
 //!   numerical angular-spectrum propagation.
 //! - `g_c = exp(-(k0·n_fiber·w0·θc)²/2)`, k0 = 2π/λ: the cleave angle θc tilts the fiber face,
 //!   so its own reflection returns tilted by 2θc inside the glass (power factor
-//!   exp(-(2π·n_fiber·w0·θc/λ)²), SPEC §5). Approximation: the cleave angle only scales this
+//!   exp(-(2π·n_fiber·w0·θc/λ)²)). Approximation: the cleave angle only scales this
 //!   direct reflection; the refraction of the outgoing beam, (n_fiber - 1)·θc, and the kicks of
 //!   the intracavity reflections on the tilted face are neglected (θ is measured from the
 //!   fiber axis).
@@ -56,14 +56,14 @@
 //! polynomial in two exact phasors, the first beam's round-trip phase and the tilt phase, with
 //! slowly varying coefficients and their analytic derivatives.
 //!
-//! # What the SPEC numbers need
+//! # The fringe's visibility and harmonics
 //!
 //! - Two-beam visibility at |L| ≈ 900 µm: 0.23 for LiNbO3 (R2 = 0.142), 0.22 for R2 = 0.132,
-//!   0.12 for glass (R2 = 0.04): SPEC's "≈ 0.2" holds for LiNbO3 (0.2 exactly needs R2 ≈ 0.11).
+//!   0.12 for glass (R2 = 0.04): the often quoted "≈ 0.2" holds for LiNbO3 (0.2 exactly needs R2 ≈ 0.11).
 //! - Second harmonic of the fringe, H2/H1 ≈ r1·√R2·|c_2/c_1|·e^{-3ε}: it is twice as large at
 //!   small gaps (|c_2/c_1| → 1) as at |L| ≫ z_R (|c_2/c_1| → 1/2). Glass: 3.6 % at 2 µm,
 //!   3.2 % at 20 µm, 1.9 % at 900 µm; LiNbO3: 7.0 % at 2 µm, 6.2 % at 20 µm, 3.6 % at 900 µm.
-//!   So SPEC's "2 % for glass" is the large-gap value and "up to 7 % for LiNbO3" the
+//!   So the often quoted "2 % for glass" is the large-gap value and "up to 7 % for LiNbO3" the
 //!   small-gap one; a tilt lowers both by e^{-3ε} (0.82 at 1°).
 
 mod fabry_perot;

@@ -1,4 +1,4 @@
-//! The Gaussian-beam numbers of SPEC §5 and the per-beam coupling against numerical propagation.
+//! The Gaussian-beam closed forms' numbers and the per-beam coupling against numerical propagation.
 
 use super::*;
 use rustfft::{Fft, FftPlanner};
@@ -19,7 +19,7 @@ fn rayleigh_range_and_divergence_of_smf28() {
 fn tilt_losses_match_spec_table_and_do_not_depend_on_gap() {
     for (deg, spec) in [(1.0, 0.88), (2.0, 0.59), (3.0, 0.30), (5.0, 0.035)] {
         let t = tilt_coupling(5.2, f64::to_radians(deg), WL);
-        assert!((t - spec).abs() < 0.01, "{deg}°: {t}, SPEC {spec}");
+        assert!((t - spec).abs() < 0.01, "{deg}°: {t}, expected {spec}");
         for gap in [0.0, 20.0, 200.0, 900.0] {
             let eta = power_coupling(5.2, gap, f64::to_radians(deg), WL);
             let defocus = power_coupling(5.2, gap, 0.0, WL);
@@ -141,7 +141,7 @@ fn round_trip_coupling_matches_paraxial_angular_spectrum() {
     }
 }
 
-/// SPEC: the coupling formulas agree with (non-paraxial) angular-spectrum propagation to
+/// Claim: the coupling formulas agree with (non-paraxial) angular-spectrum propagation to
 /// 1 % for L = 20-200 µm and θ ≤ 5° (kick of the tilted lamella taken as exp(-2ikθx)).
 /// Found: true except at 200 µm and 5°, where the paraxial power coupling is 1.5 % high
 /// (the returning beam, tilted 10°, is itself no longer paraxial).

@@ -1,4 +1,4 @@
-//! The multi-beam sum against closed forms and demodulated signals, and the SPEC §5 visibility
+//! The multi-beam sum against closed forms and demodulated signals, and the fringe's visibility
 //! and harmonics.
 
 use super::*;
@@ -200,7 +200,7 @@ fn gouy_phase_offsets_fringes_between_20_and_200_um() {
     assert!((lag_um - WL * 1e-3 / N_AIR / 8.0).abs() < 1e-3, "{lag_um} µm");
 }
 
-// ---- SPEC §5 visibility and harmonics ---------------------------------------------------
+// ---- Visibility and harmonics -----------------------------------------------------------
 
 #[test]
 fn two_beam_visibility_at_900_um() {
@@ -234,7 +234,7 @@ fn two_beam_visibility_at_900_um() {
 }
 
 /// H2/H1 from an FFT of one fringe period, against the leading-order estimate
-/// r1·√R2·|c2/c1|·e^{-3ε}, and SPEC's "2 % for glass, up to 7 % for LiNbO3".
+/// r1·√R2·|c2/c1|·e^{-3ε}, and the often quoted "2 % for glass, up to 7 % for LiNbO3".
 #[test]
 fn second_harmonic_of_the_fringe() {
     let ratio = |params: &OpticalParams, gap: f64, tilt: f64| {
@@ -265,7 +265,7 @@ fn second_harmonic_of_the_fringe() {
     assert!((0.017..0.021).contains(&glass_far), "glass at 900 µm: {glass_far}");
     let lnb_near = ratio(&lnb, 2.0, 0.0);
     assert!((0.065..0.075).contains(&lnb_near), "LiNbO3 at 2 µm: {lnb_near}");
-    // At the same small gap, glass is nearly twice SPEC's 2 %.
+    // At the same small gap, glass is nearly twice the quoted 2 %.
     let glass_near = ratio(&glass, 2.0, 0.0);
     assert!(glass_near > 0.033, "glass at 2 µm: {glass_near}");
 }
