@@ -92,8 +92,10 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
     let (lo, hi) =
         sweep.wavelength_nm.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |m, &w| (m.0.min(w), m.1.max(w)));
     assert!((lo - 1550.0).abs() < 0.05 && (hi - 1551.0).abs() < 0.05, "sweep {lo}..{hi} nm");
-    // The moves' wavelength is the resting one.
-    assert!(traces[1].wavelength_nm.iter().all(|w| (w - preset.laser.wavelength_nm).abs() < 1e-6));
+    // The moves' wavelength is the resting one, as the laser reads it back (its set-point
+    // resolution and the realistic monitor's quantisation and noise: within 10 pm).
+    let off = traces[1].wavelength_nm.iter().map(|w| (w - preset.laser.wavelength_nm).abs()).fold(0.0, f64::max);
+    assert!(off < 0.01, "a move's wavelength {off} nm off the resting {} nm", preset.laser.wavelength_nm);
 }
 
 /// Emulated seconds per real second of the calibration below. The SmarAct positions are polled,
