@@ -123,7 +123,7 @@ fn wizard_runs_every_step_identifies_and_validates() {
         w.state.wizard.steps[2].state == StepState::Done
     });
     h.get_by_label("Redo step 1");
-    h.get_by_label("Identify").click();
+    click_in_view(&mut h, "Identify");
     wait_until(&mut h, "the identification", Duration::from_secs(600), |w| {
         w.state.results.report.is_some() || w.state.results.identify_error.is_some()
     });
@@ -311,7 +311,7 @@ fn results_view_refuses_a_fit_the_model_cannot_explain() {
         h.get_by_label(&format!("Run step {} (F5)", step + 1)).click();
         wait_until(&mut h, "a step", Duration::from_secs(300), |w| w.state.wizard.steps[step].state == StepState::Done);
     }
-    h.get_by_label("Identify").click();
+    click_in_view(&mut h, "Identify");
     wait_until(&mut h, "the identification", Duration::from_secs(600), |w| {
         w.state.results.report.is_some() || w.state.results.identify_error.is_some()
     });

@@ -19,6 +19,23 @@ pub fn harness(app: Workbench) -> Harness<'static, Workbench> {
     Harness::builder().with_size(SIZE).wgpu().build_ui_state(|ui, app: &mut Workbench| app.show(ui), app)
 }
 
+/// Scroll the widget labelled `label` into view, as a user would, and click it once it has
+/// stopped moving: a click lands where the widget is drawn, and the wizard's later buttons sit
+/// below its steps.
+pub fn click_in_view(h: &mut Harness<'_, Workbench>, label: &str) {
+    h.get_by_label(label).scroll_to_me();
+    h.run_steps(2);
+    // The scroll is animated: step until the widget stops moving.
+    for _ in 0..120 {
+        let before = h.get_by_label(label).rect();
+        h.run_steps(1);
+        if h.get_by_label(label).rect() == before {
+            break;
+        }
+    }
+    h.get_by_label(label).click();
+}
+
 /// Step the UI (the worker and network I/O run on other threads) until `done` holds, or fail
 /// after `timeout` with the status line and the connection panel's message.
 pub fn wait_until(h: &mut Harness<'_, Workbench>, what: &str, timeout: Duration, done: impl Fn(&Workbench) -> bool) {
