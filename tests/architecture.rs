@@ -14,6 +14,8 @@ use proc_macro2::{Spacing, TokenStream, TokenTree};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
+// Raw identifiers (`mod r#move;`) name the module and its file without their `r#`.
+use syn::ext::IdentExt;
 use syn::visit::{self, Visit};
 use syn::{Attribute, Expr, ImplItem, Item, Meta, Stmt, TraitItem, UseTree};
 
@@ -162,12 +164,12 @@ impl Reader<'_> {
     fn use_tree(&mut self, tree: &UseTree, prefix: &mut Vec<String>) {
         match tree {
             UseTree::Path(p) => {
-                prefix.push(p.ident.to_string());
+                prefix.push(p.ident.unraw().to_string());
                 self.use_tree(&p.tree, prefix);
                 prefix.pop();
             }
-            UseTree::Name(n) => self.imported(prefix, &n.ident.to_string(), None),
-            UseTree::Rename(r) => self.imported(prefix, &r.ident.to_string(), Some(r.rename.to_string())),
+            UseTree::Name(n) => self.imported(prefix, &n.ident.unraw().to_string(), None),
+            UseTree::Rename(r) => self.imported(prefix, &r.ident.unraw().to_string(), Some(r.rename.to_string())),
             UseTree::Glob(_) => {
                 let path = prefix.clone();
                 self.module().paths.push(path);
@@ -193,7 +195,7 @@ impl Reader<'_> {
 
     /// A `mod` item: an inline module is read at once, a declared one queued with its file.
     fn module_item(&mut self, m: &syn::ItemMod) {
-        let name = m.ident.to_string();
+        let name = m.ident.unraw().to_string();
         self.module().children.insert(name.clone());
         let mut path = self.current.clone();
         path.push(name.clone());
@@ -292,7 +294,7 @@ impl<'ast> Visit<'ast> for Reader<'_> {
     }
     fn visit_path(&mut self, path: &'ast syn::Path) {
         if path.leading_colon.is_none() && path.segments.len() > 1 {
-            let segments = path.segments.iter().map(|s| s.ident.to_string()).collect();
+            let segments = path.segments.iter().map(|s| s.ident.unraw().to_string()).collect();
             self.module().paths.push(segments);
         }
         visit::visit_path(self, path);
@@ -586,6 +588,10 @@ fn the_checker_sees_an_upward_arrow_in_a_braced_import() {
     let low = "pub struct L;\nuse crate::mid as m;\npub fn l() { m::f(); }\n";
     let (up, _) = check(&with(clean_tree(), &[("low.rs", low)]));
     assert!(!up.is_empty(), "{up:?}");
+    // Through a raw identifier, which names the same module.
+    let low = "pub struct L;\nuse crate::r#mid::a::A;\n";
+    let (up, _) = check(&with(clean_tree(), &[("low.rs", low)]));
+    assert!(up.iter().any(|a| a.starts_with("low -> mid::a")), "{up:?}");
 }
 
 #[test]

@@ -401,7 +401,7 @@ fn check_fixture(name: &str, transcript: &[String]) {
     assert_eq!(text, want, "the session differs from {}", path.display());
 }
 
-/// The GCS 2 subset the bench needs (see pi_gcs.rs and pi_recorder.rs).
+/// The GCS 2 subset the bench needs (see pi_gcs/mod.rs and pi_gcs/recorder.rs).
 const GCS_SUBSET: [&str; 29] = [
     "*IDN?", "SAI?", "SVO", "SVO?", "VCO", "VCO?", "MOV", "MVR", "POS?", "ONT?", "VEL", "TMN?", "TMX?", "STP", "HLT",
     "ERR?", "DRC", "DRT", "RTR", "RTR?", "DRR?", "DRL?", "TNS?", "FRF?", "FRF", "SPA?", "SPA", "TNR?", "HDR?",

@@ -18,7 +18,6 @@ pub mod emulator;
 pub mod laser;
 pub mod link;
 pub mod pi_gcs;
-pub mod pi_recorder;
 pub mod pi_replies;
 pub mod probe;
 pub mod smaract;

@@ -11,12 +11,10 @@
 pub mod adc;
 pub mod emu_laser;
 pub mod laser;
-mod laser_sweep;
 pub mod local;
 pub mod mcs2;
 pub mod optical_bench;
 pub mod pi;
-mod pi_recorder;
 pub mod smaract;
 
 pub use crate::hardware::clock::EmuClock;

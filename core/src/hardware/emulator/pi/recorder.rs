@@ -4,8 +4,8 @@
 //! own times, through the inputs' ADC. A table that is full stops recording (`DRL?` stays at its
 //! capacity), as the instrument's does.
 
-use super::pi::{edge_after, input_value, Gcs, PiState, Shared};
-use crate::hardware::pi_recorder::{
+use super::{edge_after, input_value, Gcs, PiState, Shared};
+use crate::hardware::pi_gcs::recorder::{
     PARAM_DATA_REC_CHAN_NUMBER, PARAM_DATA_REC_MAX_POINTS, PARAM_SERVO_UPDATE_TIME, RECORD_ACTUAL_POSITION,
     RECORD_INPUT_NORMALIZED, TRIGGER_EXTERNAL, TRIGGER_ON_MOVE,
 };
@@ -15,7 +15,7 @@ pub const MAX_TABLES: usize = 16;
 
 /// The recorder's state.
 #[derive(Debug, Default)]
-pub(super) struct Recorder {
+pub(in crate::hardware::emulator) struct Recorder {
     /// Per table: (source, record option), or nothing.
     tables: Vec<Option<(String, u32)>>,
     rate: u32,
@@ -27,12 +27,12 @@ pub(super) struct Recorder {
 }
 
 impl Recorder {
-    pub(super) fn new(tables: usize) -> Self {
+    pub(in crate::hardware::emulator) fn new(tables: usize) -> Self {
         Recorder { tables: vec![None; tables.clamp(1, MAX_TABLES)], rate: 1, ..Default::default() }
     }
 
     /// A position-changing command: it starts a recording armed for one.
-    pub(super) fn trigger_on_move(&mut self, now: f64) {
+    pub(in crate::hardware::emulator) fn trigger_on_move(&mut self, now: f64) {
         if self.armed && self.external_line.is_none() && self.t_trigger.is_none() {
             self.t_trigger = Some(now);
         }
@@ -83,7 +83,7 @@ fn param_id(text: &str) -> Gcs<u32> {
 }
 
 /// The recorder's configuration: tables, rate, trigger, parameters, and the points recorded.
-pub(super) fn setup(
+pub(in crate::hardware::emulator) fn setup(
     shared: &Shared,
     st: &mut PiState,
     now: f64,
@@ -173,7 +173,12 @@ pub(super) fn setup(
 }
 
 /// `DRR?`: the recorded samples of the given tables, a GCS data-recorder header then one row per sample.
-pub(super) fn recorded_data(shared: &Shared, st: &mut PiState, now: f64, args: &[&str]) -> Gcs<Option<Vec<String>>> {
+pub(in crate::hardware::emulator) fn recorded_data(
+    shared: &Shared,
+    st: &mut PiState,
+    now: f64,
+    args: &[&str],
+) -> Gcs<Option<Vec<String>>> {
     if args.len() < 3 {
         return Err(1);
     }

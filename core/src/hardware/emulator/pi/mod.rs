@@ -1,15 +1,17 @@
 //! PI E-712 emulator: the GCS 2 subset of [`crate::hardware::pi_gcs`], with closed-loop axes moving
 //! at finite speed, `ERR?` semantics (a failed command is silent and leaves its error pending),
-//! analog inputs read through an ADC, and a data recorder ([`super::pi_recorder`]).
+//! analog inputs read through an ADC, and a data recorder ([`recorder`]).
 //!
 //! As strict as the instrument as the sources describe it (see `crate::hardware::pi_gcs`): `VEL`
 //! acts only with velocity control on (`VCO`), otherwise a `MOV` is a step the servo follows at
 //! once; an E-712 with absolute sensors does not know `FRF?` (GCS error 2); `TAV?` (volts), `TNS?`
 //! (normalised, what record option 17 records) and `TSP?` (linearised, physical units) differ.
 
+mod recorder;
+
 use super::adc::Adc;
-use super::pi_recorder::{self, Recorder};
 use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, PhotodiodeFn, Server, SharedAxes};
+use recorder::Recorder;
 use std::io::{BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::sync::{Arc, Mutex};
@@ -338,9 +340,9 @@ fn execute(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str
             Ok(Some(vec![format!("{input}={v}")]))
         }
         "DRC" | "RTR" | "RTR?" | "DRT" | "DRL?" | "TNR?" | "SPA" | "SPA?" | "HDR?" => {
-            pi_recorder::setup(shared, st, now, name, args)
+            recorder::setup(shared, st, now, name, args)
         }
-        "DRR?" => pi_recorder::recorded_data(shared, st, now, args),
+        "DRR?" => recorder::recorded_data(shared, st, now, args),
         "" => Err(1),
         _ => Err(2),
     }

@@ -1,17 +1,19 @@
 //! PI E-712 driver: the GCS 2 ASCII command subset the bench needs, over TCP (port 50000).
 //! Owns command formatting, reply parsing (multi-line replies: a line ending in space-LF continues),
 //! the `ERR?` check after every command, GCS error codes, closed loop and velocity control at
-//! connect; the data recorder is [`super::pi_recorder`].
+//! connect; the data recorder is [`recorder`].
 //!
 //! Sources: PI's GCS 2 command docstrings in PIPython (`pipython/pidevice/common/gcsbasecommands.py`,
 //! release 2.13) and PI's EPICS driver (`PIGCSPiezoController.cpp`, motorPIGCS2). Positions are in
 //! µm (the E-712's unit for the P-563.3CD axes). Errors keep the controller's number and PI's text
 //! for it ([`GcsError`]).
 
-use super::pi_recorder::RecorderFacts;
+pub mod recorder;
+
 use super::pi_replies as replies;
 use super::{parse_f64, AxisInfo, DataRecorder, HwError, Link, StageController, Traffic};
 use crate::bench::AxisUnit;
+use recorder::RecorderFacts;
 use std::fmt;
 
 /// The E-712's default TCP port.

@@ -1,6 +1,6 @@
 //! Tunable-laser emulator on loopback TCP, for either command family of [`crate::hardware::laser`]:
 //! the wavelength (an [`EmuLaser`] a photodiode closure may read), `*IDN?`, an SCPI error queue
-//! read by `:SYST:ERR?`, the sweep ([`super::laser_sweep`]), and fault injection:
+//! read by `:SYST:ERR?`, the sweep ([`sweep`]), and fault injection:
 //! [`Fault::DropConnection`], [`Fault::NoReply`], [`Fault::ErrorCode`] (queued, the command ignored)
 //! and [`Fault::Limit`], which aborts a running sweep where it is.
 //!
@@ -10,8 +10,9 @@
 //! replies with no terminator after a binary block, and a Keysight that starts with amplitude
 //! modulation on and its trigger output off.
 
+mod sweep;
+
 use super::emu_laser::{EmuLaser, SweepProfile};
-use super::laser_sweep::{self, Sweep};
 use super::{EmuClock, Fault, FaultSpec, Faults, Server, Trigger};
 use crate::hardware::controller_bench::LaserFamily;
 use std::collections::VecDeque;
@@ -19,6 +20,7 @@ use std::io::{BufRead, BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
+use sweep::Sweep;
 
 /// What the emulated laser does that an ideal one would not.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -276,7 +278,7 @@ fn handle(shared: &Shared, command: &str) -> Reply {
     if let Some(t) = st.abort_at_s.filter(|&t| now >= t) {
         st.abort_at_s = None;
         st.faults.fired.push((command.to_string(), Fault::Limit));
-        laser_sweep::abort(shared, &mut st, t);
+        sweep::abort(shared, &mut st, t);
     }
     match st.faults.take(command, now) {
         Some(Fault::DropConnection) => return Reply::Drop,
@@ -285,7 +287,7 @@ fn handle(shared: &Shared, command: &str) -> Reply {
             st.errors.push_back((c, "Injected error".into()));
             return Reply::None;
         }
-        Some(Fault::Limit) => laser_sweep::abort(shared, &mut st, now),
+        Some(Fault::Limit) => sweep::abort(shared, &mut st, now),
         None => {}
     }
     match execute(shared, &mut st, now, command) {
@@ -433,7 +435,7 @@ fn execute(shared: &Shared, st: &mut State, now: f64, command: &str) -> Scpi<Rep
         "WAV?" => text(format!("{}", shared.laser.wavelength_at(now) / unit_nm(st))),
         "WAV" => {
             let nm = wavelength_arg(st, arg)?;
-            if laser_sweep::busy(st, now) {
+            if sweep::busy(st, now) {
                 return Err(CONFLICT);
             }
             shared.laser.set(nm);
@@ -463,8 +465,8 @@ fn execute(shared: &Shared, st: &mut State, now: f64, command: &str) -> Scpi<Rep
             Ok(Reply::None)
         }
         "TRIG:OUTP?" => text(st.trigger_out.clone()),
-        "READ:POIN?" | "READ:DATA?" => laser_sweep::log_readout(st, now, &key, arg),
-        _ => laser_sweep::command(shared, st, now, &key, arg),
+        "READ:POIN?" | "READ:DATA?" => sweep::log_readout(st, now, &key, arg),
+        _ => sweep::command(shared, st, now, &key, arg),
     }
 }
 

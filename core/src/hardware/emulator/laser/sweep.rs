@@ -3,7 +3,7 @@
 //! the start with its latency and run-up, the state and `FLAG?` queries, the abort, and the log of
 //! every step reached, ready only after the sweep's post-processing.
 
-use super::laser::{
+use super::{
     quantity, unit_nm, wavelength_arg, Reply, Scpi, Shared, State, CONFLICT, DATA_TYPE, OUT_OF_RANGE, UNDEFINED_HEADER,
 };
 use crate::hardware::laser::scpi::encode_block;
@@ -13,15 +13,15 @@ use crate::hardware::laser::{keysight, santec};
 /// the stop (or the abort) at `end_s`, the laser busy (run-out, return) until `busy_until_s`,
 /// the log ready at `log_ready_s`.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Sweep {
+pub(in crate::hardware::emulator) struct Sweep {
     from: f64,
     to: f64,
     rate: f64,
     step: f64,
     t_cmd_s: f64,
     t0_s: f64,
-    pub(super) end_s: f64,
-    pub(super) busy_until_s: f64,
+    pub(in crate::hardware::emulator) end_s: f64,
+    pub(in crate::hardware::emulator) busy_until_s: f64,
     log_ready_s: f64,
     /// The laser logs its wavelength at each trigger (Keysight: lambda logging on).
     logging: bool,
@@ -43,12 +43,12 @@ impl Sweep {
 }
 
 /// The laser is sweeping (or still running out) at `now`.
-pub(super) fn busy(st: &State, now: f64) -> bool {
+pub(in crate::hardware::emulator) fn busy(st: &State, now: f64) -> bool {
     st.sweep.is_some_and(|s| now < s.busy_until_s)
 }
 
 /// Stop a running sweep where it is at `at_s` (now, or an armed abort's time already passed).
-pub(super) fn abort(shared: &Shared, st: &mut State, at_s: f64) {
+pub(in crate::hardware::emulator) fn abort(shared: &Shared, st: &mut State, at_s: f64) {
     if let Some(s) = st.sweep.as_mut().filter(|s| at_s < s.busy_until_s && at_s >= s.t_cmd_s) {
         s.end_s = s.end_s.min(at_s);
         s.busy_until_s = at_s;
@@ -80,7 +80,13 @@ fn check(st: &State) -> Option<(i64, &'static str)> {
 }
 
 /// Sweep settings, start, stop, state and flag.
-pub(super) fn command(shared: &Shared, st: &mut State, now: f64, key: &str, arg: &str) -> Scpi<Reply> {
+pub(in crate::hardware::emulator) fn command(
+    shared: &Shared,
+    st: &mut State,
+    now: f64,
+    key: &str,
+    arg: &str,
+) -> Scpi<Reply> {
     let keysight = st.keysight();
     let text = |s: String| Ok(Reply::Text(s));
     let unit = unit_nm(st);
@@ -231,7 +237,7 @@ fn step_arg(st: &State, arg: &str) -> Scpi<f64> {
 
 /// The lambda log of the last sweep: its number of points or its data as a binary block (Keysight:
 /// f64 metres; Santec: u32 0.1 pm in Legacy, f64 metres in SCPI), once the log is ready.
-pub(super) fn log_readout(st: &State, now: f64, key: &str, arg: &str) -> Scpi<Reply> {
+pub(in crate::hardware::emulator) fn log_readout(st: &State, now: f64, key: &str, arg: &str) -> Scpi<Reply> {
     let keysight = st.keysight();
     if keysight != arg.eq_ignore_ascii_case("LLOG") && !(keysight && arg.eq_ignore_ascii_case("LLOGGING")) {
         return Err(DATA_TYPE);

@@ -8,9 +8,9 @@
 //! E-725…", `get_hdr_options` parses `HDR?`; `gcsbasecommands.py`: `TNR?`, `TNS?` "normalized value
 //! of input signal channels", `TSP?` "position in physical units", `TAV?` "voltage of analog input").
 
-use super::pi_gcs::PiGcs;
-use super::pi_replies as replies;
-use super::{parse_f64, DataRecorder, HwError, RecordTrigger, RecordedBlock, RecorderRequest, RecorderSetup};
+use super::PiGcs;
+use crate::hardware::pi_replies as replies;
+use crate::hardware::{parse_f64, DataRecorder, HwError, RecordTrigger, RecordedBlock, RecorderRequest, RecorderSetup};
 
 /// Record option: actual position of an axis (PIPython `ACTUAL_POSITION_2`).
 pub const RECORD_ACTUAL_POSITION: u32 = 2;
