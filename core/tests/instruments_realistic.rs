@@ -114,6 +114,36 @@ fn a_sweep_timed_by_the_trigger_output_of_a_late_laser_measures_the_gap() {
     sweep_matches_the_virtual_bench(LaserFamily::Santec, true, 1580.0, 1540.0);
 }
 
+/// On a clock 100× real time a turn of the loop that follows a segment (its polls and recorder
+/// reads) lasts longer than a short sweep's run-out or a move's settling: the end of each segment
+/// is stamped when the laser or the controller says it is done, so that every sweep is recorded to
+/// its stop (the monitor gives its whole constant-speed part) and every move to its target.
+#[test]
+fn on_a_fast_clock_every_sweep_reaches_its_stop_and_every_move_its_target() {
+    let (_emus, _laser, mut bench) = optical_bench(LaserFamily::Keysight, false, 100.0);
+    let mut segments = vec![];
+    for k in 0..4 {
+        segments.push(Segment::Sweep { from_nm: 1550.0, to_nm: 1551.0, rate_nm_per_s: 10.0, label: format!("s{k}") });
+        let to = JointTarget::default().with(2, if k % 2 == 0 { 10.0 } else { 0.0 });
+        segments.push(Segment::Move { to, record: true, label: format!("m{k}") });
+    }
+    let hw = run(&mut bench, &plan(segments));
+    hw.outcome.unwrap();
+    assert_eq!(hw.traces.len(), 8);
+    // Two samples at 10 nm/s and 0.5 ms, and the monitor's noise.
+    let tol_nm = 0.012;
+    for (k, t) in hw.traces.iter().enumerate() {
+        if k % 2 == 0 {
+            let (lo, hi) = (t.wavelength_nm[0], *t.wavelength_nm.last().unwrap());
+            assert!((lo - 1550.0).abs() < tol_nm && (hi - 1551.0).abs() < tol_nm, "{}: {lo}..{hi} nm", t.meta.label);
+        } else {
+            let want = if k % 4 == 1 { 10.0 } else { 0.0 };
+            let last = *t.q3_um.last().unwrap();
+            assert!((last - want).abs() < 0.01, "{}: ends at q3 = {last} µm, target {want}", t.meta.label);
+        }
+    }
+}
+
 /// A bench whose laser has neither its monitor nor its trigger output wired cannot time a sweep:
 /// it says so and runs its plans without sweeps rather than guess from the start command.
 #[test]
