@@ -114,6 +114,41 @@ fn a_sweep_timed_by_the_trigger_output_of_a_late_laser_measures_the_gap() {
     sweep_matches_the_virtual_bench(LaserFamily::Santec, true, 1580.0, 1540.0);
 }
 
+/// On a clock 100× real time a turn of the loop that follows a segment (its polls, recorder reads
+/// and the live view) lasts longer than a short sweep's run-out or a move's settling: the end of each segment
+/// is stamped when the laser or the controller says it is done, so that every sweep is recorded to
+/// its stop (the monitor gives its whole constant-speed part) and every move to its target.
+#[test]
+fn on_a_fast_clock_every_sweep_reaches_its_stop_and_every_move_its_target() {
+    let (_emus, _laser, mut bench) = optical_bench(LaserFamily::Keysight, false, 100.0);
+    let mut segments = vec![];
+    for k in 0..4 {
+        segments.push(Segment::Sweep { from_nm: 1550.0, to_nm: 1551.0, rate_nm_per_s: 10.0, label: format!("s{k}") });
+        let to = JointTarget::default().with(2, if k % 2 == 0 { 10.0 } else { 0.0 });
+        segments.push(Segment::Move { to, record: true, label: format!("m{k}") });
+    }
+    // A host as busy as a live view makes it: 3 ms of real time (0.3 s of bench time) spent on
+    // the samples in every turn of the loop, between its clock reading and its questions.
+    let cancel = AtomicBool::new(false);
+    let mut slow_view = |_: &Trace, _: usize| std::thread::sleep(Duration::from_millis(3));
+    let mut control = RunControl { cancel: &cancel, on_samples: &mut slow_view, on_progress: &mut |_| {} };
+    let hw = run_plan(&mut bench, &plan(segments), &mut control);
+    hw.outcome.unwrap();
+    assert_eq!(hw.traces.len(), 8);
+    // Two samples at 10 nm/s and 0.5 ms, and the monitor's noise.
+    let tol_nm = 0.012;
+    for (k, t) in hw.traces.iter().enumerate() {
+        if k % 2 == 0 {
+            let (lo, hi) = (t.wavelength_nm[0], *t.wavelength_nm.last().unwrap());
+            assert!((lo - 1550.0).abs() < tol_nm && (hi - 1551.0).abs() < tol_nm, "{}: {lo}..{hi} nm", t.meta.label);
+        } else {
+            let want = if k % 4 == 1 { 10.0 } else { 0.0 };
+            let last = *t.q3_um.last().unwrap();
+            assert!((last - want).abs() < 0.01, "{}: ends at q3 = {last} µm, target {want}", t.meta.label);
+        }
+    }
+}
+
 /// A bench whose laser has neither its monitor nor its trigger output wired cannot time a sweep:
 /// it says so and runs its plans without sweeps rather than guess from the start command.
 #[test]

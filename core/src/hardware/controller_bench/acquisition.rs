@@ -5,7 +5,8 @@
 
 use super::ControllerBench;
 use crate::hardware::{HwError, RecordTrigger, RecorderRequest, Traffic};
-use crate::plan::TimedSegment;
+use crate::model::robot::JointType;
+use crate::plan::{TimedMotion, TimedSegment};
 use crate::trace::{Trace, TraceMeta};
 
 /// Longest round trip (s, real time) of a position poll kept in a recording.
@@ -40,6 +41,13 @@ pub(super) struct Acquisition {
     pub(super) trace: Trace,
     /// How well the polls were timed (for the log).
     pub(super) timing: PollTiming,
+}
+
+impl Acquisition {
+    /// Samples recorded from the trigger up to bench time `end_s`.
+    fn samples_to(&self, end_s: f64) -> usize {
+        ((end_s - self.t_trigger_s) / self.dt_s).floor().max(0.0) as usize + 1
+    }
 }
 
 /// How well a recording's polls were timed, logged at its end: long exchanges mean a busy host,
@@ -177,7 +185,7 @@ impl ControllerBench {
             acq.t_trigger_known = true;
         }
         if let Some(end) = up_to_s {
-            let last = ((end - acq.t_trigger_s) / acq.dt_s).floor().max(0.0) as usize + 1;
+            let last = acq.samples_to(end);
             available = available.min(last);
         }
         let available = available.min(acq.read.saturating_add(max_rows));
@@ -241,12 +249,13 @@ impl ControllerBench {
         end: f64,
     ) -> Result<(), HwError> {
         self.poll(a, true)?;
-        // The recorder may lag a poll behind: wait for the last samples.
-        let wait_until = self.bench_now() + 1.0;
+        // The recorder may lag a poll behind (it started when the move command arrived, after the
+        // bench's stamp): wait for the last samples, a second of bench time and at least 0.2 s of
+        // real time (on a fast clock a second is a few of the host's scheduling delays).
+        let wait_until = self.bench_now() + 1.0f64.max(0.2 * self.clock.scale());
         loop {
             self.read_recorder(a, Some(end), usize::MAX)?;
-            let needed = ((end - a.t_trigger_s) / a.dt_s).floor().max(0.0) as usize + 1;
-            let have_all = a.t_trigger_known && a.read >= needed.min(a.capacity.unwrap_or(usize::MAX));
+            let have_all = a.t_trigger_known && a.read >= a.samples_to(end).min(a.capacity.unwrap_or(usize::MAX));
             if have_all || self.bench_now() > wait_until {
                 break;
             }
@@ -266,13 +275,41 @@ impl ControllerBench {
         let keep = a.trace.t_s.partition_point(|&t| t <= end + 1e-9);
         keep_range(&mut a.trace, 0, keep);
         self.log_recording(a);
+        self.check_recorded_end(a, seg)
+    }
+
+    /// A move's recording ends with its recorded joints on their targets (as `check_arrival` reads
+    /// them at rest): one that ends short of them lost the end of the motion.
+    fn check_recorded_end(&self, a: &Acquisition, seg: &TimedSegment) -> Result<(), HwError> {
+        if !matches!(seg.motion, TimedMotion::Move { .. }) {
+            return Ok(());
+        }
+        for &j in &a.recorded_joints {
+            let Some(&last) = a.trace.joint_column(j).last() else { continue };
+            let (tol, unit) = match self.robot.links[j].joint {
+                JointType::Prismatic => (0.01, "µm"),
+                JointType::Revolute => (1e-4, "°"),
+            };
+            if (last - seg.to_display[j]).abs() > tol {
+                return Err(HwError::Usage {
+                    controller: self.config.photodiode.controller.clone(),
+                    problem: format!(
+                        "the recording of `{}` ended with joint {} at {last:.4} {unit}, short of its target {:.4} {unit}: it stopped before the motion did",
+                        seg.label, self.robot.links[j].name, seg.to_display[j]
+                    ),
+                });
+            }
+        }
         Ok(())
     }
 
-    /// A recorder that has filled its tables while the segment still runs loses the rest: a fault.
-    pub(super) fn check_capacity(&self, a: &Acquisition, label: &str) -> Result<(), HwError> {
+    /// A recorder that had filled its tables when the segment was seen still running (the
+    /// question asked at bench time `asked_s`) lost the rest: a fault. Its samples are read behind
+    /// time, so its tables are judged full by the time they last, not by the samples read.
+    pub(super) fn check_capacity(&self, a: &Acquisition, label: &str, asked_s: f64) -> Result<(), HwError> {
+        let full = |c: usize| a.read >= c || (a.t_trigger_known && asked_s > a.t_trigger_s + c as f64 * a.dt_s);
         match a.capacity {
-            Some(c) if a.read >= c => Err(HwError::Usage {
+            Some(c) if full(c) => Err(HwError::Usage {
                 controller: self.config.photodiode.controller.clone(),
                 problem: format!(
                     "the data recorder filled its {c} samples per table ({:.1} s at {:.2} ms) before segment `{label}` ended: the segment ran longer than planned",

@@ -55,9 +55,15 @@ impl ControllerBench {
             }
             a.timing.trigger_rtt_s = trigger_rtt_s;
         }
-        if let Some(s) = &sweep {
-            self.laser.start_sweep(s.from_nm, s.to_nm, s.rate_nm_per_s)?;
-        }
+        // A sweep's time runs from its start command, sent after the stages' (a laser without a
+        // state query is taken as done when that time is up).
+        let t_start = match &sweep {
+            Some(s) => {
+                self.laser.start_sweep(s.from_nm, s.to_nm, s.rate_nm_per_s)?;
+                self.bench_now()
+            }
+            None => t_start,
+        };
         let Some(done_at) = self.follow_motion(seg, acq, control, t_start, sweep.as_ref())? else {
             return Ok(Stop::Cancelled);
         };
@@ -118,24 +124,39 @@ impl ControllerBench {
                 Some(t) if now >= t => return Ok(Some(t)),
                 Some(_) => {}
                 None => {
+                    // Bench time at which the segment is known to be still running if it is not
+                    // finished: when its controller or laser was asked, else its planned end.
+                    let mut running_at = self.bench_now();
                     let finished = match seg.motion {
                         TimedMotion::Move { .. } => self.all_on_target()?,
                         TimedMotion::Sweep { .. } => {
                             // The laser's state, asked every 10 ms of real time once its time is up.
-                            now >= t_start + expected_s && laser_asked.elapsed().as_secs_f64() >= 0.01 && {
+                            let ask = now >= t_start + expected_s && laser_asked.elapsed().as_secs_f64() >= 0.01;
+                            if !ask {
+                                running_at = running_at.min(t_start + expected_s);
+                            }
+                            ask && {
                                 laser_asked = std::time::Instant::now();
                                 !self.laser.sweep_running()?
                             }
                         }
-                        TimedMotion::Dwell => now >= t_start + seg.duration_s,
+                        TimedMotion::Dwell => {
+                            running_at = running_at.min(t_start + seg.duration_s);
+                            now >= t_start + seg.duration_s
+                        }
                     };
                     if !finished {
                         // Still running with the recorder full: the rest of the segment is lost.
                         if let Some(a) = acq.as_ref() {
-                            self.check_capacity(a, &seg.label)?;
+                            self.check_capacity(a, &seg.label, running_at)?;
                         }
                     }
                     if finished {
+                        // The motion ended before the controller (or the laser) said so: its end is
+                        // stamped after the answer. `now` was read before this turn's polls and
+                        // reads, which on a busy host or a fast clock last longer than the settling
+                        // time: stamped there, the recording lost the end of the motion.
+                        let answered_s = self.bench_now();
                         // The stages stand still from here: a poll now is exact whatever its round
                         // trip, and bounds the interpolation at the end of the motion (polls during
                         // the motion may all have been dropped on a busy host).
@@ -145,7 +166,7 @@ impl ControllerBench {
                         // A dwell ends on time, however late the loop notices.
                         done_at = Some(match seg.motion {
                             TimedMotion::Dwell => t_start + seg.duration_s,
-                            _ => now + settle_s,
+                            _ => answered_s + settle_s,
                         });
                     } else if now > deadline {
                         return Err(self.overdue(seg, sweep.is_some(), deadline - t_start));

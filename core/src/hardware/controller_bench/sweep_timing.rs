@@ -39,7 +39,9 @@ fn fit_line(t: &[f64], p: &[f64]) -> (f64, f64) {
 /// quantisation; the line is followed outward while the readings stay on it (within 6σ of its
 /// residual), which leaves out the run-up, the run-out and the rest before and after. Each kept
 /// sample gets the line's wavelength, or, with the laser's log, the logged wavelength at the
-/// line's position along the sweep (the log's points are evenly spaced in the sweep).
+/// line's position along the sweep (the log's points are evenly spaced in the sweep). A recording
+/// that ends while the readings are still on the line, short of the stop, lost the sweep's end:
+/// refused, not taken for a shorter sweep.
 pub fn from_monitor(
     t_s: &[f64],
     monitor_nm: &[f64],
@@ -88,12 +90,22 @@ pub fn from_monitor(
         let p = a + b * t_s[k];
         (0.0..=span).contains(&p) && (progress[k] - p).abs() <= (6.0 * sigma).max(1e-3)
     };
+    let n = progress.len().min(t_s.len());
     let (mut lo, mut hi) = (central[0], central[central.len() - 1]);
     while lo > 0 && on_line(lo - 1) {
         lo -= 1;
     }
-    while hi + 1 < progress.len().min(t_s.len()) && on_line(hi + 1) {
+    while hi + 1 < n && on_line(hi + 1) {
         hi += 1;
+    }
+    // Still on the line at the recording's last sample, short of the stop by more than two
+    // samples' travel and the noise: the recording ended before the sweep did.
+    let short_nm = span - (a + b * t_s[hi]);
+    if hi + 1 == n && hi > 0 && short_nm > 2.0 * b * (t_s[hi] - t_s[hi - 1]) + 6.0 * sigma {
+        return Err(format!(
+            "the recording ended {short_nm:.4} nm before the sweep's stop at {:.4} nm: it stopped before the laser did",
+            setup.to_nm
+        ));
     }
     let wavelengths_nm = (lo..=hi)
         .map(|k| {
@@ -177,6 +189,10 @@ mod tests {
         let scaled: Vec<f64> = m.iter().map(|w| 1550.0 + 1.2 * (w - 1550.0)).collect();
         let e = from_monitor(&t, &scaled, &setup(), None).unwrap_err();
         assert!(e.contains("check the monitor's scale"), "{e}");
+        // A recording that ends before the sweep does is refused, not taken for a shorter sweep.
+        let cut = (0.045 + 0.16) / dt;
+        let e = from_monitor(&t[..cut as usize], &m[..cut as usize], &setup(), None).unwrap_err();
+        assert!(e.contains("before the sweep's stop"), "{e}");
         // A monitor that sees nothing is refused.
         assert!(from_monitor(&t, &vec![1550.0; t.len()], &setup(), None).unwrap_err().contains("is it wired"));
     }
