@@ -5,7 +5,6 @@
 
 use super::ControllerBench;
 use crate::hardware::{HwError, RecordTrigger, RecorderRequest, Traffic};
-use crate::model::robot::JointType;
 use crate::plan::{TimedMotion, TimedSegment};
 use crate::trace::{Trace, TraceMeta};
 
@@ -278,18 +277,15 @@ impl ControllerBench {
         self.check_recorded_end(a, seg)
     }
 
-    /// A move's recording ends with its recorded joints on their targets (as `check_arrival` reads
-    /// them at rest): one that ends short of them lost the end of the motion.
+    /// A move's recording ends with its recorded joints on their targets (within the tolerance
+    /// `check_arrival` uses at rest): one that ends short of them lost the end of the motion.
     fn check_recorded_end(&self, a: &Acquisition, seg: &TimedSegment) -> Result<(), HwError> {
         if !matches!(seg.motion, TimedMotion::Move { .. }) {
             return Ok(());
         }
         for &j in &a.recorded_joints {
             let Some(&last) = a.trace.joint_column(j).last() else { continue };
-            let (tol, unit) = match self.robot.links[j].joint {
-                JointType::Prismatic => (0.01, "µm"),
-                JointType::Revolute => (1e-4, "°"),
-            };
+            let (tol, unit) = self.arrival_tolerance(j);
             if (last - seg.to_display[j]).abs() > tol {
                 return Err(HwError::Usage {
                     controller: self.config.photodiode.controller.clone(),

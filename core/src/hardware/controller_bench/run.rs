@@ -193,14 +193,19 @@ impl ControllerBench {
         }
     }
 
+    /// How far from its target joint `j` may stand once arrived, and the unit it is read in.
+    pub(super) fn arrival_tolerance(&self, j: usize) -> (f64, &'static str) {
+        match self.robot.links[j].joint {
+            JointType::Prismatic => (0.01, "µm"),
+            JointType::Revolute => (1e-4, "°"),
+        }
+    }
+
     /// After a move: every joint at its target. A lost command looks like a finished move.
     fn check_arrival(&mut self, seg: &TimedSegment) -> Result<(), HwError> {
         let q = self.read_joints()?;
         for (j, &qj) in q.iter().enumerate() {
-            let (tol, unit) = match self.robot.links[j].joint {
-                JointType::Prismatic => (0.01, "µm"),
-                JointType::Revolute => (1e-4, "°"),
-            };
+            let (tol, unit) = self.arrival_tolerance(j);
             if (qj - seg.to_display[j]).abs() > tol {
                 let m = self.joints[j];
                 return Err(HwError::LimitReached {
