@@ -339,3 +339,62 @@ fn a_bench_on_an_mcs2_moves_its_wrist() {
     let q = bench.position_display();
     assert!((3..6).all(|j| (q[j] - to[j]).abs() < 1e-6), "{q:?}");
 }
+
+/// Where an axis's move that started after `after_s` stands a tenth of the way through its
+/// duration, as a fraction of its distance (emulated time, read from the emulator's own axis): a
+/// straight ramp gives 0.1, a move that first accelerates less.
+fn fraction_at_a_tenth(axes: &photorobot_core::hardware::emulator::SharedAxes, axis: usize, after_s: f64) -> f64 {
+    let axes = axes.lock().unwrap();
+    let a = &axes[axis];
+    let (from, to) = (a.position_at(after_s), a.target_at(after_s + 1e3));
+    let bisect = |mut lo: f64, mut hi: f64, moved: &dyn Fn(f64) -> bool| {
+        for _ in 0..80 {
+            let mid = 0.5 * (lo + hi);
+            if moved(mid) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        hi
+    };
+    let start = bisect(after_s, after_s + 1e3, &|t| a.position_at(t) != from);
+    let end = bisect(start, start + 1e3, &|t| !a.moving_at(t));
+    (a.position_at(start + 0.1 * (end - start)) - from) / (to - from)
+}
+
+/// Every stage moves as a straight ramp at the speed set, so that the joints of one segment,
+/// each given a speed in proportion to its distance, stay on their straight line in joint space
+/// between two waypoints: the E-712's target ramps at its slew rate (it has no acceleration), and
+/// the MCS and MCS2 drivers switch acceleration control off at connect and read it back. (With a
+/// goniometer accelerating at 20 °/s² beside the piezo stage's ramps, a validation rotation's gap
+/// swung 180 nm between waypoints.)
+#[test]
+fn every_stage_moves_as_a_straight_ramp_at_the_speed_set() {
+    let (emu, mut pi) = pi(PiEmulatorConfig::default(), 1.0);
+    let clock = EmuClock::new(1.0);
+    pi.set_velocity(0, 100.0).unwrap();
+    let t0 = clock.now_s();
+    pi.move_absolute(&[(0, 170.0)]).unwrap();
+    let f = fraction_at_a_tenth(&emu.axes(), 0, t0 - 1.0);
+    assert!((f - 0.1).abs() < 0.005, "E-712, 20 µm at 100 µm/s: {f} of the way a tenth through");
+
+    let emu = SmarActEmulator::start(EmuClock::new(1.0), SmarActEmulatorConfig::default()).unwrap();
+    let transcript = Arc::new(Mutex::new(Vec::new()));
+    let mut mcs = SmarActMcs::connect("MCS", &emu.addr().to_string(), 1.0, &[]).unwrap();
+    mcs.set_transcript(Some(transcript.clone()));
+    mcs.reconnect().unwrap();
+    let t = transcript.lock().unwrap().clone();
+    assert!(t.iter().any(|l| l == "> :SCLA0,0") && t.iter().any(|l| l == "< :CLA0,0"), "set and read back: {t:?}");
+    mcs.set_velocity(0, 1.0).unwrap();
+    mcs.move_absolute(&[(0, 0.24)]).unwrap();
+    let f = fraction_at_a_tenth(&emu.axes(), 0, 0.0);
+    assert!((f - 0.1).abs() < 0.005, "MCS goniometer, 0.24° at 1 °/s: {f} of the way a tenth through");
+
+    let emu = Mcs2Emulator::start(EmuClock::new(1.0), Mcs2EmulatorConfig::default()).unwrap();
+    let mut mcs2 = SmarActMcs2::connect("MCS2", &emu.addr().to_string(), 1.0, &[(-12.0, 12.0); 3]).unwrap();
+    mcs2.set_velocity(1, 1.0).unwrap();
+    mcs2.move_absolute(&[(1, 0.24)]).unwrap();
+    let f = fraction_at_a_tenth(&emu.axes(), 1, 0.0);
+    assert!((f - 0.1).abs() < 0.005, "MCS2 goniometer, 0.24° at 1 °/s: {f} of the way a tenth through");
+}

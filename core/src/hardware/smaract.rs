@@ -135,6 +135,8 @@ pub enum McsReply {
     SystemId(u64),
     /// `:ST<ch>,<type>`: the channel's sensor type (`:GST`).
     SensorType { channel: i64, sensor: i64 },
+    /// `:CLA<ch>,<nm/s² | µ°/s²>`: the channel's closed-loop acceleration (`:GCLA`; 0: off).
+    Acceleration { channel: i64, per_s2: i64 },
 }
 
 /// Parse one reply line; `None` if it is not one of the replies above.
@@ -148,6 +150,10 @@ pub fn parse_reply(line: &str) -> Option<McsReply> {
     if let Some(rest) = body.strip_prefix("ST") {
         let v = nums(rest)?;
         return (v.len() == 2 && v[1] >= 0).then(|| McsReply::SensorType { channel: v[0], sensor: v[1] });
+    }
+    if let Some(rest) = body.strip_prefix("CLA") {
+        let v = nums(rest)?;
+        return (v.len() == 2 && v[1] >= 0).then(|| McsReply::Acceleration { channel: v[0], per_s2: v[1] });
     }
     if let Some(rest) = body.strip_prefix("PPK") {
         let v = nums(rest)?;
@@ -240,12 +246,41 @@ impl SmarActMcs {
             axes.push(AxisInfo { id: ch.to_string(), unit });
             sensors.push(sensor);
         }
+        for ch in 0..n {
+            self.acceleration_off(ch)?;
+        }
         self.sensors = sensors;
         self.targets = vec![None; axes.len()];
         self.limits.resize(axes.len(), (f64::NEG_INFINITY, f64::INFINITY));
         self.axes = axes;
         self.system_id = self.read_system_id()?;
         Ok(())
+    }
+
+    /// `:SCLA<ch>,0`, read back with `:GCLA<ch>`: acceleration control off, so that a closed-loop
+    /// move runs at its `:SCLS` speed from start to end, a straight ramp like the piezo stage's
+    /// slew-rate-limited moves. With each stage accelerating its own way, the joints of one segment
+    /// leave their straight line in joint space: a validation rotation's gap swung 180 nm between
+    /// waypoints. (MCS ASCII `SCLA`/`GCLA`, the ESRF BLISS driver's `closed_loop_acceleration`:
+    /// "0 disables acceleration control".) A firmware without the command (error 2) moves as
+    /// configured; that is logged.
+    fn acceleration_off(&mut self, ch: i64) -> Result<(), HwError> {
+        let set = format!(":SCLA{ch},0");
+        match self.request(&set)? {
+            McsReply::Error(e) if e.code == 0 => {}
+            McsReply::Error(e) if e.code == 2 => {
+                tracing::warn!(controller = %self.name, channel = ch, "`{set}` refused as unknown: the channel keeps its acceleration");
+                return Ok(());
+            }
+            McsReply::Error(e) => return Err(self.mcs(&set, e)),
+            other => return Err(self.bad(&set, &format!("{other:?}"), &format!("`:E{ch},0`"))),
+        }
+        let get = format!(":GCLA{ch}");
+        match self.request(&get)? {
+            McsReply::Acceleration { channel, per_s2: 0 } if channel == ch => Ok(()),
+            McsReply::Error(e) => Err(self.mcs(&get, e)),
+            other => Err(self.bad(&get, &format!("{other:?}"), &format!("`:CLA{ch},0` (acceleration control off)"))),
+        }
     }
 
     /// `:GST<ch>`: the channel's sensor type (MCS ASCII; EPICS `getVal("GST")`).

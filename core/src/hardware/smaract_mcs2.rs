@@ -121,6 +121,20 @@ impl SmarActMcs2 {
                 ));
             }
             self.command(&format!(":CHAN{ch}:HOLD -1"))?;
+            // Acceleration control off: every closed-loop move runs at `VEL` from start to end,
+            // a straight ramp like the piezo stage's, so that the joints of one segment stay on
+            // their line in joint space (MCS2 `:CHANn:ACC`, 0 disables it; ESRF BLISS MCS2
+            // driver, `acceleration: 0`).
+            self.command(&format!(":CHAN{ch}:ACC 0"))?;
+            let acc = self.query_int(&format!(":CHAN{ch}:ACC?"))?;
+            if acc != 0 {
+                return Err(HwError::bad_reply(
+                    &self.name,
+                    &format!(":CHAN{ch}:ACC?"),
+                    &acc.to_string(),
+                    "0 (acceleration control off) as just set",
+                ));
+            }
             axes.push(AxisInfo { id: ch.to_string(), unit });
         }
         self.targets = vec![None; axes.len()];

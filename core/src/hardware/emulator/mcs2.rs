@@ -348,9 +348,8 @@ fn channel_property(
                 ch.vel = v;
             } else {
                 ch.acc = v;
-                if v > 0 {
-                    a.accel = v as f64;
-                }
+                // 0: acceleration control off, the move runs at its velocity from the start.
+                a.accel = if v > 0 { v as f64 } else { 1e18 };
             }
             Ok(None)
         }

@@ -64,7 +64,12 @@ struct Channel {
     referencing: bool,
     locked: bool,
     max_speed: f64,
+    /// Closed-loop acceleration as `:SCLA` set it (nm/s² or µ°/s²; 0: control off).
+    accel: i64,
 }
+
+/// How fast a channel with acceleration control off changes speed (units/s²): at once.
+const NO_ACCELERATION_CONTROL: f64 = 1e15;
 
 struct McsState {
     channels: Vec<Channel>,
@@ -112,6 +117,7 @@ impl SmarActEmulator {
                 referencing: false,
                 locked: false,
                 max_speed: speed(kind).0 * 10.0,
+                accel: speed(kind).1 as i64,
             })
             .collect();
         let shared = Arc::new(Shared {
@@ -206,8 +212,10 @@ fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
         return Some(Some(":E-1,1".into()));
     };
     // Longer names before their prefixes (GSI before GS).
-    const NAMES: [&str; 15] =
-        ["SCLS", "SCM", "GNC", "GPPK", "GP", "GA", "GSI", "GST", "GS", "MPA", "MPR", "MAA", "MAR", "FRM", "S"];
+    const NAMES: [&str; 17] = [
+        "SCLA", "SCLS", "SCM", "GCLA", "GNC", "GPPK", "GP", "GA", "GSI", "GST", "GS", "MPA", "MPR", "MAA", "MAR", "FRM",
+        "S",
+    ];
     let name = NAMES.iter().find(|n| body.starts_with(*n)).copied();
     let args = name.map_or("", |n| &body[n.len()..]);
     let fired = st.faults.take(command, now);
@@ -285,9 +293,9 @@ fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str)
     let fields = Fields::parse(args)?;
     let mut axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
     match name {
-        "SCM" | "GNC" | "GSI" | "GST" | "GPPK" | "GP" | "GA" | "GS" => query(st, &mut axes, now, name, &fields),
+        "SCM" | "GNC" | "GSI" | "GST" | "GPPK" | "GP" | "GA" | "GS" | "GCLA" => query(st, &mut axes, now, name, &fields),
         "MPA" | "MPR" | "MAA" | "MAR" => move_channel(st, &mut axes, now, name, &fields),
-        "S" | "SCLS" | "FRM" => control(st, &mut axes, now, name, &fields),
+        "S" | "SCLS" | "SCLA" | "FRM" => control(st, &mut axes, now, name, &fields),
         _ => Err((-1, 2)),
     }
 }
@@ -316,6 +324,11 @@ fn query(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, fields: 
             fields.count(1)?;
             let c = fields.channel(st)?;
             Ok(format!(":ST{c},{}", st.channels[c].sensor))
+        }
+        "GCLA" => {
+            fields.count(1)?;
+            let c = fields.channel(st)?;
+            Ok(format!(":CLA{c},{}", st.channels[c].accel))
         }
         "GPPK" => {
             fields.count(1)?;
@@ -418,6 +431,17 @@ fn control(st: &mut McsState, axes: &mut [EmuAxis], now: f64, name: &str, fields
                 return Err((c as i64, 7));
             }
             axes[c].speed = if nums[1] == 0 { st.channels[c].max_speed } else { nums[1] as f64 };
+            Ok(format!(":E{c},0"))
+        }
+        "SCLA" => {
+            fields.count(2)?;
+            let c = fields.channel(st)?;
+            if nums[1] < 0 {
+                return Err((c as i64, 7));
+            }
+            st.channels[c].accel = nums[1];
+            // Off (0): the move runs at its speed from the start, a ramp.
+            axes[c].accel = if nums[1] == 0 { NO_ACCELERATION_CONTROL } else { nums[1] as f64 };
             Ok(format!(":E{c},0"))
         }
         "FRM" => {

@@ -56,7 +56,11 @@ pub struct PiEmulatorConfig {
     pub axes: Vec<(String, f64, f64, f64)>,
     /// Default speed (µm/s) until `VEL` changes it.
     pub speed_um_per_s: f64,
-    /// Acceleration (µm/s²).
+    /// How fast an axis changes speed (µm/s²). The E-7xx controllers have no acceleration
+    /// setting: with velocity control on, the target ramps at the slew rate `VEL` sets ("Slew
+    /// Rate Limitation", E-727 user manual E727T0005, Control Details; the E-712's servo works
+    /// the same way), so every axis of the controller runs a straight ramp. The default changes
+    /// speed within one servo cycle.
     pub accel_um_per_s2: f64,
     /// Analog input channel identifiers (the photodiode, the wavelength monitor).
     pub inputs: Vec<String>,
@@ -74,14 +78,14 @@ pub struct PiEmulatorConfig {
 
 impl Default for PiEmulatorConfig {
     /// Three axes "1", "2", "3" of a P-563.3CD (0-300 µm, at the centre 150 µm), 100 µm/s,
-    /// 1000 µm/s², analog inputs "5" (the photodiode) and "6" (the laser's wavelength monitor),
+    /// ramps that reach their speed within a 20 µs servo cycle (1e7 µm/s²), analog inputs "5" (the photodiode) and "6" (the laser's wavelength monitor),
     /// digital inputs "1" to "4", a 20 µs servo cycle and 2^18 recorder points in 8 tables;
     /// realistic.
     fn default() -> Self {
         PiEmulatorConfig {
             axes: ["1", "2", "3"].iter().map(|id| (id.to_string(), 150.0, 0.0, 300.0)).collect(),
             speed_um_per_s: 100.0,
-            accel_um_per_s2: 1000.0,
+            accel_um_per_s2: 1e7,
             inputs: vec!["5".into(), "6".into()],
             digital_lines: ["1", "2", "3", "4"].iter().map(|s| s.to_string()).collect(),
             servo_cycle_s: 20e-6,
