@@ -213,8 +213,8 @@ fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
     };
     // Longer names before their prefixes (GSI before GS).
     const NAMES: [&str; 17] = [
-        "SCLA", "SCLS", "SCM", "GCLA", "GNC", "GPPK", "GP", "GA", "GSI", "GST", "GS", "MPA", "MPR", "MAA", "MAR", "FRM",
-        "S",
+        "SCLA", "SCLS", "SCM", "GCLA", "GNC", "GPPK", "GP", "GA", "GSI", "GST", "GS", "MPA", "MPR", "MAA", "MAR",
+        "FRM", "S",
     ];
     let name = NAMES.iter().find(|n| body.starts_with(*n)).copied();
     let args = name.map_or("", |n| &body[n.len()..]);
@@ -293,7 +293,9 @@ fn execute(shared: &Shared, st: &mut McsState, now: f64, name: &str, args: &str)
     let fields = Fields::parse(args)?;
     let mut axes = shared.axes.lock().unwrap_or_else(|e| e.into_inner());
     match name {
-        "SCM" | "GNC" | "GSI" | "GST" | "GPPK" | "GP" | "GA" | "GS" | "GCLA" => query(st, &mut axes, now, name, &fields),
+        "SCM" | "GNC" | "GSI" | "GST" | "GPPK" | "GP" | "GA" | "GS" | "GCLA" => {
+            query(st, &mut axes, now, name, &fields)
+        }
         "MPA" | "MPR" | "MAA" | "MAR" => move_channel(st, &mut axes, now, name, &fields),
         "S" | "SCLS" | "SCLA" | "FRM" => control(st, &mut axes, now, name, &fields),
         _ => Err((-1, 2)),
