@@ -4,10 +4,11 @@
 //! session that loads: a short plan (a laser sweep and three small moves), and the experiment
 //! design's plan on emulators running faster than real time, identified without the validation
 //! motions, whose every reported parameter must land within 3σ of the preset's truth, then a move
-//! of the lamella with that calibration on the same controllers, confirmed by the laser's sweep.
+//! of the lamella with that calibration on the same controllers, confirmed by the laser's sweep;
+//! and the same plan on the shipped MCS2 bench file through the MCS2's emulator.
 
 use photorobot_core::bench::BenchPreset;
-use photorobot_core::hardware::controller_bench::{LaserConfig, LaserFamily};
+use photorobot_core::hardware::controller_bench::{ControllerKind, LaserConfig, LaserFamily};
 use photorobot_core::hardware::emulator::adc::Adc;
 use photorobot_core::hardware::emulator::local::MONITOR_NM_PER_V;
 use photorobot_core::hardware::emulator::{LaserEmulator, LaserEmulatorConfig, LocalEmulators};
@@ -128,12 +129,33 @@ fn a_designed_plan_through_tcp_lands_within_3_sigma_of_the_truth() {
     let config = HardwareConfig { time_scale: TIME_SCALE, ..HardwareConfig::femto() };
     let bench = emulated_bench(&preset, 11, config, dir.path());
     let out = dir.path().join("session");
+    designed_plan_lands_within_3_sigma(&bench.file, &out, &preset);
+    move_through_tcp(&bench.file, &out, &preset);
+}
+
+/// The same on the shipped MCS2 bench file (`assets/benches/femto-mcs2-hardware.ron`: the wrist
+/// on an MCS2, `kind: SmarActMcs2`), through the MCS2's emulator.
+#[test]
+fn the_mcs2_bench_file_calibrates_through_its_emulator_within_3_sigma() {
+    let _one_at_a_time = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/benches/femto-mcs2-hardware.ron");
+    let config = HardwareConfig { time_scale: TIME_SCALE, ..HardwareConfig::load(&file).unwrap() };
+    assert!(config.controllers.iter().any(|c| c.kind == ControllerKind::SmarActMcs2), "{:?}", config.controllers);
+    let bench = emulated_bench(&preset, 13, config, dir.path());
+    designed_plan_lands_within_3_sigma(&bench.file, &dir.path().join("session"), &preset);
+}
+
+/// `calibrate --plan optimised --no-validation` on the emulated bench's file `bench_file` into
+/// `out`: converged, fits, and every determined parameter within 3σ of the preset's truth.
+fn designed_plan_lands_within_3_sigma(bench_file: &Path, out: &Path, preset: &BenchPreset) {
     let started = std::time::Instant::now();
     let run = Command::new(env!("CARGO_BIN_EXE_photorobot"))
         .args(["calibrate", "--bench"])
-        .arg(&bench.file)
+        .arg(bench_file)
         .args(["--model", "table2-ideal", "--plan", "optimised", "--no-validation", "--json", "--out"])
-        .arg(&out)
+        .arg(out)
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&run.stderr);
@@ -166,7 +188,6 @@ fn a_designed_plan_through_tcp_lands_within_3_sigma_of_the_truth() {
         }
     }
     assert_eq!(determined, EXPECTED_DETERMINED, "the parameters the plan determines");
-    move_through_tcp(&bench.file, &out, &preset);
 }
 
 /// `photorobot move` with that session on the same emulated controllers and laser: the lamella
