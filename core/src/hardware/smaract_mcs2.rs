@@ -81,6 +81,18 @@ impl SmarActMcs2 {
         Ok(m)
     }
 
+    /// Set the integer property `property` (`:CHANn:NAME`) to `value` and read it back
+    /// (`:CHANn:NAME?`): a controller that kept another value is named with `expected`.
+    fn set_and_read_back(&mut self, property: &str, value: i64, expected: &str) -> Result<(), HwError> {
+        self.command(&format!("{property} {value}"))?;
+        let query = format!("{property}?");
+        let read = self.query_int(&query)?;
+        if read != value {
+            return Err(HwError::bad_reply(&self.name, &query, &read.to_string(), expected));
+        }
+        Ok(())
+    }
+
     fn init(&mut self) -> Result<(), HwError> {
         self.drain_errors()?;
         self.serial = self.query(":DEV:SNUM?")?.trim().trim_matches('"').to_string();
@@ -110,31 +122,13 @@ impl SmarActMcs2 {
                     problem: format!("channel {ch} has no sensor: closed-loop moves need one"),
                 });
             }
-            self.command(&format!(":CHAN{ch}:MMOD 0"))?;
-            let mode = self.query_int(&format!(":CHAN{ch}:MMOD?"))?;
-            if mode != 0 {
-                return Err(HwError::bad_reply(
-                    &self.name,
-                    &format!(":CHAN{ch}:MMOD?"),
-                    &mode.to_string(),
-                    "0 (absolute) as just set",
-                ));
-            }
+            self.set_and_read_back(&format!(":CHAN{ch}:MMOD"), 0, "0 (absolute) as just set")?;
             self.command(&format!(":CHAN{ch}:HOLD -1"))?;
             // Acceleration control off: every closed-loop move runs at `VEL` from start to end,
             // a straight ramp like the piezo stage's, so that the joints of one segment stay on
             // their line in joint space (MCS2 `:CHANn:ACC`, 0 disables it; ESRF BLISS MCS2
             // driver, `acceleration: 0`).
-            self.command(&format!(":CHAN{ch}:ACC 0"))?;
-            let acc = self.query_int(&format!(":CHAN{ch}:ACC?"))?;
-            if acc != 0 {
-                return Err(HwError::bad_reply(
-                    &self.name,
-                    &format!(":CHAN{ch}:ACC?"),
-                    &acc.to_string(),
-                    "0 (acceleration control off) as just set",
-                ));
-            }
+            self.set_and_read_back(&format!(":CHAN{ch}:ACC"), 0, "0 (acceleration control off) as just set")?;
             axes.push(AxisInfo { id: ch.to_string(), unit });
         }
         self.targets = vec![None; axes.len()];
@@ -363,17 +357,7 @@ impl StageController for SmarActMcs2 {
     fn set_velocity(&mut self, axis: usize, per_s: f64) -> Result<(), HwError> {
         let unit = self.channel(axis)?;
         let v = (per_s.abs() * Self::base_per_unit(unit)).round().max(1.0) as i64;
-        self.command(&format!(":CHAN{axis}:VEL {v}"))?;
-        let read = self.query_int(&format!(":CHAN{axis}:VEL?"))?;
-        if read != v {
-            return Err(HwError::bad_reply(
-                &self.name,
-                &format!(":CHAN{axis}:VEL?"),
-                &read.to_string(),
-                &format!("{v}, the velocity just set"),
-            ));
-        }
-        Ok(())
+        self.set_and_read_back(&format!(":CHAN{axis}:VEL"), v, &format!("{v}, the velocity just set"))
     }
 
     fn travel_limits(&mut self, axis: usize) -> Result<(f64, f64), HwError> {
