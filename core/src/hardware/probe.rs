@@ -21,8 +21,9 @@ pub struct Identity {
 
 /// Connect to `address`, identify the controller of `kind` there and disconnect. PI: `*IDN?` and
 /// `SAI?` (no `SVO`: the servo state is left alone). MCS: `:SCM0`, `:GNC`, each channel's sensor
-/// type (`:GST`) and `:GSI` (what connecting does; nothing moves). MCS2: what connecting does (the
-/// error queue, `:DEV:SNUM?`, `:DEV:NOCH?`, each channel's movement type, absolute move mode). A
+/// type (`:GST`), acceleration control off (`:SCLA`) and `:GSI` (what connecting does; nothing
+/// moves). MCS2: what connecting does (the error queue, `:DEV:SNUM?`, `:DEV:NOCH?`, each channel's
+/// movement type, absolute move mode, acceleration control off). A
 /// controller of another protocol is an error (a bad reply or no reply), not an identity.
 pub fn identify(kind: ControllerKind, name: &str, address: &str, timeout_s: f64) -> Result<Identity, HwError> {
     let (reply, axes) = match kind {
