@@ -266,14 +266,12 @@ impl SmarActMcs {
     /// configured; that is logged.
     fn acceleration_off(&mut self, ch: i64) -> Result<(), HwError> {
         let set = format!(":SCLA{ch},0");
-        match self.request(&set)? {
-            McsReply::Error(e) if e.code == 0 => {}
-            McsReply::Error(e) if e.code == 2 => {
+        match self.ack(&set, ch) {
+            Err(HwError::Mcs { error, .. }) if error.code == 2 => {
                 tracing::warn!(controller = %self.name, channel = ch, "`{set}` refused as unknown: the channel keeps its acceleration");
                 return Ok(());
             }
-            McsReply::Error(e) => return Err(self.mcs(&set, e)),
-            other => return Err(self.bad(&set, &format!("{other:?}"), &format!("`:E{ch},0`"))),
+            other => other?,
         }
         let get = format!(":GCLA{ch}");
         match self.request(&get)? {

@@ -349,7 +349,7 @@ fn channel_property(
             } else {
                 ch.acc = v;
                 // 0: acceleration control off, the move runs at its velocity from the start.
-                a.accel = if v > 0 { v as f64 } else { 1e18 };
+                a.accel = if v > 0 { v as f64 } else { super::NO_ACCELERATION_CONTROL };
             }
             Ok(None)
         }

@@ -144,6 +144,10 @@ impl EmuAxis {
 /// Axes shared between an emulator and whoever needs their positions (a photodiode closure).
 pub type SharedAxes = Arc<Mutex<Vec<EmuAxis>>>;
 
+/// The acceleration of a channel whose acceleration control is off (controller units/s²): it
+/// runs at its speed from the start of a move, a ramp.
+pub(crate) const NO_ACCELERATION_CONTROL: f64 = 1e18;
+
 /// The photodiode signal at emulated time `t_s` (controller input units).
 pub type PhotodiodeFn = Arc<dyn Fn(f64) -> f64 + Send + Sync>;
 

@@ -2,7 +2,7 @@
 //! linear (nm) and rotary (µ° plus revolutions) channels moving at finite speed, each with its
 //! sensor type (`:GST`), and a channel that can be locked (status 9, moves refused with error 146).
 
-use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, Server, SharedAxes};
+use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, Server, SharedAxes, NO_ACCELERATION_CONTROL};
 use crate::hardware::smaract::{angle_to_mcs, status};
 use std::io::{BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -67,9 +67,6 @@ struct Channel {
     /// Closed-loop acceleration as `:SCLA` set it (nm/s² or µ°/s²; 0: control off).
     accel: i64,
 }
-
-/// How fast a channel with acceleration control off changes speed (units/s²): at once.
-const NO_ACCELERATION_CONTROL: f64 = 1e15;
 
 struct McsState {
     channels: Vec<Channel>,
