@@ -94,3 +94,42 @@ fn random_perturbations_are_never_under_reported_silently() {
         }
     }
 }
+
+/// The optimised plan with its two 20 nm/s sweeps left out (a sweep lost to a fault, or a
+/// shorter plan written by hand), through `photorobot calibrate` on three seeds: each motion
+/// planned with what it identified reports the true change of the cavity length within 10 %
+/// (or 2 nm), or says it is contradicted; and the calibration is refused (exit 1) whenever a
+/// motion is not confirmed within its target.
+#[test]
+fn a_weak_plan_is_reported_truly_or_contradicted_and_refused() {
+    use photorobot_core::plan::{Plan, Segment};
+    let dir = tempfile::tempdir().unwrap();
+    let mut weak = Plan::optimised();
+    weak.segments.retain(|s| !matches!(s, Segment::Sweep { rate_nm_per_s, .. } if *rate_nm_per_s == 20.0));
+    assert_eq!(weak.sweeps(), 1, "only the 10 nm/s sweep at q = 0 is left");
+    let plan = dir.path().join("weak.ron");
+    weak.save(&plan).unwrap();
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    for seed in ["1", "2", "3"] {
+        let out = dir.path().join(format!("s{seed}"));
+        let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--plan", plan.to_str().unwrap(), "--seed", seed];
+        let argv: Vec<String> =
+            argv.iter().map(|s| s.to_string()).chain(["--json".into(), "--out".into(), out.display().to_string()]).collect();
+        let mut stdout = Vec::new();
+        let code = photorobot_app::cli::run(argv, &mut stdout).map_or_else(|e| e.exit_code(), |_| 0);
+        let doc: Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+        let identified: photorobot_core::model::extrinsics::Extrinsics =
+            serde_json::from_value(doc["extrinsics"].clone()).unwrap();
+        let mut proven = true;
+        for (m, row) in ValidationMotion::ALL.iter().zip(doc["validation"].as_array().unwrap()) {
+            let truth = true_peak_to_peak_nm(&preset, &identified, *m);
+            let e = &row["after_evidence"];
+            let (after, verdict) = (row["after_nm"].as_f64().unwrap(), e["verdict"].as_str().unwrap());
+            eprintln!("seed {seed}: {}: true {truth:.1} nm, after {after:.1} nm, {verdict} (exit {code})", m.name());
+            let slack = (0.1 * truth).max(2.0);
+            assert!((after - truth).abs() <= slack || verdict == "contradicted", "seed {seed}: {}", m.name());
+            proven &= e["within_target"] == true;
+        }
+        assert!(proven || code == 1, "seed {seed}: exit {code} with the validation not proven");
+    }
+}

@@ -443,6 +443,10 @@ fn pose_contrast(inp: &Inputs<'_>, start: Envelope, angles: &[f64], tracked: &[f
     out
 }
 
+/// The least standard uncertainty of a sweep's absolute gap (µm): a fit whose covariance
+/// collapses (a sweep that fits its model too well) still reads the gap to a few nm at best.
+const SWEEP_SIGMA_FLOOR_UM: f64 = 0.005;
+
 /// One pose's absolute gap with the tracked gap there.
 struct SweepGap {
     pose: PoseGap,
@@ -470,7 +474,7 @@ fn sweep_gaps(inp: &Inputs<'_>, tracked: &[f64], s: usize) -> Vec<SweepGap> {
                 Ok(f) => PoseGap {
                     pose: k,
                     gap_um: Some(f.estimate.gap_um),
-                    sigma_um: Some(f.estimate.sigma_um),
+                    sigma_um: Some(f.estimate.sigma_um.max(SWEEP_SIGMA_FLOOR_UM)),
                     tracked_change_nm,
                     problem: None,
                 },
