@@ -42,7 +42,13 @@ fn move_to(rng: &mut StdRng, from: f64, span: f64, limit: f64) -> f64 {
         (true, true) => from + if rng.random_bool(0.5) { span } else { -span },
         (true, false) => from + span,
         (false, true) => from - span,
-        (false, false) => if from > 0.0 { -limit } else { limit },
+        (false, false) => {
+            if from > 0.0 {
+                -limit
+            } else {
+                limit
+            }
+        }
     }
 }
 

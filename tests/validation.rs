@@ -34,7 +34,10 @@ pub fn true_peak_to_peak_nm(preset: &BenchPreset, planned: &Extrinsics, motion: 
 /// `photorobot validate --bench BENCH --extrinsics FILE --seed SEED --json [extra]` with
 /// `extrinsics` written to a file in `dir`: its exit code and JSON document.
 pub fn run_validate(bench: &str, extrinsics: &Extrinsics, seed: u64, extra: &[&str], dir: &Path) -> (u8, Value) {
-    let file = dir.join(format!("extrinsics-{seed}-{:x}.ron", extrinsics.to_array().iter().map(|v| v.to_bits()).fold(0u64, |a, b| a.rotate_left(7) ^ b)));
+    let file = dir.join(format!(
+        "extrinsics-{seed}-{:x}.ron",
+        extrinsics.to_array().iter().map(|v| v.to_bits()).fold(0u64, |a, b| a.rotate_left(7) ^ b)
+    ));
     photorobot_core::files::save_ron(&file, extrinsics).unwrap();
     let seed = seed.to_string();
     let mut argv = vec!["photorobot", "validate", "--bench", bench, "--seed", &seed, "--json", "--extrinsics"];

@@ -211,7 +211,8 @@ impl Results {
     /// within its target: from the latest run on this bench (the check, else the validation
     /// after calibration), else from the report's own validation.
     pub fn validation_failures(&self) -> Vec<String> {
-        let line = |motion: photorobot_core::validate::ValidationMotion, f: &Result<photorobot_core::validate::ValidationFigure, String>| match f {
+        let line = |motion: photorobot_core::validate::ValidationMotion,
+                    f: &Result<photorobot_core::validate::ValidationFigure, String>| match f {
             Ok(f) if f.evidence.within_target => None,
             Ok(f) => Some(format!("`{}`: {}", motion.name(), f.evidence.summary())),
             Err(e) => Some(format!("`{}`: not measured ({e})", motion.name())),
@@ -929,7 +930,11 @@ impl AppState {
             }
             Event::Checked(motions) => {
                 let confirmed = motions.iter().filter(|m| m.figure.as_ref().is_ok_and(|f| f.evidence.within_target));
-                self.status = format!("calibration checked: {} of {} motions confirmed within target", confirmed.count(), motions.len());
+                self.status = format!(
+                    "calibration checked: {} of {} motions confirmed within target",
+                    confirmed.count(),
+                    motions.len()
+                );
                 self.results.check = Some(motions);
             }
             Event::DiagnosisStep(title, summary) => self.diagnosis.steps.push((title, summary)),

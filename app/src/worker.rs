@@ -510,14 +510,15 @@ impl Thread {
                 }
                 Command::Validate { identified } => {
                     self.send(Event::Busy(Some(BUSY_VALIDATING.into())));
-                    let pairs = run_before_and_after(self.bench.as_mut(), &self.nominal, &identified, &StopSettings::default())
-                        .into_iter()
-                        .map(|p| ValidationPair {
-                            motion: p.motion,
-                            before: p.before.map_err(|e| e.to_string()),
-                            after: p.after.map_err(|e| e.to_string()),
-                        })
-                        .collect();
+                    let pairs =
+                        run_before_and_after(self.bench.as_mut(), &self.nominal, &identified, &StopSettings::default())
+                            .into_iter()
+                            .map(|p| ValidationPair {
+                                motion: p.motion,
+                                before: p.before.map_err(|e| e.to_string()),
+                                after: p.after.map_err(|e| e.to_string()),
+                            })
+                            .collect();
                     self.send(Event::Position(self.bench.position_display()));
                     self.send(Event::Validated(pairs));
                     self.send(Event::Busy(None));

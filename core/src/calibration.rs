@@ -23,8 +23,8 @@ use crate::plan::Plan;
 use crate::trace::Trace;
 use crate::validate::before_after::{run_before_and_after, BeforeAndAfter};
 use crate::validate::evidence::{Evidence, Verdict as MotionVerdict};
-use crate::validate::StopSettings;
 use crate::validate::forecast::{forecast, ValidationForecast};
+use crate::validate::StopSettings;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
 
@@ -93,20 +93,15 @@ impl ValidationRow {
     /// or above its target); `None` when it does.
     pub fn failure(&self) -> Option<String> {
         let Some(e) = &self.after_evidence else {
-            return Some(format!(
-                "`{}`: not measured ({})",
-                self.motion,
-                self.note.as_deref().unwrap_or("no figure")
-            ));
+            return Some(format!("`{}`: not measured ({})", self.motion, self.note.as_deref().unwrap_or("no figure")));
         };
         if e.within_target {
             return None;
         }
         Some(match e.verdict {
-            MotionVerdict::Confirmed => format!(
-                "`{}`: {:.1} nm, above its {:.0} nm target",
-                self.motion, e.measured_nm, e.target_nm
-            ),
+            MotionVerdict::Confirmed => {
+                format!("`{}`: {:.1} nm, above its {:.0} nm target", self.motion, e.measured_nm, e.target_nm)
+            }
             _ => format!("`{}`: {}", self.motion, e.summary()),
         })
     }
@@ -556,7 +551,8 @@ fn add_systematic(rows: &mut [ParameterRow], id: &Identification, discrepancy: &
         row.sigma_from_jackknife = spread > families && spread > 0.0;
         let bound = if row.unit == "°" { DEFAULT_USEFUL_ANGLE_DEG } else { DEFAULT_USEFUL_LENGTH_UM };
         if total > bound {
-            let why = if row.sigma_from_jackknife { "the traces disagree" } else { "the families of observations disagree" };
+            let why =
+                if row.sigma_from_jackknife { "the traces disagree" } else { "the families of observations disagree" };
             row.determined = false;
             row.reason = Some(format!("{why}: total σ {total:.3} {} (above its useful bound)", row.unit));
             (row.sigma, row.sigma_noise, row.sigma_systematic) = (None, None, None);

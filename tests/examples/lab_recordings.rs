@@ -47,11 +47,8 @@ fn summary(outcomes: &[CaseOutcome]) -> bool {
         let motions: usize = of.iter().map(|o| o.validation.len()).sum();
         let kept = |o: &&CaseOutcome| o.validation.iter().filter(|(_, t, _, target)| t <= target).count();
         let within: usize = of.iter().map(kept).sum();
-        let said: usize = of
-            .iter()
-            .flat_map(|o| &o.validation)
-            .filter(|(_, t, f, target)| t > target && f > target)
-            .count();
+        let said: usize =
+            of.iter().flat_map(|o| &o.validation).filter(|(_, t, f, target)| t > target && f > target).count();
         let broken: Vec<String> = of.iter().flat_map(|o| o.broken_promises()).collect();
         let share = 1.0 - beyond as f64 / determined.max(1) as f64;
         println!(

@@ -2,12 +2,12 @@
 //! loaders of the files several commands take (extrinsics, plans).
 
 use photorobot_core::bench::{BenchError, BenchPreset, RunError};
-use photorobot_core::hardware::HardwareConfig;
-use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::files::FileError;
+use photorobot_core::hardware::HardwareConfig;
 use photorobot_core::measure::MeasureError;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::kinematics::LimitViolation;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::Plan;
 use photorobot_core::trace::TraceError;
 use std::path::{Path, PathBuf};

@@ -32,7 +32,9 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
         let check = egui::Button::new(RichText::new("Check the calibration on the bench").size(18.0));
         if ui
             .add_enabled(can && idle, check)
-            .on_hover_text("the four motions planned with these extrinsics, without recalibrating: has the bench drifted?")
+            .on_hover_text(
+                "the four motions planned with these extrinsics, without recalibrating: has the bench drifted?",
+            )
             .clicked()
         {
             s.worker.send(Command::Check { extrinsics: s.extrinsics });
@@ -149,7 +151,9 @@ fn before_after(ui: &mut egui::Ui, pairs: &[ValidationPair]) {
     };
     ui.label(RichText::new("Before and after calibration").strong());
     egui::Grid::new("validation table").striped(true).show(ui, |ui| {
-        for h in ["motion", "before (nominal)", "after (identified)", "tracked", "model-free", "verdict", "paper (after)"] {
+        for h in
+            ["motion", "before (nominal)", "after (identified)", "tracked", "model-free", "verdict", "paper (after)"]
+        {
             ui.strong(h);
         }
         ui.end_row();
@@ -201,6 +205,9 @@ fn curve(ui: &mut egui::Ui, p: &ValidationPair, f: &ValidationFigure, name: &str
         .x_axis_label("% of the motion")
         .y_axis_label("ΔL (nm)")
         .show(ui, |pl| {
-            pl.line(Line::new(format!("{name}: {:.1} nm p-p tracked", f.peak_to_peak_nm), PlotPoints::from(pts)).color(color));
+            pl.line(
+                Line::new(format!("{name}: {:.1} nm p-p tracked", f.peak_to_peak_nm), PlotPoints::from(pts))
+                    .color(color),
+            );
         });
 }

@@ -52,7 +52,8 @@ pub enum Family {
 
 impl Family {
     /// All four, in the order reported.
-    pub const ALL: [Family; 4] = [Family::Translations, Family::Rotations, Family::AbsoluteGaps, Family::FringeAmplitudes];
+    pub const ALL: [Family; 4] =
+        [Family::Translations, Family::Rotations, Family::AbsoluteGaps, Family::FringeAmplitudes];
 
     /// The family of an observation.
     pub fn of(o: &Observation) -> Family {

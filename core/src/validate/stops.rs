@@ -53,7 +53,8 @@ impl StopSettings {
 /// path (the circle) does not stop at its end, which is its start.
 pub fn stop_waypoints(motion: ValidationMotion, count: usize, stops: usize) -> Vec<usize> {
     let parts = if motion == ValidationMotion::Circle { stops + 1 } else { stops };
-    let mut out: Vec<usize> = (1..=stops).map(|k| ((k * count) as f64 / parts.max(1) as f64).round() as usize).collect();
+    let mut out: Vec<usize> =
+        (1..=stops).map(|k| ((k * count) as f64 / parts.max(1) as f64).round() as usize).collect();
     out.retain(|&w| (1..=count).contains(&w));
     out.dedup();
     out
@@ -193,14 +194,22 @@ mod tests {
         assert_eq!(stop_waypoints(ValidationMotion::RotationOpticalAxis, 46, 0), Vec::<usize>::new());
         let waypoints: Vec<[f64; 6]> = (0..=24).map(|k| [0.0, 0.0, 0.0, k as f64 * 0.25, 0.0, 0.0]).collect();
         let stops = stop_waypoints(ValidationMotion::RotationXf, 24, 2);
-        let p = plan_reaching("validation", ValidationMotion::RotationXf.name(), &waypoints, &[0.0; 6], &stops, Some(1560.0));
+        let p = plan_reaching(
+            "validation",
+            ValidationMotion::RotationXf.name(),
+            &waypoints,
+            &[0.0; 6],
+            &stops,
+            Some(1560.0),
+        );
         let labels: Vec<&str> = p.plan.segments.iter().map(|s| s.label()).collect();
         assert_eq!(labels.iter().filter(|l| l.starts_with(ABSOLUTE_GAP)).count(), 3, "{labels:?}");
         assert_eq!(labels.iter().filter(|l| l.starts_with(CONTRAST_DITHER)).count(), 4, "{labels:?}");
         assert_eq!(p.reaching.len(), waypoints.len() + 1);
         let i = labels.iter().position(|l| *l == "contrast dither 1").unwrap();
         assert_eq!(labels[i - 1], ValidationMotion::RotationXf.name(), "the first stop after waypoint 12");
-        let without = plan_reaching("validation", ValidationMotion::RotationXf.name(), &waypoints, &[0.0; 6], &[], None);
+        let without =
+            plan_reaching("validation", ValidationMotion::RotationXf.name(), &waypoints, &[0.0; 6], &[], None);
         assert_eq!(without.plan.segments.len(), 1 + 2 + 24, "approach, dither, waypoints");
     }
 }

@@ -60,7 +60,12 @@ impl ScpiLaser {
 
     /// Configure the sweep (not started), read every setting back, and (Keysight) ask the laser
     /// whether the set is consistent (`:WAV:SWE:CHEC?`). Returns the sweep as read back.
-    pub(super) fn configure_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<SweepSetup, HwError> {
+    pub(super) fn configure_sweep(
+        &mut self,
+        from_nm: f64,
+        to_nm: f64,
+        rate_nm_per_s: f64,
+    ) -> Result<SweepSetup, HwError> {
         let want = self.plan(from_nm, to_nm, rate_nm_per_s)?;
         let (commands, numbers, words, speed_q): (Vec<String>, [(&str, f64); 3], &[(&str, &str)], &str) =
             if self.keysight() {
@@ -86,7 +91,12 @@ impl ScpiLaser {
         for (k, (query, set)) in numbers.iter().enumerate() {
             read[k] = self.query_f64(query)? * unit;
             if (read[k] - set).abs() > READBACK_TOLERANCE_NM {
-                return Err(HwError::bad_reply(&self.name, query, &format!("{:.4} nm", read[k]), &format!("{set:.4} nm, as just set")));
+                return Err(HwError::bad_reply(
+                    &self.name,
+                    query,
+                    &format!("{:.4} nm", read[k]),
+                    &format!("{set:.4} nm, as just set"),
+                ));
             }
         }
         for (query, expected) in words {
@@ -97,7 +107,12 @@ impl ScpiLaser {
         }
         let rate = self.query_f64(speed_q)? * unit;
         if !(rate > 0.0) || (rate - want.rate_nm_per_s).abs() > 0.01 * want.rate_nm_per_s {
-            return Err(HwError::bad_reply(&self.name, speed_q, &format!("{rate} nm/s"), &format!("{} nm/s, as just set", want.rate_nm_per_s)));
+            return Err(HwError::bad_reply(
+                &self.name,
+                speed_q,
+                &format!("{rate} nm/s"),
+                &format!("{} nm/s, as just set", want.rate_nm_per_s),
+            ));
         }
         if self.keysight() {
             let check = self.query(keysight::CHECK_PARAMS)?;
@@ -106,7 +121,10 @@ impl ScpiLaser {
             if code != 0 {
                 return Err(HwError::Usage {
                     controller: self.name.clone(),
-                    problem: format!("the laser finds the sweep's settings inconsistent: `{}` answers {code}, \"{message}\"", keysight::CHECK_PARAMS),
+                    problem: format!(
+                        "the laser finds the sweep's settings inconsistent: `{}` answers {code}, \"{message}\"",
+                        keysight::CHECK_PARAMS
+                    ),
                 });
             }
         }

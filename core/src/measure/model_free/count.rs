@@ -102,8 +102,7 @@ pub fn count_fringes(signal: &[f64], envelope: Option<(&dyn Fn(usize) -> Envelop
         None => smallest_amplitude = f64::NAN,
         _ => {}
     }
-    let fringe: Vec<ExtremumClass> =
-        classes.iter().map(|c| c.1).filter(|c| *c != ExtremumClass::Turning).collect();
+    let fringe: Vec<ExtremumClass> = classes.iter().map(|c| c.1).filter(|c| *c != ExtremumClass::Turning).collect();
     let alternating = if fringe.is_empty() { 0 } else { 1 + fringe.windows(2).filter(|w| w[0] != w[1]).count() };
     // A pure fringe (I − A)/B = cos(π·u) is above 1 − τ within arccos(1 − τ)/π of an even step;
     // a second harmonic of a few % widens that on one side: twice τ covers it.

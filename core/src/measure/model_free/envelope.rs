@@ -109,10 +109,9 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(3);
         let noise = Normal::new(0.0, 1e-3).unwrap();
         let f = |phi: f64| 2.0 + 0.8 * (phi.cos() + 0.05 * (2.0 * phi + 0.4).cos());
-        let (top, bottom) = (0..100_000).map(|k| f(k as f64 * 1e-4 * std::f64::consts::TAU)).fold(
-            (f64::NEG_INFINITY, f64::INFINITY),
-            |(a, b), v| (a.max(v), b.min(v)),
-        );
+        let (top, bottom) = (0..100_000)
+            .map(|k| f(k as f64 * 1e-4 * std::f64::consts::TAU))
+            .fold((f64::NEG_INFINITY, f64::INFINITY), |(a, b), v| (a.max(v), b.min(v)));
         let n = 1200;
         let signal: Vec<f64> = (0..n)
             .map(|i| {

@@ -112,12 +112,7 @@ pub fn unwrap_gap_nm(
     } else {
         (1.0 - (count.hysteresis / b).min(2.0)).acos() / std::f64::consts::PI * step_nm
     };
-    Unwrapped {
-        gap_nm,
-        reversals_at_fringe_extrema,
-        runner_up_peak_to_peak_nm: runner_up,
-        hidden_excursion_nm: hidden,
-    }
+    Unwrapped { gap_nm, reversals_at_fringe_extrema, runner_up_peak_to_peak_nm: runner_up, hidden_excursion_nm: hidden }
 }
 
 /// A fringe extremum within the hysteresis of either end of the signal: the detector confirms
@@ -258,9 +253,14 @@ mod tests {
             let worst = worst(1.0).min(worst(-1.0));
             let (got, want) = (ptp(&d.gap_nm), ptp(&truth));
             let hidden = d.hidden_excursion_nm;
-            eprintln!("amplitude {amplitude}: ptp {got:.1} vs {want:.1} nm, worst {worst:.1} nm, hidden {hidden:.1} nm");
+            eprintln!(
+                "amplitude {amplitude}: ptp {got:.1} vs {want:.1} nm, worst {worst:.1} nm, hidden {hidden:.1} nm"
+            );
             assert!(worst < 25.0 + 2.0 * hidden, "amplitude {amplitude}: {worst} nm off");
-            assert!((got - want).abs() < 0.01 * want + 15.0 + 2.0 * hidden, "amplitude {amplitude}: {got} vs {want} nm");
+            assert!(
+                (got - want).abs() < 0.01 * want + 15.0 + 2.0 * hidden,
+                "amplitude {amplitude}: {got} vs {want} nm"
+            );
         }
     }
 }
