@@ -142,3 +142,4 @@ pub mod moves {
     }
 }
 pub mod two_beam;
+pub mod validation;

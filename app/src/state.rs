@@ -8,7 +8,7 @@ use crate::decimate::Decimator;
 use crate::dialogs::Dialogs;
 use crate::session_io::{remember, Loaded, Snapshot};
 use crate::settings::Settings;
-use crate::worker::{Command, EffectValidation, Event, Resume, ValidationPair, Worker};
+use crate::worker::{CheckedMotion, Command, EffectValidation, Event, Resume, ValidationPair, Worker};
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::calibration::{CalibrationReport, Mode};
 use photorobot_core::measure::alignment::SignalQuality;
@@ -202,6 +202,29 @@ pub struct Results {
     pub identify_error: Option<String>,
     /// Validation results.
     pub validation: Option<Vec<ValidationPair>>,
+    /// The last check of the calibration on the bench ([`Command::Check`]).
+    pub check: Option<Vec<CheckedMotion>>,
+}
+
+impl Results {
+    /// Why the validation does not prove the calibration, one sentence per motion not confirmed
+    /// within its target: from the latest run on this bench (the check, else the validation
+    /// after calibration), else from the report's own validation.
+    pub fn validation_failures(&self) -> Vec<String> {
+        let line = |motion: photorobot_core::validate::ValidationMotion,
+                    f: &Result<photorobot_core::validate::ValidationFigure, String>| match f {
+            Ok(f) if f.evidence.within_target => None,
+            Ok(f) => Some(format!("`{}`: {}", motion.name(), f.evidence.summary())),
+            Err(e) => Some(format!("`{}`: not measured ({e})", motion.name())),
+        };
+        if let Some(check) = &self.check {
+            return check.iter().filter_map(|c| line(c.motion, &c.figure)).collect();
+        }
+        if let Some(pairs) = &self.validation {
+            return pairs.iter().filter_map(|p| line(p.motion, &p.after)).collect();
+        }
+        self.report.as_ref().map_or(vec![], |r| r.validation_failures())
+    }
 }
 
 /// The diagnosis, as the Diagnosis view shows it.
@@ -602,6 +625,7 @@ impl AppState {
         self.imported.clear();
         self.results.report = None;
         self.results.validation = None;
+        self.results.check = None;
         self.clear_diagnosis();
         self.analyses.clear();
         self.extrinsics = self.worker.nominal.extrinsics;
@@ -832,6 +856,7 @@ impl AppState {
         self.position.moves = loaded.session.moves;
         self.analyses.clear();
         self.results.validation = None;
+        self.results.check = None;
         // The session's diagnosis record is kept for the next save and shown as a record by the
         // Diagnosis view (it is a summary, not a result: no steps, no residuals to draw).
         self.clear_diagnosis();
@@ -893,6 +918,7 @@ impl AppState {
                     self.status = format!("identified from {} observations", report.observations);
                     self.results.report = Some(report);
                     self.results.validation = None;
+                    self.results.check = None;
                     self.session.mark_dirty();
                 }
                 Err(e) => self.results.identify_error = Some(e),
@@ -900,6 +926,16 @@ impl AppState {
             Event::Validated(pairs) => {
                 self.status = format!("validation done: {} motions, before and after", pairs.len());
                 self.results.validation = Some(pairs);
+                self.results.check = None;
+            }
+            Event::Checked(motions) => {
+                let confirmed = motions.iter().filter(|m| m.figure.as_ref().is_ok_and(|f| f.evidence.within_target));
+                self.status = format!(
+                    "calibration checked: {} of {} motions confirmed within target",
+                    confirmed.count(),
+                    motions.len()
+                );
+                self.results.check = Some(motions);
             }
             Event::DiagnosisStep(title, summary) => self.diagnosis.steps.push((title, summary)),
             Event::Diagnosed(r) => {

@@ -19,8 +19,8 @@ use photorobot_core::plan::{JointTarget, Plan, Segment};
 use photorobot_core::position::{move_to, MoveRecord, Placement, Reference, Target};
 use photorobot_core::session::Progress;
 use photorobot_core::trace::Trace;
-use photorobot_core::validate::before_after::run_before_and_after;
-use photorobot_core::validate::{ValidationFigure, ValidationMotion};
+use photorobot_core::validate::before_after::{check_calibration, run_before_and_after};
+use photorobot_core::validate::{StopSettings, ValidationFigure, ValidationMotion};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
@@ -67,6 +67,12 @@ pub enum Command {
     Validate {
         /// The identified extrinsics.
         identified: Extrinsics,
+    },
+    /// Check a calibration on the bench without recalibrating: the four validation motions
+    /// planned with its extrinsics, with their proof (what `photorobot validate` runs).
+    Check {
+        /// The calibration's extrinsics.
+        extrinsics: Extrinsics,
     },
     /// Analyse a recorded trace (phase tracking, extremum counting or sweep fit) with the model.
     Analyse {
@@ -117,6 +123,15 @@ pub struct ValidationPair {
     pub before: Result<ValidationFigure, String>,
     /// Planned with the identified extrinsics.
     pub after: Result<ValidationFigure, String>,
+}
+
+/// One validation motion of a check of the calibration ([`Command::Check`]).
+#[derive(Debug, Clone)]
+pub struct CheckedMotion {
+    /// The motion.
+    pub motion: ValidationMotion,
+    /// Its figures and proof, or why it did not run.
+    pub figure: Result<ValidationFigure, String>,
 }
 
 /// The validation motions after a diagnosis, planned without and with the effects it added.
@@ -194,6 +209,8 @@ pub enum Event {
     Identified(Result<Box<CalibrationReport>, String>),
     /// Validation finished.
     Validated(Vec<ValidationPair>),
+    /// The check of the calibration finished.
+    Checked(Vec<CheckedMotion>),
     /// A trace analysis finished.
     Analysed {
         /// The caller's tag.
@@ -325,6 +342,7 @@ impl Worker {
             Command::Run { .. }
                 | Command::Jog(_)
                 | Command::Validate { .. }
+                | Command::Check { .. }
                 | Command::Diagnose { .. }
                 | Command::Move { .. }
         ) {
@@ -491,17 +509,29 @@ impl Thread {
                     self.send(Event::Busy(None));
                 }
                 Command::Validate { identified } => {
-                    self.send(Event::Busy(Some("validating".into())));
-                    let pairs = run_before_and_after(self.bench.as_mut(), &self.nominal, &identified)
-                        .into_iter()
-                        .map(|p| ValidationPair {
-                            motion: p.motion,
-                            before: p.before.map_err(|e| e.to_string()),
-                            after: p.after.map_err(|e| e.to_string()),
-                        })
-                        .collect();
+                    self.send(Event::Busy(Some(BUSY_VALIDATING.into())));
+                    let pairs =
+                        run_before_and_after(self.bench.as_mut(), &self.nominal, &identified, &StopSettings::default())
+                            .into_iter()
+                            .map(|p| ValidationPair {
+                                motion: p.motion,
+                                before: p.before.map_err(|e| e.to_string()),
+                                after: p.after.map_err(|e| e.to_string()),
+                            })
+                            .collect();
                     self.send(Event::Position(self.bench.position_display()));
                     self.send(Event::Validated(pairs));
+                    self.send(Event::Busy(None));
+                }
+                Command::Check { extrinsics } => {
+                    self.send(Event::Busy(Some(BUSY_VALIDATING.into())));
+                    let checked =
+                        check_calibration(self.bench.as_mut(), &self.nominal, &extrinsics, &StopSettings::default())
+                            .into_iter()
+                            .map(|(motion, figure)| CheckedMotion { motion, figure: figure.map_err(|e| e.to_string()) })
+                            .collect();
+                    self.send(Event::Position(self.bench.position_display()));
+                    self.send(Event::Checked(checked));
                     self.send(Event::Busy(None));
                 }
                 Command::Diagnose { traces, extrinsics } => {

@@ -22,7 +22,9 @@ use crate::model::phase::PhaseModel;
 use crate::plan::Plan;
 use crate::trace::Trace;
 use crate::validate::before_after::{run_before_and_after, BeforeAndAfter};
+use crate::validate::evidence::{Evidence, Verdict as MotionVerdict};
 use crate::validate::forecast::{forecast, ValidationForecast};
+use crate::validate::StopSettings;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
 
@@ -77,6 +79,32 @@ pub struct ValidationRow {
     /// The same planned with the identified extrinsics (nm).
     #[serde(default)]
     pub after_curve_nm: Vec<f64>,
+    /// The proof of the motion planned with the nominal extrinsics: its figures that do not use
+    /// the extrinsics under test, and its verdict (`before_nm` is the figure it stands behind).
+    #[serde(default)]
+    pub before_evidence: Option<Evidence>,
+    /// The same for the motion planned with the identified extrinsics: the calibration's proof.
+    #[serde(default)]
+    pub after_evidence: Option<Evidence>,
+}
+
+impl ValidationRow {
+    /// Why this motion does not prove the calibration (not measured, contradicted, unconfirmed
+    /// or above its target); `None` when it does.
+    pub fn failure(&self) -> Option<String> {
+        let Some(e) = &self.after_evidence else {
+            return Some(format!("`{}`: not measured ({})", self.motion, self.note.as_deref().unwrap_or("no figure")));
+        };
+        if e.within_target {
+            return None;
+        }
+        Some(match e.verdict {
+            MotionVerdict::Confirmed => {
+                format!("`{}`: {:.1} nm, above its {:.0} nm target", self.motion, e.measured_nm, e.target_nm)
+            }
+            _ => format!("`{}`: {}", self.motion, e.summary()),
+        })
+    }
 }
 
 /// Most points kept of a validation curve in a report or session.
@@ -155,6 +183,18 @@ pub struct CalibrationReport {
     /// The recorded traces.
     #[serde(skip)]
     pub traces: Vec<Trace>,
+}
+
+impl CalibrationReport {
+    /// Why the validation does not prove this calibration, one sentence per motion that is not
+    /// confirmed within its target; empty when every motion is (or when the validation was not
+    /// run, or predicted: the report says so instead).
+    pub fn validation_failures(&self) -> Vec<String> {
+        if self.validation_not_run || self.validation_predicted {
+            return vec![];
+        }
+        self.validation.iter().filter_map(ValidationRow::failure).collect()
+    }
 }
 
 /// The bench time of one plan of a calibration.
@@ -240,7 +280,7 @@ pub fn calibrate(bench: &mut dyn Bench, nominal: &PhaseModel, mode: Mode) -> Res
     let (traces, duration) = measure(bench, &plans)?;
     let mut report = report_from_traces(traces, duration, bench.name(), nominal, mode)?;
     report.plan_durations = durations;
-    report.validation = validation_rows(bench, nominal, &report.extrinsics);
+    report.validation = validation_rows(bench, nominal, &report.extrinsics, &StopSettings::default());
     Ok(report)
 }
 
@@ -548,19 +588,27 @@ fn withhold_undetermined(rows: &mut [ParameterRow], fit: &FitCheck) {
 }
 
 /// The validation motions planned with the nominal extrinsics (before) and with `identified`
-/// (after), run on the bench and measured with the identified model
-/// ([`run_before_and_after`], what the GUI's validation runs).
-pub fn validation_rows(bench: &mut dyn Bench, nominal: &PhaseModel, identified: &Extrinsics) -> Vec<ValidationRow> {
-    run_before_and_after(bench, nominal, identified)
+/// (after), run on the bench with the stops `stops` and measured with the identified model
+/// ([`run_before_and_after`], what the GUI's validation runs). Each figure is the one its proof
+/// stands behind ([`Evidence::measured_nm`]).
+pub fn validation_rows(
+    bench: &mut dyn Bench,
+    nominal: &PhaseModel,
+    identified: &Extrinsics,
+    stops: &StopSettings,
+) -> Vec<ValidationRow> {
+    run_before_and_after(bench, nominal, identified, stops)
         .into_iter()
         .map(|BeforeAndAfter { motion: m, before, after }| ValidationRow {
             motion: m.name().to_string(),
-            before_nm: before.as_ref().ok().map(|f| f.peak_to_peak_nm),
-            after_nm: after.as_ref().ok().map(|f| f.peak_to_peak_nm),
+            before_nm: before.as_ref().ok().map(|f| f.evidence.measured_nm),
+            after_nm: after.as_ref().ok().map(|f| f.evidence.measured_nm),
             paper_nm: m.paper_after_nm(),
             note: crate::validate::pair_note(&before, &after),
             before_curve_nm: before.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
             after_curve_nm: after.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
+            before_evidence: before.as_ref().ok().map(|f| f.evidence.clone()),
+            after_evidence: after.as_ref().ok().map(|f| f.evidence.clone()),
         })
         .collect()
 }
@@ -578,5 +626,5 @@ pub fn predicted_validation_rows(
     p.truth = *identified;
     p.effects.clear();
     let mut bench = crate::bench::VirtualBench::new(&p, None).map_err(|e| e.to_string())?;
-    Ok(validation_rows(&mut bench, nominal, identified))
+    Ok(validation_rows(&mut bench, nominal, identified, &StopSettings::default()))
 }

@@ -10,7 +10,7 @@
 //! is written atomically. `--resume` continues a measurement a crash interrupted. The folder is locked
 //! while calibrate runs: a second photorobot writing into it is refused.
 
-use super::common::{hardware_bench_file, json_text, load_plan, timed, CliError};
+use super::common::{hardware_bench_file, json_text, load_plan, nominal_model, timed, CliError};
 use super::progress::{Progress, INTERRUPT};
 use crate::hardware_bench::open_hardware_bench;
 use photorobot_core::bench::{Bench, BenchPreset, RunControl, VirtualBench};
@@ -24,7 +24,6 @@ use photorobot_core::hardware::HardwareConfig;
 use photorobot_core::identify::signs::{SignSource, TranslationSign};
 use photorobot_core::identify::sweep_cost::{self, Evidence, SweepCost};
 use photorobot_core::identify::verdict::{FitCheck, Verdict};
-use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::Plan;
 use photorobot_core::session::{
@@ -33,6 +32,7 @@ use photorobot_core::session::{
 };
 use photorobot_core::trace::import::{read_folder_with, ColumnMapping, Constants, FolderOptions};
 use photorobot_core::trace::Trace;
+use photorobot_core::validate::StopSettings;
 use std::cell::RefCell;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -190,18 +190,6 @@ pub fn calibrate(a: &CalibrateArgs, out: &mut dyn Write) -> Result<(), CliError>
         writeln!(out, "\nsession written to {}", a.out.display())?;
     }
     calibration_verdict(a, &report)
-}
-
-/// The software's model: the bench's robot description and optics, the design extrinsics.
-fn nominal_model(preset: &BenchPreset) -> Result<PhaseModel, CliError> {
-    PhaseModel::new(
-        preset.robot_description()?,
-        Extrinsics::nominal_design(),
-        preset.optics,
-        &preset.ambient,
-        preset.laser.wavelength_nm,
-    )
-    .map_err(|problem| CliError::Argument { argument: "--bench", problem })
 }
 
 /// Never overwrite recorded data: a folder that holds a saved session is left alone.
@@ -368,7 +356,8 @@ fn measure_identify_validate(
         tracing::info!("validation not run (--no-validation)");
     } else {
         progress.borrow_mut().stage("validating");
-        report.validation = timed("validate", || validation_rows(bench, nominal, &report.extrinsics));
+        let stops = StopSettings { sweeps: !a.no_sweeps, ..StopSettings::default() };
+        report.validation = timed("validate", || validation_rows(bench, nominal, &report.extrinsics, &stops));
         tracing::info!(motions = report.validation.len(), "validation done");
     }
     progress.borrow_mut().finish();
@@ -552,8 +541,9 @@ fn write_session(a: &CalibrateArgs, mut session: Session, report: &mut Calibrati
     Ok(json)
 }
 
-/// A fit that fails, a solver that did not converge or data that determine no parameter is not
-/// a calibration, though written.
+/// A fit that fails, a solver that did not converge, data that determine no parameter, or a
+/// validation run on the bench that does not confirm every motion within its target is not a
+/// calibration, though written.
 fn calibration_verdict(a: &CalibrateArgs, report: &CalibrationReport) -> Result<(), CliError> {
     let refused = |problem: String| Err(CliError::NotACalibration { session: a.out.clone(), problem });
     if let Some(fit) = report.fit.as_ref().filter(|fit| fit.verdict != Verdict::Fits) {
@@ -571,6 +561,10 @@ fn calibration_verdict(a: &CalibrateArgs, report: &CalibrationReport) -> Result<
     }
     if !report.converged {
         return refused(format!("the solver did not converge ({})", report.termination));
+    }
+    let failures = report.validation_failures();
+    if !failures.is_empty() {
+        return refused(format!("its validation does not prove it: {}", failures.join("; ")));
     }
     Ok(())
 }
@@ -709,7 +703,9 @@ fn print_parameters(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
     Ok(())
 }
 
-/// The validation rows, or why there are none.
+/// The validation rows, or why there are none: before and after (the figures the proofs stand
+/// behind), after as tracked with the identified extrinsics alone and model-free, the count's
+/// bounds and the verdict.
 fn print_validation(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Result<()> {
     if r.validation_not_run {
         return writeln!(out, "\nvalidation NOT RUN (--no-validation): run its motions in the GUI's Validation view");
@@ -717,20 +713,32 @@ fn print_validation(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
     if r.validation_predicted {
         writeln!(out, "\nvalidation PREDICTED on a virtual bench with the identified extrinsics (no bench was run):")?;
     } else {
-        writeln!(out, "\nvalidation (FP cavity variation, peak to peak):")?;
+        writeln!(out, "\nvalidation (FP cavity variation: |L| along the beam, peak to peak; each figure the one its verdict stands behind):")?;
     }
-    writeln!(out, "  {:<28} {:>12} {:>12} {:>12}", "motion", "before (nm)", "after (nm)", "paper (nm)")?;
+    writeln!(
+        out,
+        "  {:<52} {:>10} {:>10} {:>10} {:>11} {:>12} {:<13} {:>6}",
+        "motion", "before nm", "after nm", "tracked", "model-free", "count ≥", "verdict", "paper"
+    )?;
     for v in &r.validation {
         let f = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.1}"));
+        let e = v.after_evidence.as_ref();
         writeln!(
             out,
-            "  {:<28} {:>12} {:>12} {:>12.0}{}",
+            "  {:<52} {:>10} {:>10} {:>10} {:>11} {:>12} {:<13} {:>6.0}{}",
             v.motion,
             f(v.before_nm),
             f(v.after_nm),
+            f(e.map(|e| e.tracked_nm)),
+            f(e.and_then(|e| e.model_free_nm)),
+            f(e.and_then(|e| e.bounds).map(|b| b.lower_nm)),
+            e.map_or("-", |e| e.verdict.word()),
             v.paper_nm,
             v.note.as_ref().map_or(String::new(), |n| format!("  ({n})"))
         )?;
+    }
+    for failure in r.validation_failures() {
+        writeln!(out, "  NOT PROVEN: {failure}")?;
     }
     Ok(())
 }

@@ -1,14 +1,16 @@
 //! What every command shares: the error type and its exit codes, the JSON document form and the
 //! loaders of the files several commands take (extrinsics, plans).
 
-use photorobot_core::bench::{BenchError, RunError};
+use photorobot_core::bench::{BenchError, BenchPreset, RunError};
 use photorobot_core::files::FileError;
+use photorobot_core::hardware::HardwareConfig;
 use photorobot_core::measure::MeasureError;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::kinematics::LimitViolation;
+use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::Plan;
 use photorobot_core::trace::TraceError;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 /// Why a command failed. Every message names the file, field or argument and what was expected.
@@ -138,6 +140,33 @@ pub fn load_plan(name_or_path: &str) -> Result<Plan, CliError> {
     })
 }
 
+/// The software's model: the bench's robot description and optics, the design extrinsics.
+pub fn nominal_model(preset: &BenchPreset) -> Result<PhaseModel, CliError> {
+    PhaseModel::new(
+        preset.robot_description()?,
+        Extrinsics::nominal_design(),
+        preset.optics,
+        &preset.ambient,
+        preset.laser.wavelength_nm,
+    )
+    .map_err(|problem| CliError::Argument { argument: "--bench", problem })
+}
+
+/// `--bench` as a hardware bench file, when it is one (a file that parses as a HardwareConfig, or
+/// names `controllers:` and is then reported as a broken one); `None` for a preset.
+pub fn hardware_bench_file(bench: &str) -> Result<Option<HardwareConfig>, CliError> {
+    let path = Path::new(bench);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = photorobot_core::files::read_text(path)?;
+    match HardwareConfig::from_ron_str(&text, path) {
+        Ok(config) => Ok(Some(config)),
+        Err(e) if text.contains("controllers:") => Err(e.into()),
+        Err(_) => Ok(None),
+    }
+}
+
 /// Run one stage of a command, logging its wall time at info level (`-v` on stderr, and the
 /// session log): `stage done stage=<name> elapsed_s=<seconds>`.
 pub fn timed<T>(stage: &str, f: impl FnOnce() -> T) -> T {
@@ -145,19 +174,4 @@ pub fn timed<T>(stage: &str, f: impl FnOnce() -> T) -> T {
     let out = f();
     tracing::info!(stage = %stage, elapsed_s = t0.elapsed().as_secs_f64(), "stage done");
     out
-}
-
-/// `--bench` as a hardware bench file, when it is one (a file that parses as a HardwareConfig, or
-/// names `controllers:` and is then reported as a broken one); `None` for a preset.
-pub fn hardware_bench_file(bench: &str) -> Result<Option<photorobot_core::hardware::HardwareConfig>, CliError> {
-    let path = std::path::Path::new(bench);
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let text = photorobot_core::files::read_text(path)?;
-    match photorobot_core::hardware::HardwareConfig::from_ron_str(&text, path) {
-        Ok(config) => Ok(Some(config)),
-        Err(e) if text.contains("controllers:") => Err(e.into()),
-        Err(_) => Ok(None),
-    }
 }

@@ -13,6 +13,7 @@ pub mod r#move;
 pub mod progress;
 pub mod report;
 pub mod simulate;
+pub mod validate;
 
 pub use common::{json_text, CliError, JSON_SCHEMA};
 
@@ -56,6 +57,8 @@ pub enum Command {
     /// Place the lamella at a gap, tilt, lateral offset and rotation relative to the fiber with a
     /// calibration, and prove the gap by a measurement that does not use the extrinsics.
     Move(r#move::MoveArgs),
+    /// Check a calibration on the bench without recalibrating: the validation motions with their proof.
+    Validate(validate::ValidateArgs),
     /// Start the workbench GUI (the default when no command is given).
     Gui,
     /// Serve a stage-controller or tunable-laser protocol emulator (PI E-712, SmarAct MCS, Keysight or
@@ -94,6 +97,7 @@ pub fn run_parsed(cli: Cli, out: &mut dyn Write) -> Result<Outcome, CliError> {
         Some(Command::Diagnose(a)) => diagnose::diagnose(&a, out).map(|()| Outcome::Done),
         Some(Command::Report(a)) => report::report(&a, out).map(|()| Outcome::Done),
         Some(Command::Move(a)) => r#move::move_lamella(&a, out).map(|()| Outcome::Done),
+        Some(Command::Validate(a)) => validate::validate(&a, out).map(|()| Outcome::Done),
         Some(Command::Emulate(a)) => emulate::emulate(&a, out).map(|()| Outcome::Done),
     }
 }

@@ -1,6 +1,7 @@
 //! Results: the Table II-style table with uncertainties and determined / not determined, the
 //! residual plot per equation (measurement kind), the correlation heat map, the condition number
-//! and the warnings in words.
+//! and the warnings in words; above them, an error when the validation does not prove the
+//! calibration.
 
 use crate::state::AppState;
 use egui::{Color32, RichText};
@@ -42,6 +43,8 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
         ui.label("No identification yet: run the wizard's steps, then Identify.");
         return;
     };
+    // A calibration its validation does not confirm is not a success, whatever the fit says.
+    super::validation::proof_banner(ui, s);
     egui::ScrollArea::vertical().id_salt("results").show(ui, |ui| report(ui, r));
 }
 

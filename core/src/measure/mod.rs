@@ -11,6 +11,7 @@ pub mod alignment;
 pub mod extrema;
 pub mod hint;
 pub mod live_count;
+pub mod model_free;
 pub mod signal;
 pub mod sweep;
 pub mod track;

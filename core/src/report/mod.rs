@@ -305,12 +305,31 @@ fn validation(h: &mut String, c: &CalibrationReport) {
              on a virtual bench whose truth is the identified extrinsics. Run them on the real bench to confirm.</p>\n",
         );
     }
+    let failures = c.validation_failures();
+    if !failures.is_empty() {
+        h.push_str(
+            "<p class=\"warn\"><b>NOT PROVEN: the validation does not confirm this calibration.</b></p>\n<ul>\n",
+        );
+        for f in &failures {
+            let _ = writeln!(h, "<li class=\"warn\">{}</li>", escape(f));
+        }
+        h.push_str("</ul>\n");
+    } else if !c.validation.is_empty() && !c.validation_predicted {
+        h.push_str("<p>Every validation motion is confirmed within its target.</p>\n");
+    }
     h.push_str(
-        "<p>Each validation motion should leave the Fabry-Perot cavity length unchanged. The figure of merit is the \
-         peak-to-peak variation of the cavity length during the motion, planned with the nominal (design) extrinsics \
-         (<i>before</i>) and with the identified ones (<i>after</i>). The <i>forecast</i> is what the uncertainty of the \
-         identified extrinsics allows the true gap along the motion (95 %): above the target (10 nm for the circle, 20 nm \
-         for the rotations) the data do not determine the extrinsics well enough for it.</p>\n<table>\n<tr><th>motion</th><th>before (nm)</th><th>after (nm)</th><th>forecast (nm)</th><th>paper after (nm)</th><th>note</th></tr>\n",
+        "<p>Each validation motion should leave the Fabry-Perot cavity length |L| unchanged. The figure of merit is the \
+         peak-to-peak variation of |L| during the motion, planned with the nominal (design) extrinsics \
+         (<i>before</i>) and with the identified ones (<i>after</i>); each is the figure its verdict stands behind. \
+         <i>Tracked</i> is the after figure read with the identified extrinsics alone (their fringe prediction as the \
+         tracker's hint, their tilt term); <i>model-free</i> reads the same fringes from the signal's own turning \
+         points, with the tilt term from the fringe contrast; <i>count</i> is the lower bound the signal's extrema \
+         set on the fringes' peak to peak. A motion is <i>confirmed</i> when every such figure agrees, \
+         <i>contradicted</i> when one does not. The <i>forecast</i> is what the uncertainty of the identified \
+         extrinsics allows the true gap along the motion (95 %): above the target (10 nm for the circle, 20 nm for \
+         the rotations) the data do not determine the extrinsics well enough for it.</p>\n<table>\n<tr><th>motion</th>\
+         <th>before (nm)</th><th>after (nm)</th><th>tracked (nm)</th><th>model-free (nm)</th><th>count ≥ (nm)</th>\
+         <th>verdict</th><th>forecast (nm)</th><th>paper after (nm)</th><th>note</th></tr>\n",
     );
     let f = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.1}"));
     for v in &c.validation {
@@ -320,12 +339,25 @@ fn validation(h: &mut String, c: &CalibrationReport) {
             Some(x) => format!("≤ {:.1}", x.expected_nm),
             None => "–".to_string(),
         };
+        let e = v.after_evidence.as_ref();
+        let verdict = match e {
+            Some(e) if e.within_target => e.verdict.word().to_string(),
+            Some(e) => format!(
+                "<span class=\"warn\">{}{}</span>",
+                e.verdict.word(),
+                if e.verdict == crate::validate::evidence::Verdict::Confirmed { ", above target" } else { "" }
+            ),
+            None => "–".to_string(),
+        };
         let _ = writeln!(
             h,
-            "<tr><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{forecast_cell}</td><td class=\"num\">{:.0}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{verdict}</td><td class=\"num\">{forecast_cell}</td><td class=\"num\">{:.0}</td><td>{}</td></tr>",
             escape(&v.motion),
             f(v.before_nm),
             f(v.after_nm),
+            f(e.map(|e| e.tracked_nm)),
+            f(e.and_then(|e| e.model_free_nm)),
+            f(e.and_then(|e| e.bounds).map(|b| b.lower_nm)),
             v.paper_nm,
             escape(v.note.as_deref().unwrap_or(""))
         );

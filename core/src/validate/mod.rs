@@ -8,7 +8,12 @@
 //! peak-to-peak is taken. With perfect extrinsics the figure is the noise.
 
 pub mod before_after;
+pub mod contrast;
+pub mod evidence;
 pub mod forecast;
+pub mod stops;
+
+pub use stops::{StopSettings, ABSOLUTE_GAP, CONTRAST_DITHER, ENVELOPE_DITHER};
 
 use crate::bench::{run_plan, Bench, RunControl};
 use crate::measure::{self, Measurement};
@@ -16,7 +21,7 @@ use crate::model::effects::Backlash;
 use crate::model::extrinsics::Extrinsics;
 use crate::model::kinematics::{IgmError, LimitViolation};
 use crate::model::phase::PhaseModel;
-use crate::plan::{JointTarget, Plan, Segment};
+use crate::plan::Plan;
 use crate::trace::{ExtraColumn, Trace};
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
@@ -49,6 +54,11 @@ impl ValidationMotion {
             Self::RotationZf => "rotation 6° about Z_f (paper: Y_f) through P_r",
             Self::RotationOpticalAxis => "rotation 45.5° about the optical axis through P_r",
         }
+    }
+
+    /// The target a validation must meet (nm): 10 for the circle, 20 for the rotations.
+    pub fn target_nm(self) -> f64 {
+        forecast::target_nm(self)
     }
 
     /// The paper's reported figure after calibration (nm), for comparison.
@@ -191,33 +201,13 @@ pub fn waypoints_shifted(
     Ok(out)
 }
 
-/// Label of the short axial dither recorded before each validation motion: with a good
-/// calibration the motion itself shows no fringe, so the envelope is measured on the dither.
-pub const ENVELOPE_DITHER: &str = "envelope dither";
-
-/// Joint moves smaller than this (display units) set no direction of travel: the IGM's
-/// round-off, not a reversal.
-const REVERSAL_EPS: f64 = 1e-9;
-
 /// The plan of a validation motion: an unrecorded move to the first waypoint, a recorded axial
-/// dither of 1 µm out and back (the fringe envelope), then recorded moves through the waypoints.
-/// For stages with play (reversal errors of width `play`, display units, zero for none; the
-/// extended model's [`crate::model::effects::reversal_play`]) the commands lead the wanted
-/// poses by half the play in each joint's direction of travel, so that the stages go through
-/// the waypoints. Before the first recorded move every stage with play is loaded from the
-/// side opposite its first travel (an unrecorded move of 1.5 plays back, then forward), so its
-/// state is known whatever it did before; where a joint reverses, a recorded take-up move
-/// carries its command across the play while the stage stands still. Returns the plan and the
-/// stages' state at its first recorded sample (for [`modelled_real_joints`]).
+/// dither of 1 µm out and back (the fringe envelope), then recorded moves through the waypoints,
+/// with no stop ([`stops::plan_reaching`] says how stages with play are handled). Returns the
+/// plan and the stages' state at its first recorded sample (for [`modelled_real_joints`]).
 pub fn plan_with_play(motion: ValidationMotion, waypoints: &[[f64; 6]], play: &[f64; 6]) -> (Plan, Backlash) {
-    let (plan, state, _) = plan_reaching(motion, waypoints, play);
+    let (plan, state, _) = plan_through(&format!("validation: {}", motion.name()), motion.name(), waypoints, play);
     (plan, state)
-}
-
-/// [`plan_with_play`], and the index of the segment that reaches each wanted pose (the dither's
-/// far end, its return to the first waypoint, then every later waypoint).
-fn plan_reaching(motion: ValidationMotion, waypoints: &[[f64; 6]], play: &[f64; 6]) -> (Plan, Backlash, Vec<usize>) {
-    plan_through(&format!("validation: {}", motion.name()), motion.name(), waypoints, play)
 }
 
 /// The plan of [`plan_with_play`] for any path through `waypoints` (µm, °): named `name`, its
@@ -225,58 +215,8 @@ fn plan_reaching(motion: ValidationMotion, waypoints: &[[f64; 6]], play: &[f64; 
 /// and the index of the segment that reaches each wanted pose (the dither's far end, its return
 /// to the first waypoint, then every later waypoint).
 pub fn plan_through(name: &str, label: &str, waypoints: &[[f64; 6]], play: &[f64; 6]) -> (Plan, Backlash, Vec<usize>) {
-    let w0 = waypoints[0];
-    let mut out = w0;
-    out[1] += 1.0;
-    let half: [f64; 6] = std::array::from_fn(|j| 0.5 * play[j].abs());
-    let wanted: Vec<([f64; 6], &str)> = [(out, ENVELOPE_DITHER), (w0, ENVELOPE_DITHER)]
-        .into_iter()
-        .chain(waypoints[1..].iter().map(|w| (*w, label)))
-        .collect();
-    // Each joint's first direction of travel.
-    let mut dir = [0.0f64; 6];
-    let mut prev = w0;
-    for (w, _) in &wanted {
-        for j in 0..6 {
-            if dir[j] == 0.0 && (w[j] - prev[j]).abs() > REVERSAL_EPS {
-                dir[j] = (w[j] - prev[j]).signum();
-            }
-        }
-        prev = *w;
-    }
-    let dir = dir.map(|d| if d == 0.0 { 1.0 } else { d });
-    let start: [f64; 6] = std::array::from_fn(|j| w0[j] + dir[j] * half[j]);
-    let mut segments = Vec::new();
-    if half.iter().any(|h| *h > 0.0) {
-        let load: [f64; 6] = std::array::from_fn(|j| start[j] - 3.0 * dir[j] * half[j]);
-        segments.push(Segment::Move { to: JointTarget::all(load), record: false, label: "approach".into() });
-    }
-    segments.push(Segment::Move { to: JointTarget::all(start), record: false, label: "approach".into() });
-    let state = Backlash { offset: std::array::from_fn(|j| -dir[j] * half[j]), command: start };
-    let mut dir = dir;
-    let mut prev = w0;
-    let mut command = start;
-    let mut reaching = Vec::with_capacity(wanted.len());
-    for (w, label) in wanted {
-        let mut take_up = command;
-        let mut reverses = false;
-        for j in 0..6 {
-            let d = w[j] - prev[j];
-            if half[j] > 0.0 && d.abs() > REVERSAL_EPS && d.signum() != dir[j] {
-                dir[j] = d.signum();
-                take_up[j] = prev[j] + dir[j] * half[j];
-                reverses = true;
-            }
-        }
-        if reverses {
-            segments.push(Segment::Move { to: JointTarget::all(take_up), record: true, label: label.into() });
-        }
-        command = std::array::from_fn(|j| w[j] + dir[j] * half[j]);
-        reaching.push(segments.len());
-        segments.push(Segment::Move { to: JointTarget::all(command), record: true, label: label.into() });
-        prev = w;
-    }
-    (Plan { name: name.to_string(), description: String::new(), segments }, state, reaching)
+    let p = stops::plan_reaching(name, label, waypoints, play, &[], None);
+    (p.plan, p.state, p.reaching)
 }
 
 /// What a validation plan compensates from the extended model: the stages' play (reversal
@@ -315,6 +255,11 @@ impl Compensation {
 /// from their state `state` at its first sample, following its recorded commands
 /// ([`Backlash`]): what the analysis model's motion hint, fringe shape and tilt correction need.
 pub fn modelled_real_joints(trace: &Trace, play: &[f64; 6], mut state: Backlash) -> Trace {
+    follow_real_joints(trace, play, &mut state)
+}
+
+/// [`modelled_real_joints`] from `state`, left at the trace's last sample.
+fn follow_real_joints(trace: &Trace, play: &[f64; 6], state: &mut Backlash) -> Trace {
     let mut out = trace.clone();
     for i in 0..trace.len() {
         let q = trace.joints_display(i);
@@ -359,6 +304,8 @@ pub struct ValidationFigure {
     pub tracked_with_model_shape: bool,
     /// Why the model's fringe shape was not used.
     pub shape_fallback: Option<String>,
+    /// The figures that do not use the extrinsics under test, and the verdict.
+    pub evidence: evidence::Evidence,
 }
 
 impl ValidationFigure {
@@ -407,12 +354,13 @@ pub fn run_validation(
 
 /// [`run_validation`] with the motion planned through the IGM of `planning` (its robot chain:
 /// e.g. the nominal robot, or the robot with the effects a diagnosis added) and measured with
-/// `analysis`, compensating what `compensation` says (default: nothing). Stages with play: the
-/// commands compensate it ([`plan_with_play`]) and the analysis models the stages' real joints
-/// along the trace ([`modelled_real_joints`]). A drifting gap: each waypoint of the motion is
-/// moved along the beam by the drift expected between the motion's start and the time the
-/// bench reaches it ([`Plan::expand`] on the bench's limits), so that the gap stands still;
-/// the figure measures what the robot and the drift leave together.
+/// `analysis`, compensating what `compensation` says (default: nothing), without stops
+/// ([`StopSettings::NONE`]). Stages with play: the commands compensate it ([`plan_with_play`])
+/// and the analysis models the stages' real joints along the trace ([`modelled_real_joints`]).
+/// A drifting gap: each waypoint of the motion is moved along the beam by the drift expected
+/// between the motion's start and the time the bench reaches it ([`Plan::expand`] on the
+/// bench's limits), so that the gap stands still; the figure measures what the robot and the
+/// drift leave together.
 pub fn run_validation_planned(
     bench: &mut dyn Bench,
     planning: &PhaseModel,
@@ -422,7 +370,8 @@ pub fn run_validation_planned(
     start: [f64; 6],
     compensation: &Compensation,
 ) -> Result<ValidationFigure, ValidationError> {
-    record_validation(bench, planning, planned_with, motion, start, compensation)?.measure(analysis)
+    record_validation(bench, planning, planned_with, motion, start, compensation, &StopSettings::NONE)?
+        .measure(analysis)
 }
 
 /// A validation motion recorded on a bench, not yet measured ([`RecordedValidation::measure`]):
@@ -430,16 +379,20 @@ pub fn run_validation_planned(
 #[derive(Debug, Clone)]
 pub struct RecordedValidation {
     motion: ValidationMotion,
-    /// The recorded trace (all waypoints joined).
+    /// The recorded trace (the envelope dither and the motion's waypoints joined).
     trace: Trace,
     /// The trace with the stages' modelled real joints, for stages with play.
     real: Option<Trace>,
     /// The first sample of the motion proper (after the envelope dither).
     dither_end: usize,
+    /// The start, then each stop: their dithers and sweeps.
+    poses: Vec<evidence::PoseRecord>,
 }
 
 /// The bench half of [`run_validation_planned`]: plan with `planned_with` through the IGM of
-/// `planning`, compensate what `compensation` says, and run on the bench from `start`.
+/// `planning`, compensate what `compensation` says, and run on the bench from `start`, stopping
+/// where `stops` says. The plan runs piece by piece: a sweep the bench refuses or fails costs
+/// that pose's absolute gap (recorded as its problem), not the motion.
 pub fn record_validation(
     bench: &mut dyn Bench,
     planning: &PhaseModel,
@@ -447,43 +400,138 @@ pub fn record_validation(
     motion: ValidationMotion,
     start: [f64; 6],
     compensation: &Compensation,
+    stops: &StopSettings,
 ) -> Result<RecordedValidation, ValidationError> {
     let count = motion.waypoint_count();
     let play = &compensation.play;
+    let stop_at = stops::stop_waypoints(motion, count, stops.stops);
+    let sweep_nm = (stops.sweeps && bench.tunable_laser()).then(|| bench.wavelength_nm());
     let mut w = waypoints(planning, planned_with, motion, start, count)?;
-    let (mut p, mut state, reaching) = plan_reaching(motion, &w, play);
+    let mut p =
+        stops::plan_reaching(&format!("validation: {}", motion.name()), motion.name(), &w, play, &stop_at, sweep_nm);
     if !compensation.drift.is_empty() {
         let run_error = |e: String| ValidationError::Run { motion: motion.name(), problem: e };
         let timed = p
+            .plan
             .expand(bench.robot(), bench.position_display(), bench.motion_limits())
             .map_err(|e| run_error(e.to_string()))?;
         let t0 = bench.clock_s();
         // reaching[1] is the return from the dither: the motion starts there.
-        let at = |k: usize| t0 + timed[reaching[k]].end_s();
+        let at = |k: usize| t0 + timed[p.reaching[k]].end_s();
         let start_nm = compensation.drift_nm(at(1));
         let axial_um: Vec<f64> = (0..=count).map(|k| -(compensation.drift_nm(at(k + 1)) - start_nm) * 1e-3).collect();
         w = waypoints_shifted(planning, planned_with, motion, start, count, &axial_um)?;
-        (p, state, _) = plan_reaching(motion, &w, play);
+        p = stops::plan_reaching(
+            &format!("validation: {}", motion.name()),
+            motion.name(),
+            &w,
+            play,
+            &stop_at,
+            sweep_nm,
+        );
     }
+    let (traces, refused) = run_pieces(bench, &p.plan, motion)?;
+    // Stages with play: their real joints follow every recorded command in order, the stops'
+    // dithers included.
+    let real = play.iter().any(|w| *w != 0.0).then(|| {
+        let mut state = p.state;
+        let real: Vec<Trace> = traces.iter().map(|t| follow_real_joints(t, play, &mut state)).collect();
+        sort_recorded(motion, real, refused.clone(), stop_at.len()).map(|r| r.0)
+    });
+    let (trace, dither_end, poses) = sort_recorded(motion, traces, refused, stop_at.len())?;
+    let real = real.transpose()?;
+    Ok(RecordedValidation { motion, trace, real, dither_end, poses })
+}
+
+/// Run `plan` in pieces split at its sweeps: every trace recorded, and each sweep that failed
+/// with why (its label, the problem); any other failure is the motion's.
+fn run_pieces(
+    bench: &mut dyn Bench,
+    plan: &Plan,
+    motion: ValidationMotion,
+) -> Result<(Vec<Trace>, Vec<(String, String)>), ValidationError> {
     let cancel = AtomicBool::new(false);
-    let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-    let run = run_plan(bench, &p, &mut control);
-    run.outcome.map_err(|e| ValidationError::Run { motion: motion.name(), problem: e.to_string() })?;
+    let mut traces = Vec::new();
+    let mut refused = Vec::new();
+    let mut piece: Vec<crate::plan::Segment> = Vec::new();
+    let mut pieces = Vec::new();
+    for seg in &plan.segments {
+        if matches!(seg, crate::plan::Segment::Sweep { .. }) {
+            pieces.push(std::mem::take(&mut piece));
+            pieces.push(vec![seg.clone()]);
+        } else {
+            piece.push(seg.clone());
+        }
+    }
+    pieces.push(piece);
+    for segments in pieces.into_iter().filter(|p| !p.is_empty()) {
+        let sweep = matches!(segments[0], crate::plan::Segment::Sweep { .. });
+        let label = segments[0].label().to_string();
+        let part = Plan { name: plan.name.clone(), description: String::new(), segments };
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        let run = run_plan(bench, &part, &mut control);
+        match run.outcome {
+            Ok(()) => traces.extend(run.traces),
+            Err(e) if sweep => refused.push((label, e.to_string())),
+            Err(e) => return Err(ValidationError::Run { motion: motion.name(), problem: e.to_string() }),
+        }
+    }
+    Ok((traces, refused))
+}
+
+/// The number after a stop's label (`contrast dither 2`, `absolute gap 0`).
+fn pose_number(label: &str, prefix: &str) -> Option<usize> {
+    label.strip_prefix(prefix)?.trim().parse().ok()
+}
+
+/// The motion's trace (envelope dither and motion joined), where the motion starts, and each
+/// pose's dither and sweep with its sample in that trace.
+fn sort_recorded(
+    motion: ValidationMotion,
+    traces: Vec<Trace>,
+    refused: Vec<(String, String)>,
+    stops: usize,
+) -> Result<(Trace, usize, Vec<evidence::PoseRecord>), ValidationError> {
+    let mut poses: Vec<evidence::PoseRecord> =
+        (0..=stops).map(|_| evidence::PoseRecord { sample: 0, dither: None, sweep: None }).collect();
+    let mut along: Vec<Trace> = Vec::new();
+    let mut dithers: Vec<Vec<Trace>> = vec![Vec::new(); stops + 1];
+    let (mut length, mut dither_end) = (0usize, 0usize);
+    for t in traces {
+        let label = t.meta.label.clone();
+        if label == ENVELOPE_DITHER || label == motion.name() {
+            length += t.len();
+            if label == ENVELOPE_DITHER {
+                dither_end = length;
+            }
+            along.push(t);
+        } else if let Some(k) = pose_number(&label, CONTRAST_DITHER).filter(|k| *k <= stops) {
+            poses[k].sample = length.saturating_sub(1);
+            dithers[k].push(t);
+        } else if let Some(k) = pose_number(&label, ABSOLUTE_GAP).filter(|k| *k <= stops) {
+            poses[k].sample = if k == 0 { dither_end } else { length.saturating_sub(1) };
+            poses[k].sweep = Some(Ok(t));
+        }
+    }
+    for (label, problem) in refused {
+        if let Some(k) = pose_number(&label, ABSOLUTE_GAP).filter(|k| *k <= stops) {
+            poses[k].sweep = Some(Err(problem));
+        }
+    }
+    for (pose, d) in poses.iter_mut().zip(dithers) {
+        pose.dither = join(&d);
+    }
+    poses[0].sample = dither_end;
     let trace =
-        join(&run.traces).ok_or(ValidationError::Run { motion: motion.name(), problem: "nothing recorded".into() })?;
-    let real = if play.iter().any(|w| *w != 0.0) { Some(modelled_real_joints(&trace, play, state)) } else { None };
-    let dither_end = {
-        let dither = join(&run.traces.iter().filter(|t| t.meta.label == ENVELOPE_DITHER).cloned().collect::<Vec<_>>());
-        dither.map_or(0, |d| d.len())
-    };
-    Ok(RecordedValidation { motion, trace, real, dither_end })
+        join(&along).ok_or(ValidationError::Run { motion: motion.name(), problem: "nothing recorded".into() })?;
+    Ok((trace, dither_end, poses))
 }
 
 impl RecordedValidation {
     /// The analysis half of [`run_validation_planned`]: the figure of merit measured with
     /// `analysis` (the best model available: it sets the motion hint and the tilt correction).
     pub fn measure(self, analysis: &PhaseModel) -> Result<ValidationFigure, ValidationError> {
-        let RecordedValidation { motion, trace, real, dither_end } = self;
+        let RecordedValidation { motion, trace, real, dither_end, poses } = self;
         let analysed = real.as_ref().unwrap_or(&trace);
         // A motion whose model gap moves less than two fringes after the dither (the circle, the
         // rotation about the optical axis) is tracked with the phase free of the hint in time: its
@@ -521,8 +569,19 @@ impl RecordedValidation {
         let variation: Vec<f64> =
             (dither_end..trace.len()).map(|i| m.track.dl_nm[i] - d0 - (tilt_term(i) - t0)).collect();
         let (lo, hi) = variation.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let evidence = evidence::assess(&evidence::Inputs {
+            motion,
+            trace: analysed,
+            motion_start: dither_end,
+            tracked_dl_nm: &m.track.dl_nm,
+            tracked_sigma_nm: &m.track.sigma_dl_nm,
+            tracked_nm: hi - lo,
+            poses: &poses,
+            analysis,
+        });
         Ok(ValidationFigure {
             motion,
+            evidence,
             peak_to_peak_nm: hi - lo,
             trace,
             variation_nm: variation,
@@ -540,6 +599,7 @@ mod tests {
     use super::*;
     use crate::bench::{BenchPreset, VirtualBench};
     use crate::model::robot::RobotDescription;
+    use crate::plan::Segment;
 
     fn figure(planned_with: Extrinsics, analysis_with: Extrinsics, motion: ValidationMotion) -> f64 {
         let preset = BenchPreset::resolve("table2-ideal").unwrap();
