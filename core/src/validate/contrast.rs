@@ -12,6 +12,10 @@
 //! gives c1 and c2, hence T along the whole rotation. The fringe phase cannot: the distance from
 //! the fiber's end to the lamella plane does not depend on the fiber's direction.
 
+mod shape;
+
+pub use shape::{fit_with_shape, ContrastShape};
+
 use crate::measure::model_free::Envelope;
 use crate::model::kinematics::Chain;
 use crate::model::optics::{FabryPerot, OpticalParams};
@@ -154,6 +158,11 @@ impl TiltTerm {
         (v.max(0.0).sqrt() * 1e3).hypot(self.relative * self.change_nm(angle_rad))
     }
 
+    /// c2 of `cos γ = c0 + c1·cos φ + c2·sin φ`.
+    pub fn c2(&self) -> f64 {
+        self.c[1]
+    }
+
     fn gradient(&self, angle_rad: f64) -> [f64; 2] {
         [-self.gap_um * (angle_rad.cos() - 1.0), -self.gap_um * angle_rad.sin()]
     }
@@ -211,7 +220,7 @@ pub fn fit_tilt_term(
 /// The relative error of one dither's amplitude beyond its noise: the same pose read by the
 /// dithers of two rotations on table2-ideal differs by 0.015-0.07 %, and the three poses of a
 /// rotation depart from one Gaussian of the tilt by about 0.1 %.
-pub const AMPLITUDE_REPEATABILITY: f64 = 1e-3;
+pub const AMPLITUDE_REPEATABILITY: f64 = 5e-4;
 
 /// The fewest amplitude samples along a rotation that fit its tilt term.
 pub const MIN_SAMPLES_ALONG: usize = 3;
@@ -390,5 +399,39 @@ mod tests {
         // No fall of contrast with the tilt: no term.
         let flat: Vec<(f64, f64, f64)> = (0..20).map(|k| (0.005 * k as f64, 0.02, 1e-4)).collect();
         assert!(fit_tilt_term_along(&flat, gap_um, 0.0).is_none());
+    }
+    /// The model's own contrast at the start and two stops of 6° rotations whose tilt passes
+    /// through, or stays off, normal incidence: the tilt term fitted to the optics' shape with its
+    /// width free is the true one to a fraction of a nanometre when the tilt stays in the plane
+    /// of rotation, and the Gaussian fit that starts it is 8 nm off.
+    #[test]
+    fn the_tilt_term_from_the_models_own_contrast_is_exact() {
+        let preset = BenchPreset::resolve("table2-ideal").unwrap();
+        let model = PhaseModel::of_preset(&preset, preset.truth).unwrap();
+        let fp = FabryPerot::new(&model.optics, 1560.0, model.n_air).unwrap();
+        let s = contrast_sensitivity(&model.optics, 1560.0, model.n_air, 898.0).unwrap();
+        let shape = ContrastShape::of(&fp, 898.0);
+        for (in_plane_deg, out_deg) in [(1.885f64, 0.01f64), (2.988, 1.115), (-1.0, 0.5), (4.0, 0.0)] {
+            let (g0, z) = (in_plane_deg.to_radians(), out_deg.to_radians());
+            let (c1, c2) = (g0.cos() * z.cos(), g0.sin() * z.cos());
+            let cos_g = |phi: f64| c1 * phi.cos() + c2 * phi.sin();
+            let samples: Vec<(f64, f64, f64)> = [0.0f64, 3.0, 6.0]
+                .iter()
+                .map(|d| {
+                    let phi = d.to_radians();
+                    (phi, half_peak_to_peak(&fp, 898.0, cos_g(phi).clamp(-1.0, 1.0).acos()), 1e-9)
+                })
+                .collect();
+            let (g, _) = fit_tilt_term_along(&samples, 898.0, s.quartic_per_rad2).unwrap();
+            let (t, k) = fit_with_shape(&samples, 898.0, &shape, g.c[1], 1e-3).unwrap();
+            assert!((k - 1.0).abs() < 1e-3, "width factor {k}");
+            eprintln!("Gaussian fit {} nm", g.change_nm(6f64.to_radians()));
+            let phi = 6f64.to_radians();
+            let truth = 898.0 * (cos_g(0.0) - cos_g(phi)) * 1e3;
+            eprintln!("{in_plane_deg}° in plane, {out_deg}° out: {} nm vs {truth} nm", t.change_nm(phi));
+            // The tilt out of the plane of rotation is left out: a few nm for half a degree.
+            let tolerance = if out_deg < 0.1 { 0.5 } else { 4.0 };
+            assert!((t.change_nm(phi) - truth).abs() < tolerance, "{} vs {truth}", t.change_nm(phi));
+        }
     }
 }

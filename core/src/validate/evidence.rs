@@ -11,8 +11,8 @@
 //! keeps the tilt).
 
 use super::contrast::{
-    contrast_sensitivity, fit_tilt_term, fit_tilt_term_along, rotation_angles_rad, ContrastPose, ContrastSensitivity,
-    RotationAxis, TiltTerm,
+    contrast_sensitivity, fit_tilt_term, fit_tilt_term_along, fit_with_shape, rotation_angles_rad, ContrastPose,
+    ContrastSensitivity, ContrastShape, RotationAxis, TiltTerm, AMPLITUDE_REPEATABILITY,
 };
 use super::forecast::target_nm;
 use super::ValidationMotion;
@@ -205,7 +205,11 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
     let poses_contrast = start_envelope.map(contrast).unwrap_or_default();
     let tilt = rotation.and_then(|axis| {
         let sensitivity = contrast_sensitivity(&inp.analysis.optics, wavelength_nm, inp.analysis.n_air, gap_um).ok()?;
-        let along = || tilt_along(&dither_amplitudes(inp, &angles, s, &sensitivity), gap_um, &sensitivity);
+        let along = || {
+            let fp = FabryPerot::new(&inp.analysis.optics, wavelength_nm, inp.analysis.n_air).ok();
+            let shape = fp.map(|fp| ContrastShape::of(&fp, gap_um));
+            tilt_along(&dither_amplitudes(inp, &angles, s, &sensitivity), gap_um, &sensitivity, shape.as_ref())
+        };
         if let Some((t, kappa)) = (axis == RotationAxis::Transverse).then(along).flatten() {
             return Some((t, ContrastSensitivity { kappa_per_rad2: kappa, ..sensitivity }));
         }
@@ -442,8 +446,18 @@ fn interpolate(points: &[(f64, f64)], x: f64) -> f64 {
 
 /// The tilt term of a rotation about a transverse axis from the fringe's amplitude at its poses,
 /// with the fitted κ.
-fn tilt_along(samples: &[(f64, f64, f64)], gap_um: f64, sens: &ContrastSensitivity) -> Option<(TiltTerm, f64)> {
-    fit_tilt_term_along(samples, gap_um, sens.quartic_per_rad2)
+fn tilt_along(
+    samples: &[(f64, f64, f64)],
+    gap_um: f64,
+    sens: &ContrastSensitivity,
+    shape: Option<&ContrastShape>,
+) -> Option<(TiltTerm, f64)> {
+    let (gaussian, kappa) = fit_tilt_term_along(samples, gap_um, sens.quartic_per_rad2)?;
+    let Some(shape) = shape else { return Some((gaussian, kappa)) };
+    match fit_with_shape(samples, gap_um, shape, gaussian.c2(), AMPLITUDE_REPEATABILITY) {
+        Some((t, k)) => Some((t, sens.kappa_per_rad2 * k * k)),
+        None => Some((gaussian, kappa)),
+    }
 }
 
 /// The fringe's amplitude on the dither at the start and at each stop of a rotation, as
