@@ -274,7 +274,7 @@ pub fn fit_tilt_term_along(samples: &[(f64, f64, f64)], gap_um: f64, rho_per_rad
         let scale = chi2.max(1.0);
         let (p, r) = (x[1], x[2]);
         let (vp, vr, cpr) = (inv[(1, 1)] * scale, inv[(2, 2)] * scale, inv[(1, 2)] * scale);
-        if !(p > 5.0 * vp.sqrt()) {
+        if p.is_nan() || vp.is_nan() || p <= 5.0 * vp.sqrt() {
             return None;
         }
         let next = r / p;

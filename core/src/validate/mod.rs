@@ -443,13 +443,12 @@ pub fn record_validation(
     Ok(RecordedValidation { motion, trace, real, dither_end, poses })
 }
 
+/// Every trace a motion recorded, and each sweep that failed with why (its label, the problem).
+type Pieces = (Vec<Trace>, Vec<(String, String)>);
+
 /// Run `plan` in pieces split at its sweeps: every trace recorded, and each sweep that failed
 /// with why (its label, the problem); any other failure is the motion's.
-fn run_pieces(
-    bench: &mut dyn Bench,
-    plan: &Plan,
-    motion: ValidationMotion,
-) -> Result<(Vec<Trace>, Vec<(String, String)>), ValidationError> {
+fn run_pieces(bench: &mut dyn Bench, plan: &Plan, motion: ValidationMotion) -> Result<Pieces, ValidationError> {
     let cancel = AtomicBool::new(false);
     let mut traces = Vec::new();
     let mut refused = Vec::new();

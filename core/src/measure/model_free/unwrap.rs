@@ -107,7 +107,7 @@ pub fn unwrap_gap_nm(
     let reversals_at_fringe_extrema: Vec<usize> =
         candidates.iter().filter(|&&j| reversed[j]).map(|&j| bounds[j].0).collect();
     let b = count.smallest_amplitude;
-    let hidden = if reversals_at_fringe_extrema.is_empty() || !(b > 0.0) {
+    let hidden = if reversals_at_fringe_extrema.is_empty() || b.is_nan() || b <= 0.0 {
         0.0
     } else {
         (1.0 - (count.hysteresis / b).min(2.0)).acos() / std::f64::consts::PI * step_nm
