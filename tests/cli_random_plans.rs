@@ -69,7 +69,11 @@ fn a_traces_folder_calibrates_as_the_direct_run() {
     let direct = dir.path().join("direct");
     let again = dir.path().join("again");
     let d = direct.display().to_string();
-    let (ok, first) = calibrate(&["--bench", "table2-ideal", "--seed", "5", "--mode", "paper", "--json", "--out", &d]);
+    // Paper mode leaves β_wf and θ_wf undetermined and its validation is refused: the traces are
+    // what is compared here.
+    let direct_args =
+        ["--bench", "table2-ideal", "--seed", "5", "--mode", "paper", "--no-validation", "--json", "--out", &d];
+    let (ok, first) = calibrate(&direct_args);
     ok.unwrap();
     let traces = direct.join("traces").display().to_string();
     let a = again.display().to_string();

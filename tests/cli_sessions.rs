@@ -273,7 +273,9 @@ fn resume_skips_a_step_the_workbench_measured_and_refuses_one_it_stopped() {
     use photorobot_core::session::{Progress, TraceRef};
     let root = tempfile::tempdir().unwrap();
     let full_dir = root.path().join("full");
-    let full = calibrate(&[], &full_dir);
+    // The measurement steps are what is resumed: the validation is not run (paper mode leaves
+    // β_wf and θ_wf undetermined, and its validation is refused).
+    let full = calibrate(&["--no-validation"], &full_dir);
     let measured = Session::load(&full_dir).unwrap();
     let second: Vec<TraceRef> = measured.traces.iter().filter(|t| t.step.is_some_and(|s| s.0 == 1)).cloned().collect();
     assert!(second.len() >= 2 && second.len() < measured.traces.len());
@@ -293,7 +295,7 @@ fn resume_skips_a_step_the_workbench_measured_and_refuses_one_it_stopped() {
     };
 
     let dir = workbench_folder("second-whole", &second);
-    let resumed = calibrate(&["--resume"], &dir);
+    let resumed = calibrate(&["--resume", "--no-validation"], &dir);
     let session = Session::load(&dir).unwrap();
     let kept: Vec<&TraceRef> = session.traces.iter().filter(|t| t.step.is_some_and(|s| s.0 == 1)).collect();
     let files = |refs: &[&TraceRef]| refs.iter().map(|t| t.file.clone()).collect::<Vec<_>>();
@@ -313,7 +315,7 @@ fn resume_skips_a_step_the_workbench_measured_and_refuses_one_it_stopped() {
     let mut autosaved = Session::recover(&dir).unwrap();
     autosaved.progress = Some(Progress { plan: 1, next_segment: 0, plan_start_display: start });
     autosaved.autosave(&dir).unwrap();
-    let resumed = calibrate(&["--resume"], &dir);
+    let resumed = calibrate(&["--resume", "--no-validation"], &dir);
     let session = Session::load(&dir).unwrap();
     let steps: Vec<(usize, usize)> = session.traces.iter().map(|t| t.step.unwrap()).collect();
     let mut in_plan_order = steps.clone();
