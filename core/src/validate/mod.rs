@@ -496,10 +496,15 @@ fn sort_recorded(
     let mut along: Vec<Trace> = Vec::new();
     let mut dithers: Vec<Vec<Trace>> = vec![Vec::new(); stops + 1];
     let (mut length, mut dither_end) = (0usize, 0usize);
+    let mut last_t: Option<f64> = None;
     for t in traces {
         let label = t.meta.label.clone();
         if label == ENVELOPE_DITHER || label == motion.name() {
-            length += t.len();
+            // Counted as [`join`] keeps them: a segment's samples at or before the last one kept
+            // (the shared boundary) are dropped.
+            let from = last_t.map_or(0, |last| t.t_s.partition_point(|&x| x <= last));
+            length += t.len() - from;
+            last_t = t.t_s.last().copied().or(last_t);
             if label == ENVELOPE_DITHER {
                 dither_end = length;
             }
@@ -596,6 +601,39 @@ impl RecordedValidation {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Segments that share their boundary sample, as a bench records them: each stop's pose
+    /// sample is the joined trace's sample where the stop was reached (its time and joints), not
+    /// one counted with the shared samples twice.
+    #[test]
+    fn a_stops_sample_is_where_the_joined_trace_reached_it() {
+        let segment = |label: &str, t0: f64, q0: f64| {
+            let meta = crate::trace::TraceMeta { label: label.into(), ..Default::default() };
+            let mut t = Trace::new(meta);
+            for k in 0..=10 {
+                let q = q0 + k as f64;
+                t.push_sample(t0 + 0.1 * k as f64, [q, 0.0, 0.0, 0.0, 0.0, 0.0], 1560.0, 0.5);
+            }
+            t
+        };
+        let motion = ValidationMotion::Circle;
+        let name = motion.name();
+        let mut traces = vec![segment(ENVELOPE_DITHER, 0.0, 0.0)];
+        for (k, t0) in [1.0, 2.0, 3.0, 4.0].iter().enumerate() {
+            traces.push(segment(name, *t0, 10.0 * (k + 1) as f64));
+            if k == 1 || k == 3 {
+                traces.push(segment(&format!("{CONTRAST_DITHER} {}", k / 2 + 1), 10.0 + *t0, 0.0));
+            }
+        }
+        let (trace, start, poses) = sort_recorded(motion, traces, vec![], 2).unwrap();
+        assert_eq!(trace.len(), 51, "five segments of eleven samples sharing four");
+        assert_eq!(start, 11);
+        for (k, end_t) in [(1, 3.0), (2, 5.0)] {
+            let i = poses[k].sample;
+            assert!(i < trace.len(), "pose {k} at {i} of {}", trace.len());
+            assert!((trace.t_s[i] - end_t).abs() < 1e-9, "pose {k} at t = {}", trace.t_s[i]);
+        }
+    }
     use crate::bench::{BenchPreset, VirtualBench};
     use crate::model::robot::RobotDescription;
     use crate::plan::Segment;
