@@ -1,8 +1,8 @@
 //! GUI tests of the quick calibration and the Position view (egui_kittest, headless): the
 //! wizard's plan choice with what each costs, the designed plan measured and identified, then
 //! moves of the lamella: a confirmed one (checked against the bench's hidden truth), a target out
-//! of reach refused with nothing moved, and a move stopped. With PHOTOROBOT_SCREENSHOTS=1 the
-//! views are written to screenshots/.
+//! of reach refused with nothing moved, a move stopped, and random targets over the workspace.
+//! With PHOTOROBOT_SCREENSHOTS=1 the views are written to screenshots/.
 
 mod common;
 
@@ -15,6 +15,7 @@ use photorobot_app::state::StepState;
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::position::{Target, TaskFrame, Verdict};
+use rand::{Rng, SeedableRng};
 use std::time::Duration;
 
 fn workbench() -> Workbench {
@@ -99,6 +100,7 @@ fn the_quick_calibration_then_a_confirmed_move_in_the_position_view() {
     assert_eq!(h.state().state.q_display, r.joints_end.to_array(), "nothing moved");
 
     // A move stopped with Esc: at real time it lasts seconds; it is recorded as stopped.
+    let speed = h.state().state.settings.speed;
     h.state_mut().state.settings.speed = 1.0;
     h.state_mut().state.position.target = Target { gap_um: 960.0, ..target };
     h.run_steps(3);
@@ -110,6 +112,38 @@ fn the_quick_calibration_then_a_confirmed_move_in_the_position_view() {
     wait_until(&mut h, "the stop", Duration::from_secs(30), |w| w.state.position.moves.len() == 2);
     assert_eq!(h.state().state.position.moves[1].verdict, Verdict::Stopped);
     h.get_by_label("STOPPED");
+
+    // Random targets over the workspace, each typed and placed with Go from where the last one
+    // left the lamella: every target the view does not refuse is confirmed by its sweep, the
+    // true gap within 10 nm and within the bound shown.
+    h.state_mut().state.settings.speed = speed;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+    let (mut placed, mut typed) = (0, 0);
+    while placed < 4 {
+        typed += 1;
+        assert!(typed <= 20, "{placed} of {typed} random targets planned");
+        let target = Target {
+            gap_um: rng.random_range(780.0..1020.0),
+            tilt_deg: [rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0)],
+            lateral_um: [rng.random_range(-200.0..20.0), rng.random_range(-200.0..20.0)],
+            rotation_deg: rng.random_range(-20.0..20.0),
+        };
+        h.state_mut().state.position.target = target;
+        h.state_mut().state.position.keep_gap = false;
+        h.run_steps(3);
+        if matches!(&h.state().state.position.preview, Some((_, Err(_)))) {
+            continue;
+        }
+        let before = h.state().state.position.moves.len();
+        h.get_by_label("Go (F5)").click();
+        wait_until(&mut h, "a random move", Duration::from_secs(120), |w| w.state.position.moves.len() > before);
+        let r = h.state().state.position.moves[before].clone();
+        assert_eq!(r.verdict, Verdict::Confirmed, "{target:?}: {}", r.note);
+        let error_nm = (truth_at(&r.joints_end.to_array()).gap_um - target.gap_um) * 1e3;
+        eprintln!("{target:?}: true gap error {error_nm:+.2} nm, bound {:.2} nm", r.bound_nm.unwrap());
+        assert!(error_nm.abs() <= 10.0 && error_nm.abs() <= r.bound_nm.unwrap(), "{target:?}: {error_nm} nm");
+        placed += 1;
+    }
 }
 
 /// "Design a plan for this bench" runs the experiment design for the preset at hand and makes its

@@ -5,7 +5,7 @@
 use crate::state::AppState;
 use egui::{Color32, RichText};
 use egui_plot::{Line, Plot, PlotPoints};
-use photorobot_core::position::{MovePlan, MoveRecord, Verdict};
+use photorobot_core::position::{MovePlan, MoveRecord, Target, Verdict};
 
 /// Draw the Position view: the target and its planned move on the left, the last move and the
 /// session's moves on the right.
@@ -148,11 +148,21 @@ fn planned(ui: &mut egui::Ui, plan: &MovePlan, from: &[f64; 6]) {
         )),
         None => ui.label("no forecast: the extrinsics are taken as exact"),
     };
-    if plan.path.targets.first() != plan.path.targets.last() {
-        path_plots(ui, plan);
-    } else {
-        ui.label("the lamella is at the target already");
+    match (plan.path.targets.first(), plan.path.targets.last()) {
+        (Some(a), Some(b)) if !same_place(a, b) => path_plots(ui, plan),
+        _ => {
+            ui.label("the lamella is at the target already");
+        }
     }
+}
+
+/// Two targets the same to round-off (1 pm, 1 µ°): a move from one to the other has no path.
+fn same_place(a: &Target, b: &Target) -> bool {
+    let (pa, pb) = (
+        [a.gap_um, a.tilt_deg[0], a.tilt_deg[1], a.lateral_um[0], a.lateral_um[1], a.rotation_deg],
+        [b.gap_um, b.tilt_deg[0], b.tilt_deg[1], b.lateral_um[0], b.lateral_um[1], b.rotation_deg],
+    );
+    pa.iter().zip(&pb).all(|(x, y)| (x - y).abs() < 1e-6)
 }
 
 /// The path in task space: the gap along the waypoints, and the lamella across the beam.
@@ -160,13 +170,26 @@ fn path_plots(ui: &mut egui::Ui, plan: &MovePlan) {
     let t = &plan.path.targets;
     let gap: Vec<[f64; 2]> = t.iter().enumerate().map(|(k, p)| [k as f64, p.gap_um]).collect();
     let lateral: Vec<[f64; 2]> = t.iter().map(|p| [p.lateral_um[0], p.lateral_um[1]]).collect();
+    // A path that keeps the gap or the lateral position would give the plot no extent along that
+    // axis (egui_plot refuses such bounds): each plot spans at least a little around the start.
+    let (g0, l0) = (gap[0][1], lateral[0]);
     ui.columns(2, |cols| {
-        Plot::new("path gap").height(150.0).x_axis_label("waypoint").y_axis_label("gap (µm)").show(&mut cols[0], |p| {
-            p.line(Line::new("gap", PlotPoints::from(gap)));
-        });
+        Plot::new("path gap")
+            .height(150.0)
+            .x_axis_label("waypoint")
+            .y_axis_label("gap (µm)")
+            .include_y(g0 - 0.01)
+            .include_y(g0 + 0.01)
+            .show(&mut cols[0], |p| {
+                p.line(Line::new("gap", PlotPoints::from(gap)));
+            });
         Plot::new("path lateral")
             .height(150.0)
             .data_aspect(1.0)
+            .include_x(l0[0] - 1.0)
+            .include_x(l0[0] + 1.0)
+            .include_y(l0[1] - 1.0)
+            .include_y(l0[1] + 1.0)
             .x_axis_label("x along X_f (µm)")
             .y_axis_label("z along Z_f (µm)")
             .show(&mut cols[1], |p| {
