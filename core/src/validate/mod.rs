@@ -866,3 +866,4 @@ mod tests {
         );
     }
 }
+#[cfg(test)] mod exp_hint;
