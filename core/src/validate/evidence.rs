@@ -80,8 +80,9 @@ pub struct PoseGap {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Evidence {
     /// The figure the verdict stands behind: confirmed, the tracked figure (every figure that
-    /// does not use the extrinsics under test agrees with it within its uncertainty);
-    /// contradicted, the largest figure any measurement supports.
+    /// does not use the extrinsics under test agrees with it within its uncertainty), on the
+    /// rotation about the beam the model-free one; contradicted, the largest figure any
+    /// measurement supports.
     pub measured_nm: f64,
     /// The verdict.
     pub verdict: Verdict,
@@ -161,6 +162,8 @@ pub struct Inputs<'a> {
     pub tracked_sigma_nm: &'a [f64],
     /// The figure tracked and tilt-corrected with the model under test.
     pub tracked_nm: f64,
+    /// Its curve: the tracked gap, tilt-corrected, per sample from the motion's start (nm).
+    pub variation_nm: &'a [f64],
     /// The start, then each stop.
     pub poses: &'a [PoseRecord],
     /// The analysis model: its robot and optics are used here, its extrinsics only for the cavity
@@ -278,6 +281,18 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
             ),
         });
     }
+    if rotation == Some(RotationAxis::Transverse) {
+        if let Some(r) = super::smooth::cyclic_residual_nm(inp.variation_nm, &angles) {
+            let tol = SLACK_NM + 6.0 * sigma_track;
+            checks.push(Check {
+                name: "fringe shape".into(),
+                agrees: r <= tol,
+                detail: format!(
+                    "the tracked curve leaves {r:.1} nm about a smooth path in the angle (tolerance {tol:.1} nm)"
+                ),
+            });
+        }
+    }
     checks.extend(sweep_checks(&gaps));
     let verdict = if checks.iter().any(|c| !c.agrees) {
         Verdict::Contradicted
@@ -286,9 +301,18 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
     } else {
         Verdict::Confirmed
     };
-    // Confirmed, the tracked figure is the most precise of those that agree; contradicted, the
-    // largest any measurement supports.
-    let candidate = inp.tracked_nm;
+    // Confirmed: the tracked figure; on the rotation about the beam, whose gap stays within a
+    // step, the model-free one. There the fringes barely move, the tracker leans on the hint of
+    // the model under test (tracked with the hint of Table II with β_et 1° off, the gap moved
+    // 9.3 nm where the truth moved 0.1; with a hint standing still, 0.3 nm), and the model-free
+    // reading needs no hint (its free sign costs little on a gap that moves by less than a step).
+    // Contradicted: the largest figure any measurement supports.
+    let small = model_free.as_ref().is_some_and(|m| m.peak_to_peak_nm < step_nm);
+    let axial = rotation == Some(RotationAxis::Axial);
+    let candidate = match model_free_nm.filter(|_| small && axial) {
+        Some(mf) => mf,
+        None => inp.tracked_nm,
+    };
     let measured_nm = match verdict {
         Verdict::Contradicted => {
             let lower = bounds.filter(|_| rotation.is_none()).map(|b| b.lower_nm);
@@ -369,24 +393,88 @@ fn model_free_reading(
     };
     let form = PathForm { basis: &basis, max_reversals: if inp.motion == ValidationMotion::Circle { 2 } else { 1 } };
     let unwrapped = unwrap_gap_nm(signal, envelope_at, &count, step_nm, Some(&form));
-    let ptp = peak_to_peak(unwrapped.gap_nm.iter().copied());
-    let floor_nm = model_free_floor_nm(inp, &count, step_nm, ptp, envelope_error) + 2.0 * unwrapped.hidden_excursion_nm;
-    let mf = ModelFree {
-        gap: unwrapped.gap_nm,
-        peak_to_peak_nm: ptp,
-        alternative_nm: unwrapped.runner_up_peak_to_peak_nm,
-        floor_nm,
-    };
+    let window = (signal.len() / SMOOTHING_FRACTION).max(1);
+    let gap = moving_average(&unwrapped.gap_nm, window);
+    let ptp = peak_to_peak(gap.iter().copied());
+    let noise_rad = end_noise_rad(signal, envelope_at, &gap, &count, window, ptp < step_nm);
+    let floor_nm =
+        model_free_floor_nm(inp, &count, step_nm, ptp, envelope_error, noise_rad) + 2.0 * unwrapped.hidden_excursion_nm;
+    let mf = ModelFree { gap, peak_to_peak_nm: ptp, alternative_nm: unwrapped.runner_up_peak_to_peak_nm, floor_nm };
     (count, bounds, Some(mf))
 }
 
-/// The model-free gap's floor (nm): the arccos near the extrema of the gap at both ends of its
-/// peak to peak, `λ/(4π)·√(2σ/B)` each; the fringe's second harmonic (its largest over 0-4° of
-/// tilt in the optics model), up to `2|h2|` rad at each end; the envelope's error on the
-/// normalised signal; and 1 % of the figure for the envelope's drift along the motion.
-fn model_free_floor_nm(inp: &Inputs<'_>, count: &FringeCount, step_nm: f64, ptp: f64, envelope_error: f64) -> f64 {
+/// The model-free gap is averaged over this fraction of the motion's samples: white noise of the
+/// samples, not the gap's motion (a validation motion lasts seconds, the window milliseconds).
+const SMOOTHING_FRACTION: usize = 1000;
+
+/// The centred moving average of `v` over `window` samples (shorter at the ends).
+fn moving_average(v: &[f64], window: usize) -> Vec<f64> {
+    let mut sum = Vec::with_capacity(v.len() + 1);
+    sum.push(0.0);
+    for x in v {
+        sum.push(sum.last().copied().unwrap_or(0.0) + x);
+    }
+    let half = window / 2;
+    (0..v.len())
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(half), (i + half + 1).min(v.len()));
+            (sum[b] - sum[a]) / (b - a) as f64
+        })
+        .collect()
+}
+
+/// The phase error (rad) of the averaged gap at both ends of its peak to peak. On a gap that
+/// stays within a step (`within_step`), four σ of the arccos where the signal sits,
+/// `4σ/(B·sin φ·√window)`, and within reach of a fringe extremum the arccos's own bias,
+/// `√(2σ/B)`, which averaging does not remove; on a longer motion that bias at both ends (its
+/// turning points may lie anywhere, and the envelope carried along it is the looser bound).
+fn end_noise_rad(
+    signal: &[f64],
+    envelope_at: &dyn Fn(usize) -> Envelope,
+    gap: &[f64],
+    count: &FringeCount,
+    window: usize,
+    within_step: bool,
+) -> f64 {
     let b = count.smallest_amplitude.max(f64::MIN_POSITIVE);
-    let sigma = count.hysteresis / crate::measure::model_free::NOISE_HYSTERESIS_SIGMA;
+    let sigma_u = count.hysteresis / crate::measure::model_free::NOISE_HYSTERESIS_SIGMA / b;
+    let extremum = (2.0 * sigma_u).sqrt();
+    if !within_step {
+        return 2.0 * extremum;
+    }
+    let at = |k: usize| {
+        let lo = k.saturating_sub(window / 2);
+        let hi = (k + window / 2 + 1).min(signal.len());
+        let u = (lo..hi).map(|i| envelope_at(i).normalised(signal[i])).sum::<f64>() / (hi - lo).max(1) as f64;
+        let sin = (1.0 - u * u).max(0.0).sqrt();
+        if sin > 2.0 * extremum {
+            4.0 * sigma_u / (sin * (window as f64).sqrt())
+        } else {
+            extremum
+        }
+    };
+    let arg = |better: fn(f64, f64) -> bool| {
+        (0..gap.len()).fold(0, |best, i| if better(gap[i], gap[best]) { i } else { best })
+    };
+    if gap.is_empty() {
+        return 2.0 * extremum;
+    }
+    at(arg(|a, b| a > b)) + at(arg(|a, b| a < b))
+}
+
+/// The model-free gap's floor (nm): the arccos's noise at both ends of its peak to peak
+/// (`noise_rad`, [`end_noise_rad`]); the fringe's second harmonic (its largest over 0-4° of
+/// tilt in the optics model), up to `2|h2|` rad at each end of a motion over a step or more; the
+/// envelope's error on the normalised signal; and 1 % of the figure for the envelope's drift
+/// along the motion.
+fn model_free_floor_nm(
+    inp: &Inputs<'_>,
+    count: &FringeCount,
+    step_nm: f64,
+    ptp: f64,
+    envelope_error: f64,
+    noise_rad: f64,
+) -> f64 {
     let per_rad = step_nm / std::f64::consts::PI;
     let gap_um = inp.analysis.gap_and_tilt(&inp.trace.joints_display(inp.motion_start)).map_or(900.0, |g| g.0);
     let h2 = FabryPerot::new(&inp.analysis.optics, inp.trace.wavelength_nm[0], inp.analysis.n_air)
@@ -397,11 +485,13 @@ fn model_free_floor_nm(inp: &Inputs<'_>, count: &FringeCount, step_nm: f64, ptp:
                 .fold(0.0, f64::max)
         })
         .unwrap_or(0.1);
-    let noise = 2.0 * (2.0 * sigma / b).sqrt();
+    let noise = noise_rad;
     // An envelope error shifts the arccos alike at both ends of a small motion: its share grows
-    // with the motion up to a whole step.
-    let envelope = 2.0 * (2.0 * envelope_error).sqrt() * (ptp / step_nm).min(1.0);
-    per_rad * (noise + 2.0 * h2 + envelope) + 0.01 * ptp
+    // with the motion up to a whole step. So does the harmonic's distortion, whose error grows
+    // like the square root of the phase near an extremum.
+    let share = (ptp / step_nm).min(1.0);
+    let envelope = 2.0 * (2.0 * envelope_error).sqrt() * share;
+    per_rad * (noise + 2.0 * h2 * share.sqrt() + envelope) + 0.01 * ptp
 }
 
 /// The envelope along the motion (index from its start): the start's on a motion that keeps its

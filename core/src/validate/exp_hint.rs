@@ -30,9 +30,20 @@ fn which_half_biases() {
         a[PARAMETER_NAMES.iter().position(|p| p.0 == name).unwrap()] += d;
         let e = Extrinsics::from_array(a);
         let model = PhaseModel::of_preset(&preset, e).unwrap();
-        for motion in [ValidationMotion::RotationXf, ValidationMotion::RotationZf, ValidationMotion::RotationOpticalAxis] {
+        for motion in
+            [ValidationMotion::RotationXf, ValidationMotion::RotationZf, ValidationMotion::RotationOpticalAxis]
+        {
             let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
-            let r = record_validation(&mut bench, &model, &e, motion, [0.0; 6], &Compensation::default(), &StopSettings::default()).unwrap();
+            let r = record_validation(
+                &mut bench,
+                &model,
+                &e,
+                motion,
+                [0.0; 6],
+                &Compensation::default(),
+                &StopSettings::default(),
+            )
+            .unwrap();
             let t = &r.trace;
             let s = r.dither_end;
             let w = t.wavelength_nm[0];
@@ -46,7 +57,12 @@ fn which_half_biases() {
                 v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
             };
             let mut line = format!("{name} {d:+}: {}: free {free}", motion.name());
-            for (lab, h, sh) in [("e/e", &hint_e, &shape_e), ("t/e", &hint_t, &shape_e), ("e/t", &hint_e, &shape_t), ("t/t", &hint_t, &shape_t)] {
+            for (lab, h, sh) in [
+                ("e/e", &hint_e, &shape_e),
+                ("t/e", &hint_t, &shape_e),
+                ("e/t", &hint_e, &shape_t),
+                ("t/t", &hint_t, &shape_t),
+            ] {
                 for fr in [free, true] {
                     let tr = track_phase_shaped(&t.irradiance, h, &sh.as_model(), w, model.n_air, &cfg(fr)).unwrap();
                     line += &format!(" | {lab}{} {:.1}", if fr { "F" } else { "" }, ptp_err(&tr.dl_nm));
@@ -58,7 +74,8 @@ fn which_half_biases() {
             mix_a.amplitude = shape_t.amplitude.clone();
             mix_a.offset = shape_t.offset.clone();
             for (lab, sh) in [("harm_t", &mix_h), ("amp_t", &mix_a)] {
-                let tr = track_phase_shaped(&t.irradiance, &hint_e, &sh.as_model(), w, model.n_air, &cfg(free)).unwrap();
+                let tr =
+                    track_phase_shaped(&t.irradiance, &hint_e, &sh.as_model(), w, model.n_air, &cfg(free)).unwrap();
                 line += &format!(" | {lab} {:.1}", ptp_err(&tr.dl_nm));
             }
             let flat: Vec<f64> = (0..t.len()).map(|i| if i < s { hint_e[i] } else { hint_e[s] }).collect();
@@ -85,7 +102,16 @@ fn chi2_against_tilt() {
         let model = PhaseModel::of_preset(&preset, e).unwrap();
         for motion in [ValidationMotion::RotationXf, ValidationMotion::RotationZf] {
             let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
-            let r = record_validation(&mut bench, &model, &e, motion, [0.0; 6], &Compensation::default(), &StopSettings::default()).unwrap();
+            let r = record_validation(
+                &mut bench,
+                &model,
+                &e,
+                motion,
+                [0.0; 6],
+                &Compensation::default(),
+                &StopSettings::default(),
+            )
+            .unwrap();
             let t = &r.trace;
             let s = r.dither_end;
             let w = t.wavelength_nm[0];
@@ -93,25 +119,34 @@ fn chi2_against_tilt() {
             let (hint_t, _) = truth_m.hint_and_shape(t, w).unwrap();
             let fp = FabryPerot::new(&model.optics, w, model.n_air).unwrap();
             let step = 20;
-            let ge: Vec<(f64, f64)> = (0..t.len()).step_by(step).map(|i| model.gap_and_tilt(&t.joints_display(i)).unwrap()).collect();
-            let gt: Vec<(f64, f64)> = (0..t.len()).step_by(step).map(|i| truth_m.gap_and_tilt(&t.joints_display(i)).unwrap()).collect();
+            let ge: Vec<(f64, f64)> =
+                (0..t.len()).step_by(step).map(|i| model.gap_and_tilt(&t.joints_display(i)).unwrap()).collect();
+            let gt: Vec<(f64, f64)> =
+                (0..t.len()).step_by(step).map(|i| truth_m.gap_and_tilt(&t.joints_display(i)).unwrap()).collect();
             let ptp_err = |dl: &[f64]| {
                 let v: Vec<f64> = (s..t.len()).map(|i| (dl[i] - dl[s]) - (hint_t[i] - hint_t[s])).collect();
                 v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
             };
-            let mut line = format!("{name} {d:+}: {}: tilt e {:.3}..{:.3}° t {:.3}..{:.3}°", motion.name(),
-                ge.iter().map(|g| g.1.to_degrees()).fold(f64::MAX, f64::min), ge.iter().map(|g| g.1.to_degrees()).fold(f64::MIN, f64::max),
-                gt.iter().map(|g| g.1.to_degrees()).fold(f64::MAX, f64::min), gt.iter().map(|g| g.1.to_degrees()).fold(f64::MIN, f64::max));
+            let mut line = format!(
+                "{name} {d:+}: {}: tilt e {:.3}..{:.3}° t {:.3}..{:.3}°",
+                motion.name(),
+                ge.iter().map(|g| g.1.to_degrees()).fold(f64::MAX, f64::min),
+                ge.iter().map(|g| g.1.to_degrees()).fold(f64::MIN, f64::max),
+                gt.iter().map(|g| g.1.to_degrees()).fold(f64::MAX, f64::min),
+                gt.iter().map(|g| g.1.to_degrees()).fold(f64::MIN, f64::max)
+            );
             for sfac in [0.0, 0.5, 0.9, 1.0, 1.1, 1.5] {
                 let mut ex = Default::default();
-                let knots: Vec<_> = ge.iter().zip(&gt).map(|(a, b)| fp.fringe_shape(a.0, a.1 + sfac * (b.1 - a.1), &mut ex)).collect();
+                let knots: Vec<_> =
+                    ge.iter().zip(&gt).map(|(a, b)| fp.fringe_shape(a.0, a.1 + sfac * (b.1 - a.1), &mut ex)).collect();
                 let at = |i: usize| &knots[(i / step).min(knots.len() - 1)];
                 let sh = FringeShapeTrace {
                     harmonics: (0..t.len()).map(|i| Harmonic::from_phasors(at(i).second, at(i).third)).collect(),
                     offset: (0..t.len()).map(|i| at(i).offset).collect(),
                     amplitude: (0..t.len()).map(|i| at(i).fundamental.max(f64::MIN_POSITIVE)).collect(),
                 };
-                let tr = track_phase_shaped(&t.irradiance, &hint_e, &sh.as_model(), w, model.n_air, &cfg(false)).unwrap();
+                let tr =
+                    track_phase_shaped(&t.irradiance, &hint_e, &sh.as_model(), w, model.n_air, &cfg(false)).unwrap();
                 line += &format!(" | s={sfac}: err {:.1} χ² {:.4}", ptp_err(&tr.dl_nm), tr.normalized_chi2);
             }
             eprintln!("{line}");

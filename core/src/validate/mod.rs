@@ -11,6 +11,7 @@ pub mod before_after;
 pub mod contrast;
 pub mod evidence;
 pub mod forecast;
+pub mod smooth;
 pub mod stops;
 
 pub use stops::{StopSettings, ABSOLUTE_GAP, CONTRAST_DITHER, ENVELOPE_DITHER};
@@ -580,6 +581,7 @@ impl RecordedValidation {
             tracked_dl_nm: &m.track.dl_nm,
             tracked_sigma_nm: &m.track.sigma_dl_nm,
             tracked_nm: hi - lo,
+            variation_nm: &variation,
             poses: &poses,
             analysis,
         });
@@ -866,4 +868,5 @@ mod tests {
         );
     }
 }
-#[cfg(test)] mod exp_hint;
+#[cfg(test)]
+mod exp_hint;
