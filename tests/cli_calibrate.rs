@@ -75,7 +75,8 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
     }
     // Where the time went: every stage, and every segment of the measurement and of the eight
     // validation runs (four motions, before and after).
-    let stages: Vec<&str> = doc["timing"]["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
+    let stages: Vec<&str> =
+        doc["timing"]["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
     assert_eq!(stages, ["measure", "read_traces", "identify", "validate"]);
     let segments = doc["timing"]["segments"].as_array().unwrap();
     let runs = |stage: &str| {

@@ -106,7 +106,8 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
     let segments = timing["segments"].as_array().unwrap();
     let measured: Vec<&Value> = segments.iter().filter(|s| s["stage"] == "measure").collect();
     assert_eq!(measured.len(), 5, "the plan's five segments");
-    let mut runs: Vec<u64> = segments.iter().filter(|s| s["stage"] == "validate").map(|s| s["run"].as_u64().unwrap()).collect();
+    let mut runs: Vec<u64> =
+        segments.iter().filter(|s| s["stage"] == "validate").map(|s| s["run"].as_u64().unwrap()).collect();
     runs.dedup();
     assert_eq!(runs.len(), 4, "one run per validation motion");
     for s in segments {
@@ -117,7 +118,13 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
         assert_eq!(b["recorder_s"].as_f64().unwrap() > 0.0, s["record"] == true, "{s}");
     }
     let html = dir.path().join("report.html");
-    let report_run = Command::new(env!("CARGO_BIN_EXE_photorobot")).arg("report").arg(&out).arg("--out").arg(&html).output().unwrap();
+    let report_run = Command::new(env!("CARGO_BIN_EXE_photorobot"))
+        .arg("report")
+        .arg(&out)
+        .arg("--out")
+        .arg(&html)
+        .output()
+        .unwrap();
     assert!(report_run.status.success());
     let html = std::fs::read_to_string(&html).unwrap();
     assert!(html.contains("Where the time went") && html.contains("total validate"), "the report's time section");

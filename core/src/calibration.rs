@@ -573,7 +573,11 @@ pub fn validation_rows(bench: &mut dyn Bench, nominal: &PhaseModel, identified: 
 /// The validation motions planned with `identified` alone, run on the bench and measured with
 /// the identified model ([`check_calibration`]): the proof of the calibration without the
 /// comparison with the nominal extrinsics, in half the bench time (`before_nm` stays empty).
-pub fn validation_rows_after(bench: &mut dyn Bench, nominal: &PhaseModel, identified: &Extrinsics) -> Vec<ValidationRow> {
+pub fn validation_rows_after(
+    bench: &mut dyn Bench,
+    nominal: &PhaseModel,
+    identified: &Extrinsics,
+) -> Vec<ValidationRow> {
     check_calibration(bench, nominal, identified)
         .into_iter()
         .map(|(m, after)| ValidationRow {

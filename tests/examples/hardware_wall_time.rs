@@ -51,7 +51,9 @@ fn emulate(bin: &Path, seed: u64) -> (Emulators, Vec<(String, String)>) {
 /// The embedded femto hardware file with the emulators' addresses.
 fn hardware_file(dir: &Path, addresses: &[(String, String)]) -> PathBuf {
     let mut text = FEMTO_HARDWARE_RON.to_string();
-    for (name, default) in [("PI E-712", "127.0.0.1:50000"), ("SmarAct MCS", "127.0.0.1:5000"), ("Keysight laser", "127.0.0.1:5025")] {
+    for (name, default) in
+        [("PI E-712", "127.0.0.1:50000"), ("SmarAct MCS", "127.0.0.1:5000"), ("Keysight laser", "127.0.0.1:5025")]
+    {
         let at = addresses.iter().find(|(n, _)| n == name).unwrap_or_else(|| panic!("no {name} in {addresses:?}"));
         text = text.replace(&format!("\"{default}\""), &format!("\"{}\"", at.1));
     }
@@ -119,9 +121,9 @@ fn main() {
     let runs: usize = value("--runs").map_or(1, |v| v.parse().expect("--runs N"));
     let seed: u64 = value("--seed").map_or(11, |v| v.parse().expect("--seed S"));
     let max_s: Option<f64> = value("--max-s").map(|v| v.parse().expect("--max-s LIMIT"));
-    let bin = value("--bin").map(PathBuf::from).unwrap_or_else(|| {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/release/photorobot")
-    });
+    let bin = value("--bin")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/release/photorobot"));
     let mut walls = Vec::new();
     for k in 0..runs {
         let (wall_s, stages, report) = calibrate(&bin, seed + k as u64, &extra);

@@ -350,7 +350,10 @@ mod tests {
             assert!(s.planned_s > 0.0 && s.breakdown.is_none() && s.waiting_s() == 0.0);
         }
         let stages = timing.stage_totals();
-        assert_eq!(stages.iter().map(|t| (t.name.as_str(), t.segments)).collect::<Vec<_>>(), [("measure", 2), ("validate", 4)]);
+        assert_eq!(
+            stages.iter().map(|t| (t.name.as_str(), t.segments)).collect::<Vec<_>>(),
+            [("measure", 2), ("validate", 4)]
+        );
         let sum: f64 = timing.segments[2..].iter().map(|s| s.bench_s).sum();
         assert!((stages[1].bench_s - sum).abs() < 1e-12);
     }
