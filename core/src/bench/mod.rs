@@ -4,6 +4,7 @@
 
 pub mod preset;
 pub mod run;
+pub mod timing;
 pub mod virtual_bench;
 
 use crate::files::FileError;
@@ -17,6 +18,7 @@ use thiserror::Error;
 
 pub use preset::BenchPreset;
 pub use run::{resume_plan, resume_plan_with, run_plan, run_plan_with, OnStep, PlanRun, RunError, StepDone};
+pub use timing::{RunTiming, SegmentBreakdown, SegmentTiming, StageTime, TimedBench, TimingTotals};
 pub use virtual_bench::VirtualBench;
 
 /// Why a bench operation failed.
@@ -184,5 +186,10 @@ pub trait Bench: Send {
     /// Open the links to the stage controllers again after a fault (nothing to do on a simulated bench).
     fn reconnect(&mut self) -> Result<(), BenchError> {
         Ok(())
+    }
+    /// How the last segment run spent its bench time, for a bench on controllers (`None` for a
+    /// simulated bench, whose clock is the plan's timing model).
+    fn last_breakdown(&self) -> Option<SegmentBreakdown> {
+        None
     }
 }

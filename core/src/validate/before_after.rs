@@ -1,6 +1,7 @@
 //! The validation before and after calibration: every validation motion planned with the
 //! nominal extrinsics and with the identified ones, run one after the other on the same bench and
-//! both measured with the identified model (the best knowledge of the cavity).
+//! both measured with the identified model (the best knowledge of the cavity); and the check of
+//! a calibration alone, its motions planned with the identified extrinsics only.
 
 use crate::bench::Bench;
 use crate::model::extrinsics::Extrinsics;
@@ -21,27 +22,26 @@ pub struct BeforeAndAfter {
     pub after: Result<ValidationFigure, ValidationError>,
 }
 
-/// Every motion of [`ValidationMotion::ALL`] from q = 0, in order, "before" then "after" for
-/// each; `nominal` is the software's model before calibration. The bench runs the motions one
-/// after the other; each run's fringe analysis starts on the compute pool as soon as it is
-/// recorded, beside the bench's next run (the same figures as measuring each right after its
-/// run: the analysis reads only the recorded trace).
-pub fn run_before_and_after(
+type Slot = Mutex<Option<Result<ValidationFigure, ValidationError>>>;
+
+/// Every motion of [`ValidationMotion::ALL`] from q = 0, in order, planned with each of
+/// `planned` in turn and measured with `analysis`. The bench runs the motions one after the
+/// other; each run's fringe analysis starts on the compute pool as soon as it is recorded,
+/// beside the bench's next run (the same figures as measuring each right after its run: the
+/// analysis reads only the recorded trace).
+fn run_all<const K: usize>(
     bench: &mut dyn Bench,
-    nominal: &PhaseModel,
-    identified: &Extrinsics,
-) -> Vec<BeforeAndAfter> {
-    let analysis = PhaseModel { extrinsics: *identified, ..nominal.clone() };
-    let planned = [nominal.extrinsics, *identified];
+    analysis: &PhaseModel,
+    planned: [Extrinsics; K],
+) -> Vec<[Result<ValidationFigure, ValidationError>; K]> {
     let none = Compensation::default();
-    type Slot = Mutex<Option<Result<ValidationFigure, ValidationError>>>;
-    let slots: Vec<[Slot; 2]> = ValidationMotion::ALL.iter().map(|_| [Mutex::new(None), Mutex::new(None)]).collect();
+    let slots: Vec<[Slot; K]> =
+        ValidationMotion::ALL.iter().map(|_| std::array::from_fn(|_| Mutex::new(None))).collect();
     // In place: the bench stays on this thread, only the analyses go to the pool.
     rayon::in_place_scope(|scope| {
-        for (motion, pair) in ValidationMotion::ALL.into_iter().zip(&slots) {
-            for (planned_with, slot) in planned.iter().zip(pair) {
-                let recorded = record_validation(bench, &analysis, planned_with, motion, [0.0; 6], &none);
-                let analysis = &analysis;
+        for (motion, row) in ValidationMotion::ALL.into_iter().zip(&slots) {
+            for (planned_with, slot) in planned.iter().zip(row) {
+                let recorded = record_validation(bench, analysis, planned_with, motion, [0.0; 6], &none);
                 scope.spawn(move |_| {
                     let figure = recorded.and_then(|r: RecordedValidation| r.measure(analysis));
                     *slot.lock().unwrap_or_else(PoisonError::into_inner) = Some(figure);
@@ -49,14 +49,43 @@ pub fn run_before_and_after(
             }
         }
     });
+    slots
+        .into_iter()
+        .map(|row| {
+            row.map(|slot| {
+                slot.into_inner().unwrap_or_else(PoisonError::into_inner).expect("every analysis ran in the scope")
+            })
+        })
+        .collect()
+}
+
+/// Every motion of [`ValidationMotion::ALL`] from q = 0, in order, "before" then "after" for
+/// each; `nominal` is the software's model before calibration.
+pub fn run_before_and_after(
+    bench: &mut dyn Bench,
+    nominal: &PhaseModel,
+    identified: &Extrinsics,
+) -> Vec<BeforeAndAfter> {
+    let analysis = PhaseModel { extrinsics: *identified, ..nominal.clone() };
     ValidationMotion::ALL
         .into_iter()
-        .zip(slots)
-        .map(|(motion, [before, after])| {
-            let figure = |slot: Slot| {
-                slot.into_inner().unwrap_or_else(PoisonError::into_inner).expect("every analysis ran in the scope")
-            };
-            BeforeAndAfter { motion, before: figure(before), after: figure(after) }
-        })
+        .zip(run_all(bench, &analysis, [nominal.extrinsics, *identified]))
+        .map(|(motion, [before, after])| BeforeAndAfter { motion, before, after })
+        .collect()
+}
+
+/// Check a calibration without the comparison with the nominal extrinsics: every motion of
+/// [`ValidationMotion::ALL`] planned with `extrinsics` through the robot of `model` and measured
+/// with the model carrying them (half the bench time of [`run_before_and_after`]).
+pub fn check_calibration(
+    bench: &mut dyn Bench,
+    model: &PhaseModel,
+    extrinsics: &Extrinsics,
+) -> Vec<(ValidationMotion, Result<ValidationFigure, ValidationError>)> {
+    let analysis = PhaseModel { extrinsics: *extrinsics, ..model.clone() };
+    ValidationMotion::ALL
+        .into_iter()
+        .zip(run_all(bench, &analysis, [*extrinsics]))
+        .map(|(motion, [figure])| (motion, figure))
         .collect()
 }

@@ -20,6 +20,15 @@ const READ_ROWS_WHILE_MOVING: usize = 10_000;
 /// with six decimals and refuse 0 (PI GCS error 8).
 const MIN_SPEED_FRACTION: f64 = 1e-4;
 
+/// Where the segment running is, in bench time (s): its start, its motion command, the end the
+/// controllers reported.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Marks {
+    pub(super) start_s: f64,
+    pub(super) motion_s: Option<f64>,
+    pub(super) end_s: Option<f64>,
+}
+
 /// How a segment that met no fault ended.
 pub(super) enum Stop {
     /// It ran to its end.
@@ -47,6 +56,7 @@ impl ControllerBench {
             }
         }
         let t_start = self.bench_now();
+        self.marks.motion_s = Some(t_start);
         let (t_trigger, trigger_rtt_s) = self.start_motion(seg)?;
         if let Some(a) = acq.as_mut() {
             if !a.external {
@@ -67,6 +77,7 @@ impl ControllerBench {
         let Some(done_at) = self.follow_motion(seg, acq, control, t_start, sweep.as_ref())? else {
             return Ok(Stop::Cancelled);
         };
+        self.marks.end_s = Some(done_at.max(self.bench_now()));
         let log = if sweep.is_some() { self.finish_sweep()? } else { None };
         if matches!(seg.motion, TimedMotion::Move { .. }) {
             self.check_arrival(seg)?;
@@ -175,6 +186,19 @@ impl ControllerBench {
             }
             self.sleep_poll();
         }
+    }
+
+    /// The segment's breakdown from its marks, now that it has ended (a fault or a cancel: as far
+    /// as it got).
+    pub(super) fn close_breakdown(&mut self) {
+        let now = self.bench_now();
+        let m = self.marks;
+        let motion = m.motion_s.unwrap_or(now);
+        let end = m.end_s.unwrap_or(now);
+        let b = &mut self.breakdown;
+        b.setup_s = motion - m.start_s;
+        b.motion_s = end - motion;
+        b.finish_s = now - end;
     }
 
     /// The segment ran past its deadline: the axes (or the sweep) that did not finish.
