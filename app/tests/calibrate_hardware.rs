@@ -113,9 +113,14 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
     assert!(stdout.contains("before: not run"), "{stdout}");
     assert!(stdout.contains("total validate"), "the time per stage is printed:\n{stdout}");
     let report: Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    // This short plan's extrinsics put some motions beyond the joint limits: those say why.
+    let mut ran = 0;
     for v in report["validation"].as_array().unwrap() {
-        assert!(v["before_nm"].is_null() && v["after_nm"].is_number(), "{v}");
+        assert!(v["before_nm"].is_null(), "{v}");
+        assert!(v["after_nm"].is_number() || v["note"].as_str().is_some_and(|n| n.contains("limit")), "{v}");
+        ran += usize::from(v["after_nm"].is_number());
     }
+    assert!(ran >= 1, "{ran} validation motions ran");
     let timing = &report["timing"];
     let stages: Vec<&str> = timing["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
     assert_eq!(stages, ["measure", "read_traces", "identify", "validate"]);
@@ -125,7 +130,7 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
     let mut runs: Vec<u64> =
         segments.iter().filter(|s| s["stage"] == "validate").map(|s| s["run"].as_u64().unwrap()).collect();
     runs.dedup();
-    assert_eq!(runs.len(), 4, "one run per validation motion");
+    assert_eq!(runs.len(), ran, "one run per validation motion that ran");
     for s in segments {
         let b = &s["breakdown"];
         let parts = ["setup_s", "motion_s", "finish_s"].map(|k| b[k].as_f64().unwrap_or_else(|| panic!("{s}")));

@@ -27,6 +27,12 @@ pub struct SegmentBreakdown {
     pub recorder_s: f64,
     /// Of `recorder_s`, the part after the motion's end (what the reading adds to the segment).
     pub recorder_after_s: f64,
+    /// The motion as the bench commanded it (a move: the slowest joint's straight ramp at its
+    /// speed limit, then the settling time; a sweep: the plan's time). The plan's timing model
+    /// ramps up and down at the acceleration limits, which stages with acceleration control off
+    /// do not.
+    #[serde(default)]
+    pub commanded_s: f64,
 }
 
 /// One segment as it ran.
@@ -277,7 +283,7 @@ impl Bench for TimedBench<'_> {
             index: segment.index,
             label: segment.label.clone(),
             record: segment.record,
-            planned_s: segment.duration_s,
+            planned_s: self.inner.last_breakdown().map_or(segment.duration_s, |b| b.commanded_s),
             bench_s: self.inner.clock_s() - t0,
             wall_s: wall0.elapsed().as_secs_f64(),
             breakdown: self.inner.last_breakdown(),

@@ -407,7 +407,13 @@ impl Bench for ControllerBench {
         control: &mut RunControl<'_>,
     ) -> Result<Option<Trace>, BenchError> {
         self.marks = Marks { start_s: self.bench_now(), ..Marks::default() };
-        self.breakdown = SegmentBreakdown::default();
+        let commanded_s = match segment.motion {
+            crate::plan::TimedMotion::Move { settle_s, .. } if self.ramp_s(segment) > 0.0 => {
+                self.ramp_s(segment) + settle_s
+            }
+            _ => segment.duration_s,
+        };
+        self.breakdown = SegmentBreakdown { commanded_s, ..SegmentBreakdown::default() };
         let out = self.run_segment_kept(segment, meta, control);
         self.close_breakdown();
         out

@@ -253,11 +253,18 @@ impl ControllerBench {
         self.joints[j].zero + self.joints[j].sign * q
     }
 
+    /// The time (s) of a move's straight ramp: every joint arrives with the slowest, which moves
+    /// at its speed limit.
+    pub(super) fn ramp_s(&self, seg: &TimedSegment) -> f64 {
+        let limit = |j: usize| self.motion.for_joint(self.robot.links[j].joint).0;
+        (0..6).map(|j| (seg.to_display[j] - seg.from_display[j]).abs() / limit(j)).fold(0.0, f64::max)
+    }
+
     fn set_speeds(&mut self, seg: &TimedSegment) -> Result<(), HwError> {
         let d: [f64; 6] = std::array::from_fn(|j| (seg.to_display[j] - seg.from_display[j]).abs());
         let limit = |j: usize| self.motion.for_joint(self.robot.links[j].joint).0;
         // All joints arrive together: the slowest sets the time.
-        let time = (0..6).map(|j| d[j] / limit(j)).fold(0.0, f64::max);
+        let time = self.ramp_s(seg);
         for (j, &dj) in d.iter().enumerate() {
             // A joint that moves by rounding noise still gets a speed the controller can express.
             let v = if dj > 0.0 && time > 0.0 { (dj / time).max(MIN_SPEED_FRACTION * limit(j)) } else { limit(j) };
