@@ -383,6 +383,7 @@ mod tests {
                 finish_s: 0.25,
                 recorder_s: 0.2,
                 recorder_after_s: 0.15,
+                commanded_s: 0.2,
             }),
         };
         assert!((s.waiting_s() - 0.55).abs() < 1e-12);
