@@ -62,18 +62,6 @@ fn hardware_file(dir: &Path, addresses: &[(String, String)]) -> PathBuf {
     file
 }
 
-/// The `stage done` events of a command's log (name, s).
-fn logged_stages(log: &str) -> Vec<(String, f64)> {
-    let field = |line: &str, key: &str| -> Option<String> {
-        let at = line.find(&format!("{key}="))? + key.len() + 1;
-        Some(line[at..].split_whitespace().next()?.to_string())
-    };
-    log.lines()
-        .filter(|l| l.contains("stage done"))
-        .filter_map(|l| Some((field(l, "stage")?, field(l, "elapsed_s")?.parse().ok()?)))
-        .collect()
-}
-
 /// One calibration: its wall time, the stages its log gives and its report.
 fn calibrate(bin: &Path, seed: u64, extra: &[String]) -> (f64, Vec<(String, f64)>, CalibrationReport) {
     let dir = tempfile::tempdir().expect("a temporary folder");
@@ -92,7 +80,7 @@ fn calibrate(bin: &Path, seed: u64, extra: &[String]) -> (f64, Vec<(String, f64)
     let wall_s = t0.elapsed().as_secs_f64();
     assert!(out.status.success(), "calibrate failed:\n{}", String::from_utf8_lossy(&out.stderr));
     let report: CalibrationReport = serde_json::from_slice(&out.stdout).expect("the report");
-    (wall_s, logged_stages(&String::from_utf8_lossy(&out.stderr)), report)
+    (wall_s, photorobot_e2e::logged_stages(&String::from_utf8_lossy(&out.stderr)), report)
 }
 
 fn print(wall_s: f64, stages: &[(String, f64)], r: &CalibrationReport) {

@@ -2,10 +2,8 @@
 //! waiting and how long reading the recorder took, gathered by [`TimedBench`] around any bench.
 //! Owns the timing records, their totals per run and per stage, and their lines in the log.
 
-use super::{AxisStatus, Bench, BenchError, LaserStatus, RunControl};
-use crate::model::air::AmbientConditions;
-use crate::model::robot::RobotDescription;
-use crate::plan::{MotionLimits, TimedSegment};
+use super::{Bench, BenchError, RunControl};
+use crate::plan::TimedSegment;
 use crate::trace::{Trace, TraceMeta};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -221,45 +219,7 @@ fn log_totals(what: &str, t: &TimingTotals) {
 }
 
 impl Bench for TimedBench<'_> {
-    fn name(&self) -> String {
-        self.inner.name()
-    }
-    fn robot(&self) -> &RobotDescription {
-        self.inner.robot()
-    }
-    fn motion_limits(&self) -> &MotionLimits {
-        self.inner.motion_limits()
-    }
-    fn position_display(&self) -> [f64; 6] {
-        self.inner.position_display()
-    }
-    fn wavelength_nm(&self) -> f64 {
-        self.inner.wavelength_nm()
-    }
-    fn ambient(&self) -> AmbientConditions {
-        self.inner.ambient()
-    }
-    fn identification(&self) -> Vec<(String, String)> {
-        self.inner.identification()
-    }
-    fn clock_s(&self) -> f64 {
-        self.inner.clock_s()
-    }
-    fn tunable_laser(&self) -> bool {
-        self.inner.tunable_laser()
-    }
-    fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
-        self.inner.hardware_status()
-    }
-    fn laser_status(&mut self) -> Option<LaserStatus> {
-        self.inner.laser_status()
-    }
-    fn reconnect(&mut self) -> Result<(), BenchError> {
-        self.inner.reconnect()
-    }
-    fn last_breakdown(&self) -> Option<SegmentBreakdown> {
-        self.inner.last_breakdown()
-    }
+    crate::forward_bench_queries!(inner);
 
     fn run_segment(
         &mut self,
