@@ -14,8 +14,10 @@ fn calibrate(mode: &str, dir: &std::path::Path, traces: Option<&std::path::Path>
     let argv = ["photorobot", "calibrate", "--bench", "table2-ideal", "--seed", "7", "--mode", mode, "--json", "--out"];
     let mut argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
     argv.push(dir.display().to_string());
-    if let Some(t) = traces {
-        argv.extend(["--traces".to_string(), t.display().to_string()]);
+    match traces {
+        Some(t) => argv.extend(["--traces".to_string(), t.display().to_string()]),
+        // The paper's comparison: each validation motion planned with the nominal extrinsics too.
+        None => argv.push("--before".to_string()),
     }
     assert_eq!(run(argv, &mut out).unwrap(), Outcome::Done);
     serde_json::from_slice(&out).unwrap()
@@ -94,6 +96,19 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
     // Bench time of the default joint plans: 13.0 min.
     let minutes = doc["measurement_duration_s"].as_f64().unwrap() / 60.0;
     assert!((minutes - 13.0).abs() < 0.05, "{minutes} min of bench time, the docs state 13.0");
+    // Where the time went: every stage, and every segment of the measurement and of the eight
+    // validation runs (four motions, before and after).
+    let stages: Vec<&str> =
+        doc["timing"]["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
+    assert_eq!(stages, ["measure", "read_traces", "identify", "validate"]);
+    let segments = doc["timing"]["segments"].as_array().unwrap();
+    let runs = |stage: &str| {
+        let mut r: Vec<u64> =
+            segments.iter().filter(|s| s["stage"] == stage).map(|s| s["run"].as_u64().unwrap()).collect();
+        r.dedup();
+        r.len()
+    };
+    assert_eq!((runs("measure"), runs("validate")), (3, 8), "three plans, eight validation runs");
     // The session: every trace, the extrinsics, the report.
     let traces = std::fs::read_dir(dir.path().join("traces")).unwrap().count();
     assert!(traces > 60, "{traces} traces written");

@@ -143,3 +143,16 @@ pub mod moves {
 }
 pub mod two_beam;
 pub mod validation;
+
+/// The `stage done` events of a command's log (`RUST_LOG` at info on stderr): each stage's name
+/// and wall time (s), as the wall-time examples read them.
+pub fn logged_stages(log: &str) -> Vec<(String, f64)> {
+    let field = |line: &str, key: &str| -> Option<String> {
+        let at = line.find(&format!("{key}="))? + key.len() + 1;
+        Some(line[at..].split_whitespace().next()?.to_string())
+    };
+    log.lines()
+        .filter(|l| l.contains("stage done"))
+        .filter_map(|l| Some((field(l, "stage")?, field(l, "elapsed_s")?.parse().ok()?)))
+        .collect()
+}

@@ -3,10 +3,8 @@
 //! obeys the one shared stop flag, and the traces of the plan being recorded are kept aside so
 //! that a panic in the worker does not lose them.
 
-use photorobot_core::bench::{AxisStatus, Bench, BenchError, RunControl};
-use photorobot_core::model::air::AmbientConditions;
-use photorobot_core::model::robot::RobotDescription;
-use photorobot_core::plan::{MotionLimits, TimedSegment};
+use photorobot_core::bench::{Bench, BenchError, RunControl};
+use photorobot_core::plan::TimedSegment;
 use photorobot_core::trace::{Trace, TraceMeta};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -43,33 +41,7 @@ impl GuardedBench {
 }
 
 impl Bench for GuardedBench {
-    fn name(&self) -> String {
-        self.inner.name()
-    }
-    fn robot(&self) -> &RobotDescription {
-        self.inner.robot()
-    }
-    fn motion_limits(&self) -> &MotionLimits {
-        self.inner.motion_limits()
-    }
-    fn position_display(&self) -> [f64; 6] {
-        self.inner.position_display()
-    }
-    fn wavelength_nm(&self) -> f64 {
-        self.inner.wavelength_nm()
-    }
-    fn identification(&self) -> Vec<(String, String)> {
-        self.inner.identification()
-    }
-    fn ambient(&self) -> AmbientConditions {
-        self.inner.ambient()
-    }
-    fn clock_s(&self) -> f64 {
-        self.inner.clock_s()
-    }
-    fn tunable_laser(&self) -> bool {
-        self.inner.tunable_laser()
-    }
+    photorobot_core::forward_bench_queries!(inner);
 
     /// Run the segment with the shared stop flag in place of the caller's (a stop already
     /// requested refuses it at once), keeping its trace when keeping is on.
@@ -95,16 +67,6 @@ impl Bench for GuardedBench {
             }
         }
         result
-    }
-
-    fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
-        self.inner.hardware_status()
-    }
-    fn laser_status(&mut self) -> Option<photorobot_core::bench::LaserStatus> {
-        self.inner.laser_status()
-    }
-    fn reconnect(&mut self) -> Result<(), BenchError> {
-        self.inner.reconnect()
     }
 }
 

@@ -107,6 +107,48 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
         "a move's wavelength {mean_off} nm off the resting {} nm on average, {off} nm at most",
         preset.laser.wavelength_nm
     );
+
+    // The validation ran planned with the identified extrinsics only (no --before), and where
+    // the time went is in the report: every segment on the controllers with its breakdown.
+    assert!(stdout.contains("before: not run"), "{stdout}");
+    assert!(stdout.contains("total validate"), "the time per stage is printed:\n{stdout}");
+    let report: Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    // This short plan's extrinsics put some motions beyond the joint limits: those say why.
+    let mut ran = 0;
+    for v in report["validation"].as_array().unwrap() {
+        assert!(v["before_nm"].is_null(), "{v}");
+        assert!(v["after_nm"].is_number() || v["note"].as_str().is_some_and(|n| n.contains("limit")), "{v}");
+        ran += usize::from(v["after_nm"].is_number());
+    }
+    assert!(ran >= 1, "{ran} validation motions ran");
+    let timing = &report["timing"];
+    let stages: Vec<&str> = timing["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
+    assert_eq!(stages, ["measure", "read_traces", "identify", "validate"]);
+    let segments = timing["segments"].as_array().unwrap();
+    let measured: Vec<&Value> = segments.iter().filter(|s| s["stage"] == "measure").collect();
+    assert_eq!(measured.len(), 5, "the plan's five segments");
+    let mut runs: Vec<u64> =
+        segments.iter().filter(|s| s["stage"] == "validate").map(|s| s["run"].as_u64().unwrap()).collect();
+    runs.dedup();
+    assert_eq!(runs.len(), ran, "one run per validation motion that ran");
+    for s in segments {
+        let b = &s["breakdown"];
+        let parts = ["setup_s", "motion_s", "finish_s"].map(|k| b[k].as_f64().unwrap_or_else(|| panic!("{s}")));
+        let bench_s = s["bench_s"].as_f64().unwrap();
+        assert!((parts.iter().sum::<f64>() - bench_s).abs() < 0.05, "{s}");
+        assert_eq!(b["recorder_s"].as_f64().unwrap() > 0.0, s["record"] == true, "{s}");
+    }
+    let html = dir.path().join("report.html");
+    let report_run = Command::new(env!("CARGO_BIN_EXE_photorobot"))
+        .arg("report")
+        .arg(&out)
+        .arg("--out")
+        .arg(&html)
+        .output()
+        .unwrap();
+    assert!(report_run.status.success());
+    let html = std::fs::read_to_string(&html).unwrap();
+    assert!(html.contains("Where the time went") && html.contains("total validate"), "the report's time section");
 }
 
 /// Emulated seconds per real second of the calibration below. The SmarAct positions are polled,

@@ -15,10 +15,8 @@ use photorobot_app::motion::Motion;
 use photorobot_app::settings::Settings;
 use photorobot_app::state::StepState;
 use photorobot_app::worker::{Command, Pace, Worker};
-use photorobot_core::bench::{AxisStatus, Bench, BenchError, BenchPreset, RunControl, VirtualBench};
-use photorobot_core::model::air::AmbientConditions;
-use photorobot_core::model::robot::RobotDescription;
-use photorobot_core::plan::{MotionLimits, TimedSegment};
+use photorobot_core::bench::{Bench, BenchError, BenchPreset, RunControl, VirtualBench};
+use photorobot_core::plan::TimedSegment;
 use photorobot_core::trace::{Trace, TraceMeta};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -245,27 +243,8 @@ struct PanicsAt {
 }
 
 impl Bench for PanicsAt {
-    fn name(&self) -> String {
-        self.inner.name()
-    }
-    fn robot(&self) -> &RobotDescription {
-        self.inner.robot()
-    }
-    fn motion_limits(&self) -> &MotionLimits {
-        self.inner.motion_limits()
-    }
-    fn position_display(&self) -> [f64; 6] {
-        self.inner.position_display()
-    }
-    fn wavelength_nm(&self) -> f64 {
-        self.inner.wavelength_nm()
-    }
-    fn ambient(&self) -> AmbientConditions {
-        self.inner.ambient()
-    }
-    fn clock_s(&self) -> f64 {
-        self.inner.clock_s()
-    }
+    photorobot_core::forward_bench_queries!(inner);
+
     fn run_segment(
         &mut self,
         segment: &TimedSegment,
@@ -276,9 +255,6 @@ impl Bench for PanicsAt {
         assert!(self.count != self.at, "injected driver fault in segment {}", self.count);
         std::thread::sleep(self.delay);
         self.inner.run_segment(segment, meta, control)
-    }
-    fn hardware_status(&mut self) -> Option<Vec<AxisStatus>> {
-        None
     }
 }
 

@@ -21,7 +21,7 @@ use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
 use crate::model::phase::PhaseModel;
 use crate::plan::Plan;
 use crate::trace::Trace;
-use crate::validate::before_after::{run_before_and_after, BeforeAndAfter};
+use crate::validate::before_after::{check_calibration, run_before_and_after, BeforeAndAfter};
 use crate::validate::evidence::{Evidence, Verdict as MotionVerdict};
 use crate::validate::forecast::{forecast, ValidationForecast};
 use crate::validate::StopSettings;
@@ -178,6 +178,10 @@ pub struct CalibrationReport {
     /// planned sweep was measured and analysed.
     #[serde(default)]
     pub sweep_cost: Option<crate::identify::sweep_cost::SweepCost>,
+    /// Where the command's time went: its stages' wall times and each segment's bench time, the
+    /// controllers' waiting and the recorder's reading; `None` in reports saved without one.
+    #[serde(default)]
+    pub timing: Option<crate::bench::RunTiming>,
     /// The identified extrinsics.
     pub extrinsics: Extrinsics,
     /// The recorded traces.
@@ -385,6 +389,7 @@ pub fn report_from_identification(
         translation_signs: signs,
         model_discrepancy: Some(discrepancy),
         sweep_cost: lost,
+        timing: None,
         extrinsics,
         traces,
     }
@@ -608,6 +613,34 @@ pub fn validation_rows(
             before_curve_nm: before.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
             after_curve_nm: after.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
             before_evidence: before.as_ref().ok().map(|f| f.evidence.clone()),
+            after_evidence: after.as_ref().ok().map(|f| f.evidence.clone()),
+        })
+        .collect()
+}
+
+/// The validation motions planned with `identified` alone, run on the bench and measured with
+/// the identified model ([`check_calibration`]): the proof of the calibration without the
+/// comparison with the nominal extrinsics, in half the bench time (`before_nm` stays empty).
+pub fn validation_rows_after(
+    bench: &mut dyn Bench,
+    nominal: &PhaseModel,
+    identified: &Extrinsics,
+    stops: &StopSettings,
+) -> Vec<ValidationRow> {
+    check_calibration(bench, nominal, identified, stops)
+        .into_iter()
+        .map(|(m, after)| ValidationRow {
+            motion: m.name().to_string(),
+            before_nm: None,
+            after_nm: after.as_ref().ok().map(|f| f.evidence.measured_nm),
+            paper_nm: m.paper_after_nm(),
+            note: match &after {
+                Err(e) => Some(e.to_string()),
+                Ok(f) => f.tracking_note(),
+            },
+            before_curve_nm: vec![],
+            after_curve_nm: after.as_ref().map_or(vec![], |f| thin(&f.variation_nm, CURVE_POINTS)),
+            before_evidence: None,
             after_evidence: after.as_ref().ok().map(|f| f.evidence.clone()),
         })
         .collect()

@@ -615,3 +615,49 @@ fn a_joint_that_moves_by_a_hair_gets_a_velocity_the_controller_accepts() {
     let outcome = run(&mut bench, &plan).outcome;
     assert!(outcome.is_ok(), "{outcome:?}");
 }
+
+/// Every segment through the controllers is timed, and its bench time splits into setting it up,
+/// the motion until the controllers report its end, and finishing it: a recorded segment reads
+/// the recorder, an unrecorded one does not, and no motion ends before its ramp at the speed limit.
+#[test]
+fn each_segment_on_the_controllers_says_where_its_time_went() {
+    use photorobot_core::bench::TimedBench;
+    let _one = serial();
+    let preset = preset_2khz();
+    let r = rig(1.0, &preset, 5);
+    let mut bench = hardware_bench(&r, &preset, 2.0);
+    let plan = Plan {
+        name: "timed".into(),
+        description: String::new(),
+        segments: vec![
+            Segment::Move { to: JointTarget::default().with(0, 10.0), record: false, label: "approach".into() },
+            Segment::Move { to: JointTarget::default().with(0, 12.0), record: true, label: "X".into() },
+            Segment::Move {
+                to: JointTarget::default().with(0, 12.0).with(3, 0.2),
+                record: true,
+                label: "wrist".into(),
+            },
+        ],
+    };
+    // The stages move as straight ramps at the speed set (acceleration control off), the slowest
+    // joint at its speed limit: each segment's (joint, distance) and the shortest motion it allows.
+    let limits = bench.motion_limits();
+    let joints: Vec<_> = bench.robot().links.iter().map(|l| l.joint).collect();
+    let ramp_s = [(0, 10.0), (0, 2.0), (3, 0.2)].map(|(j, d): (usize, f64)| d / limits.for_joint(joints[j]).0);
+    let mut timed = TimedBench::new(&mut bench, "measure");
+    let outcome = run(&mut timed, &plan).outcome;
+    assert!(outcome.is_ok(), "{outcome:?}");
+    let timing = timed.finish();
+    assert_eq!(timing.segments.len(), 3);
+    for (s, ramp_s) in timing.segments.iter().zip(ramp_s) {
+        let b = s.breakdown.unwrap_or_else(|| panic!("{}: no breakdown", s.label));
+        let sum = b.setup_s + b.motion_s + b.finish_s;
+        assert!((sum - s.bench_s).abs() < 0.005, "{}: {sum} s of parts, {} s of bench time", s.label, s.bench_s);
+        assert!(b.setup_s > 0.0 && b.finish_s >= 0.0, "{}: {b:?}", s.label);
+        assert!(b.motion_s >= 0.95 * ramp_s, "{}: ended in {} s, the ramp takes {ramp_s} s", s.label, b.motion_s);
+        assert!(s.planned_s > ramp_s && s.planned_s == b.commanded_s, "{}: planned {} s", s.label, s.planned_s);
+        assert!(b.recorder_after_s <= b.recorder_s && b.recorder_after_s <= b.finish_s + 1e-9, "{}: {b:?}", s.label);
+        assert_eq!(b.recorder_s > 0.0, s.record, "{}: the recorder is read when the segment records", s.label);
+        assert!(s.waiting_s() > 0.0 && s.waiting_s() < s.bench_s, "{}: {}", s.label, s.waiting_s());
+    }
+}

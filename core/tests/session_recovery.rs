@@ -3,9 +3,7 @@
 //! bit for bit from the autosave, and the measurement resumes from there to the end.
 
 use photorobot_core::bench::{Bench, BenchError, BenchPreset, RunControl, VirtualBench};
-use photorobot_core::model::air::AmbientConditions;
-use photorobot_core::model::robot::RobotDescription;
-use photorobot_core::plan::{MotionLimits, Plan, TimedSegment};
+use photorobot_core::plan::{Plan, TimedSegment};
 use photorobot_core::session::recording::record;
 use photorobot_core::session::{find_recovery, BenchInfo, Session, SessionWriter};
 use photorobot_core::trace::{Trace, TraceMeta};
@@ -22,27 +20,8 @@ struct CrashingBench {
 }
 
 impl Bench for CrashingBench {
-    fn name(&self) -> String {
-        self.inner.name()
-    }
-    fn robot(&self) -> &RobotDescription {
-        self.inner.robot()
-    }
-    fn motion_limits(&self) -> &MotionLimits {
-        self.inner.motion_limits()
-    }
-    fn position_display(&self) -> [f64; 6] {
-        self.inner.position_display()
-    }
-    fn wavelength_nm(&self) -> f64 {
-        self.inner.wavelength_nm()
-    }
-    fn ambient(&self) -> AmbientConditions {
-        self.inner.ambient()
-    }
-    fn clock_s(&self) -> f64 {
-        self.inner.clock_s()
-    }
+    photorobot_core::forward_bench_queries!(inner);
+
     fn run_segment(
         &mut self,
         segment: &TimedSegment,

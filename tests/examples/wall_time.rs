@@ -33,7 +33,7 @@ fn run(bin: &Path, args: &[&str], ok_codes: &[i32]) -> Timed {
     let code = out.status.code().unwrap_or(-1);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(ok_codes.contains(&code), "photorobot {} exited with {code}:\n{stderr}", args.join(" "));
-    Timed { wall_s, stages: stages(&stderr) }
+    Timed { wall_s, stages: photorobot_e2e::logged_stages(&stderr) }
 }
 
 /// Flush the file system's pending writes and let the kernel finish with them.
@@ -45,18 +45,6 @@ fn settle() {
 
 /// The pause before each command, s.
 const SETTLE_S: u64 = 5;
-
-/// The `stage done` events of a command's log.
-fn stages(log: &str) -> Vec<(String, f64)> {
-    let field = |line: &str, key: &str| -> Option<String> {
-        let at = line.find(&format!("{key}="))? + key.len() + 1;
-        Some(line[at..].split_whitespace().next()?.to_string())
-    };
-    log.lines()
-        .filter(|l| l.contains("stage done"))
-        .filter_map(|l| Some((field(l, "stage")?, field(l, "elapsed_s")?.parse().ok()?)))
-        .collect()
-}
 
 fn print(name: &str, t: &Timed) {
     println!("{name:<28} {:>8.2} s wall", t.wall_s);

@@ -13,10 +13,10 @@
 use super::common::{hardware_bench_file, json_text, load_plan, nominal_model, timed, CliError};
 use super::progress::{Progress, INTERRUPT};
 use crate::hardware_bench::open_hardware_bench;
-use photorobot_core::bench::{Bench, BenchPreset, RunControl, VirtualBench};
+use photorobot_core::bench::{Bench, BenchPreset, RunControl, RunTiming, StageTime, TimedBench, VirtualBench};
 use photorobot_core::calibration::{
     identify, plan_durations, plans, predicted_validation_rows, report_from_identification, report_from_traces,
-    validation_rows, CalibrationReport, Mode,
+    validation_rows, validation_rows_after, CalibrationReport, Mode,
 };
 use photorobot_core::files::{save_ron, write_atomic, FileError};
 use photorobot_core::hardware::emulator::EmuClock;
@@ -93,6 +93,11 @@ pub struct CalibrateArgs {
     /// they were not run.
     #[arg(long, conflicts_with = "traces")]
     pub no_validation: bool,
+    /// Run each validation motion twice: planned with the nominal (design) extrinsics as well as
+    /// with the identified ones, the paper's before-and-after comparison (twice the validation's
+    /// bench time). Without it only the identified extrinsics are validated.
+    #[arg(long, conflicts_with_all = ["traces", "no_validation"])]
+    pub before: bool,
     /// Continue the measurement autosaved in --out (after a crash) instead of starting anew.
     #[arg(long)]
     pub resume: bool,
@@ -299,7 +304,8 @@ fn calibrate_on_hardware(
 }
 
 /// Measure the session's plans on `bench` (each trace saved as it is recorded, the session
-/// autosaved after it), identify, and run the validation motions on the same bench.
+/// autosaved after it), identify, and run the validation motions on the same bench. Every
+/// segment's timing and every stage's wall time go into the report.
 fn measure_identify_validate(
     a: &CalibrateArgs,
     preset: &BenchPreset,
@@ -317,8 +323,10 @@ fn measure_identify_validate(
     let mut on_progress = |done: f64| progress.borrow_mut().fraction(done);
     let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut on_progress };
     let mut writer = SessionWriter::new(&a.out, session).keeping_traces();
-    let recorded = timed("measure", || {
-        record_with(bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))
+    let mut stages = Vec::new();
+    let mut bench = TimedBench::new(bench, "measure");
+    let recorded = stage(&mut stages, "measure", || {
+        record_with(&mut bench, &mut writer, &mut control, &mut |p, s| progress.borrow_mut().segment(p, s))
     })?;
     if let Err(e) = recorded.outcome {
         progress.borrow_mut().finish();
@@ -331,11 +339,12 @@ fn measure_identify_validate(
     tracing::info!(bench_time_s = recorded.duration_s, "measurement done");
     progress.borrow_mut().stage("identifying");
     // The traces this run recorded stay in memory; those of an interrupted run are read back.
-    let traces = timed("read_traces", || writer.take_traces())?;
+    let traces = stage(&mut stages, "read_traces", || writer.take_traces())?;
     let session = writer.into_session();
     let name = session.bench.name.clone();
-    let mut report = timed("identify", || report_from_traces(traces, recorded.duration_s, name, nominal, mode))
-        .map_err(calibration_failed)?;
+    let mut report =
+        stage(&mut stages, "identify", || report_from_traces(traces, recorded.duration_s, name, nominal, mode))
+            .map_err(calibration_failed)?;
     tracing::info!(
         converged = report.converged,
         residual_rms_sigma = report.residual_rms_sigma,
@@ -343,7 +352,7 @@ fn measure_identify_validate(
         report.termination
     );
     report.plan_durations = durations;
-    if session.plans.iter().all(|p| p.sweeps() == 0) && skips_sweeps(a, &*bench) {
+    if session.plans.iter().all(|p| p.sweeps() == 0) && skips_sweeps(a, &bench) {
         progress.borrow_mut().stage("assessing what the missing sweeps cost");
         let cost = sweep_cost(a, preset, mode, &session, &report)?;
         for s in cost.sentences() {
@@ -357,11 +366,24 @@ fn measure_identify_validate(
     } else {
         progress.borrow_mut().stage("validating");
         let stops = StopSettings { sweeps: !a.no_sweeps, ..StopSettings::default() };
-        report.validation = timed("validate", || validation_rows(bench, nominal, &report.extrinsics, &stops));
+        bench.set_stage("validate");
+        report.validation = stage(&mut stages, "validate", || match a.before {
+            true => validation_rows(&mut bench, nominal, &report.extrinsics, &stops),
+            false => validation_rows_after(&mut bench, nominal, &report.extrinsics, &stops),
+        });
         tracing::info!(motions = report.validation.len(), "validation done");
     }
     progress.borrow_mut().finish();
+    report.timing = Some(RunTiming { stages, ..bench.finish() });
     Ok((session, report))
+}
+
+/// Run one stage with [`timed`], keeping its wall time in `stages`.
+fn stage<T>(stages: &mut Vec<StageTime>, name: &str, f: impl FnOnce() -> T) -> T {
+    let t0 = std::time::Instant::now();
+    let out = timed(name, f);
+    stages.push(StageTime { stage: name.to_string(), wall_s: t0.elapsed().as_secs_f64() });
+    out
 }
 
 /// The session autosaved in `dir`, refused when a plan other than the one it resumes was
@@ -430,6 +452,12 @@ pub fn resume_command(a: &CalibrateArgs) -> String {
     }
     if a.no_sweeps {
         cmd += " --no-sweeps";
+    }
+    if a.no_validation {
+        cmd += " --no-validation";
+    }
+    if a.before {
+        cmd += " --before";
     }
     cmd += &format!(" --out {} --resume", shell_quote(&a.out.display().to_string()));
     if a.json {
@@ -651,6 +679,9 @@ pub fn print_report(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
         }
     }
     print_signs(&r.translation_signs, out)?;
+    if let Some(t) = &r.timing {
+        print_timing(t, out)?;
+    }
     if let Some(cost) = &r.sweep_cost {
         if cost.lost.is_empty() {
             writeln!(out, "\nno wavelength sweeps (no tunable laser, or --no-sweeps): what that costs")?;
@@ -714,6 +745,9 @@ fn print_validation(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
         writeln!(out, "\nvalidation PREDICTED on a virtual bench with the identified extrinsics (no bench was run):")?;
     } else {
         writeln!(out, "\nvalidation (FP cavity variation: |L| along the beam, peak to peak; each figure the one its verdict stands behind):")?;
+        if r.validation.iter().all(|v| v.before_nm.is_none() && v.before_curve_nm.is_empty()) {
+            writeln!(out, "  (before: not run; --before also runs each motion planned with the nominal extrinsics)")?;
+        }
     }
     writeln!(
         out,
@@ -739,6 +773,31 @@ fn print_validation(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
     }
     for failure in r.validation_failures() {
         writeln!(out, "  NOT PROVEN: {failure}")?;
+    }
+    Ok(())
+}
+
+/// Where the time went: each stage's wall time, then each plan run's and each stage's bench time
+/// against the plans' timing model, the controllers' waiting and the recorder's reading.
+fn print_timing(t: &RunTiming, out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(out, "\ntime (s):")?;
+    for s in &t.stages {
+        writeln!(out, "  {:<14} {:>8.2} wall", s.stage, s.wall_s)?;
+    }
+    writeln!(
+        out,
+        "  {:<62} {:>5} {:>8} {:>8} {:>8} {:>8} {:>8}",
+        "bench time", "segs", "planned", "bench", "waiting", "recorder", "wall"
+    )?;
+    let runs = t.runs();
+    let rows = runs.iter().map(|(stage, r)| (format!("{stage}: {}", r.name), r));
+    let totals = t.stage_totals();
+    for (name, r) in rows.chain(totals.iter().map(|r| (format!("total {}", r.name), r))) {
+        writeln!(
+            out,
+            "  {:<62} {:>5} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2}",
+            name, r.segments, r.planned_s, r.bench_s, r.waiting_s, r.recorder_after_s, r.wall_s
+        )?;
     }
     Ok(())
 }
@@ -815,6 +874,22 @@ mod tests {
         assert_eq!(e.exit_code(), 1, "not a wrong command line");
         let resumed = args(&["photorobot", "calibrate", "--bench", "b", "--out", "o", "--resume"]);
         assert!(!plan_error(&resumed, limits).to_string().contains("--"), "no argument to blame");
+    }
+
+    #[test]
+    fn before_runs_only_when_the_validation_does_and_is_resumed_with_it() {
+        let a = args(&["photorobot", "calibrate", "--bench", "b", "--out", "o", "--before"]);
+        assert!(a.before);
+        assert_eq!(resume_command(&a), "photorobot calibrate --bench b --mode joint --before --out o --resume");
+        assert!(!args(&["photorobot", "calibrate", "--bench", "b", "--out", "o"]).before, "after only by default");
+        for other in ["--no-validation", "--traces"] {
+            let mut line = vec!["photorobot", "calibrate", "--bench", "b", "--out", "o", "--before", other];
+            if other == "--traces" {
+                line.push("t");
+            }
+            let e = crate::cli::Cli::try_parse_from(line).unwrap_err();
+            assert!(e.to_string().contains("--before"), "{other}: {e}");
+        }
     }
 
     #[test]

@@ -4,6 +4,7 @@
 
 pub mod preset;
 pub mod run;
+pub mod timing;
 pub mod virtual_bench;
 
 use crate::files::FileError;
@@ -17,6 +18,7 @@ use thiserror::Error;
 
 pub use preset::BenchPreset;
 pub use run::{resume_plan, resume_plan_with, run_plan, run_plan_with, OnStep, PlanRun, RunError, StepDone};
+pub use timing::{RunTiming, SegmentBreakdown, SegmentTiming, StageTime, TimedBench, TimingTotals};
 pub use virtual_bench::VirtualBench;
 
 /// Why a bench operation failed.
@@ -136,6 +138,54 @@ impl RunControl<'_> {
     }
 }
 
+/// Inside `impl Bench for Wrapper { … }` of a bench that wraps another (the field `$inner`) and
+/// changes only how segments run: every other method of [`Bench`] forwarded to it, so that no
+/// wrapper hides what the bench under it says (its identification, laser, controllers, timing).
+#[macro_export]
+macro_rules! forward_bench_queries {
+    ($inner:ident) => {
+        fn name(&self) -> String {
+            self.$inner.name()
+        }
+        fn robot(&self) -> &$crate::model::robot::RobotDescription {
+            self.$inner.robot()
+        }
+        fn motion_limits(&self) -> &$crate::plan::MotionLimits {
+            self.$inner.motion_limits()
+        }
+        fn position_display(&self) -> [f64; 6] {
+            self.$inner.position_display()
+        }
+        fn wavelength_nm(&self) -> f64 {
+            self.$inner.wavelength_nm()
+        }
+        fn ambient(&self) -> $crate::model::air::AmbientConditions {
+            self.$inner.ambient()
+        }
+        fn identification(&self) -> Vec<(String, String)> {
+            self.$inner.identification()
+        }
+        fn clock_s(&self) -> f64 {
+            self.$inner.clock_s()
+        }
+        fn tunable_laser(&self) -> bool {
+            self.$inner.tunable_laser()
+        }
+        fn hardware_status(&mut self) -> Option<Vec<$crate::bench::AxisStatus>> {
+            self.$inner.hardware_status()
+        }
+        fn laser_status(&mut self) -> Option<$crate::bench::LaserStatus> {
+            self.$inner.laser_status()
+        }
+        fn reconnect(&mut self) -> Result<(), $crate::bench::BenchError> {
+            self.$inner.reconnect()
+        }
+        fn last_breakdown(&self) -> Option<$crate::bench::SegmentBreakdown> {
+            self.$inner.last_breakdown()
+        }
+    };
+}
+
 /// What every bench offers: the robot it believes it has, its state, and running one timed
 /// segment of a plan while recording.
 pub trait Bench: Send {
@@ -184,5 +234,10 @@ pub trait Bench: Send {
     /// Open the links to the stage controllers again after a fault (nothing to do on a simulated bench).
     fn reconnect(&mut self) -> Result<(), BenchError> {
         Ok(())
+    }
+    /// How the last segment run spent its bench time, for a bench on controllers (`None` for a
+    /// simulated bench, whose clock is the plan's timing model).
+    fn last_breakdown(&self) -> Option<SegmentBreakdown> {
+        None
     }
 }

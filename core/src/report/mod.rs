@@ -5,7 +5,8 @@
 //! σ, determined or why not; an undetermined parameter never shows a bare number); the
 //! identifiability warnings; the residual of every observation in units of its σ; the
 //! validation motions before and after calibration (figures and curves); the diagnosis if one
-//! was run; the moves of the lamella made with the calibration and their proof; the lab record
+//! was run; where the calibration's time went (stages, plan runs, segments); the moves of the
+//! lamella made with the calibration and their proof; the lab record
 //! (who, when, ambient conditions, controllers); the notes and the list of traces.
 
 use crate::calibration::{CalibrationReport, ValidationRow};
@@ -17,6 +18,7 @@ mod escape;
 mod lab;
 mod moves;
 mod svg;
+mod timing;
 
 pub use escape::escape;
 
@@ -49,6 +51,7 @@ pub fn render_html(session: &Session) -> String {
             identifiability(&mut h, c);
             residual_plot(&mut h, c);
             validation(&mut h, c);
+            timing::timing(&mut h, c);
         }
         None => {
             h.push_str("<p class=\"warn\">No calibration in this session yet: only the measurements are listed.</p>\n")

@@ -398,7 +398,7 @@ fn model_free_reading(
     let ptp = peak_to_peak(gap.iter().copied());
     let noise_rad = end_noise_rad(signal, envelope_at, &gap, &count, window, ptp < step_nm);
     let floor_nm =
-        model_free_floor_nm(inp, &count, step_nm, ptp, envelope_error, noise_rad) + 2.0 * unwrapped.hidden_excursion_nm;
+        model_free_floor_nm(inp, step_nm, ptp, envelope_error, noise_rad) + 2.0 * unwrapped.hidden_excursion_nm;
     let mf = ModelFree { gap, peak_to_peak_nm: ptp, alternative_nm: unwrapped.runner_up_peak_to_peak_nm, floor_nm };
     (count, bounds, Some(mf))
 }
@@ -467,14 +467,7 @@ fn end_noise_rad(
 /// tilt in the optics model), up to `2|h2|` rad at each end of a motion over a step or more; the
 /// envelope's error on the normalised signal; and 1 % of the figure for the envelope's drift
 /// along the motion.
-fn model_free_floor_nm(
-    inp: &Inputs<'_>,
-    count: &FringeCount,
-    step_nm: f64,
-    ptp: f64,
-    envelope_error: f64,
-    noise_rad: f64,
-) -> f64 {
+fn model_free_floor_nm(inp: &Inputs<'_>, step_nm: f64, ptp: f64, envelope_error: f64, noise_rad: f64) -> f64 {
     let per_rad = step_nm / std::f64::consts::PI;
     let gap_um = inp.analysis.gap_and_tilt(&inp.trace.joints_display(inp.motion_start)).map_or(900.0, |g| g.0);
     let h2 = FabryPerot::new(&inp.analysis.optics, inp.trace.wavelength_nm[0], inp.analysis.n_air)

@@ -165,7 +165,24 @@ impl ControllerBench {
 
     /// Read what the recorder holds (up to bench time `up_to_s`), at most `max_rows` rows: while
     /// the segment runs, the reads stay short so that the polls and the progress keep their pace.
+    /// The time it takes counts in the segment's breakdown.
     pub(super) fn read_recorder(
+        &mut self,
+        acq: &mut Acquisition,
+        up_to_s: Option<f64>,
+        max_rows: usize,
+    ) -> Result<(), HwError> {
+        let t0 = self.bench_now();
+        let out = self.read_recorder_rows(acq, up_to_s, max_rows);
+        let spent = self.bench_now() - t0;
+        self.breakdown.recorder_s += spent;
+        if self.marks.end_s.is_some() {
+            self.breakdown.recorder_after_s += spent;
+        }
+        out
+    }
+
+    fn read_recorder_rows(
         &mut self,
         acq: &mut Acquisition,
         up_to_s: Option<f64>,

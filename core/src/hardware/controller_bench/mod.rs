@@ -17,13 +17,13 @@ pub mod sweep_timing;
 
 use super::clock::EmuClock;
 use super::{HwError, PiGcs, SmarActMcs, SmarActMcs2, StageController};
-use crate::bench::{AxisStatus, AxisUnit, Bench, BenchError, LaserStatus, RunControl};
+use crate::bench::{AxisStatus, AxisUnit, Bench, BenchError, LaserStatus, RunControl, SegmentBreakdown};
 use crate::model::air::AmbientConditions;
 use crate::model::robot::{JointType, LinkDescription, RobotDescription};
 use crate::plan::{MotionLimits, TimedSegment};
 use crate::trace::{Trace, TraceMeta};
 use acquisition::Acquisition;
-use run::Stop;
+use run::{Marks, Stop};
 use std::sync::Arc;
 
 pub use config::{ControllerConfig, ControllerKind, HardwareConfig, JointConfig, PhotodiodeConfig, FEMTO_HARDWARE_RON};
@@ -73,6 +73,10 @@ pub struct ControllerBench {
     velocities: [f64; 6],
     /// The last error of each controller (a fault during a segment, a failed status query).
     last_errors: Vec<Option<String>>,
+    /// Where the segment running (or last run) is, in bench time.
+    marks: Marks,
+    /// How the last segment spent its bench time.
+    breakdown: SegmentBreakdown,
 }
 
 impl ControllerBench {
@@ -163,6 +167,8 @@ impl ControllerBench {
             q_display: [0.0; 6],
             velocities: [f64::NAN; 6],
             last_errors: vec![None; n_controllers],
+            marks: Marks::default(),
+            breakdown: SegmentBreakdown::default(),
         };
         bench.q_display = bench.read_joints().map_err(fault)?;
         if bench.laser.tunable() && bench.sweep_time_base().is_none() {
@@ -390,7 +396,33 @@ impl Bench for ControllerBench {
         ControllerBench::reconnect(self)
     }
 
+    fn last_breakdown(&self) -> Option<SegmentBreakdown> {
+        Some(self.breakdown)
+    }
+
     fn run_segment(
+        &mut self,
+        segment: &TimedSegment,
+        meta: TraceMeta,
+        control: &mut RunControl<'_>,
+    ) -> Result<Option<Trace>, BenchError> {
+        self.marks = Marks { start_s: self.bench_now(), ..Marks::default() };
+        let commanded_s = match segment.motion {
+            crate::plan::TimedMotion::Move { settle_s, .. } if self.ramp_s(segment) > 0.0 => {
+                self.ramp_s(segment) + settle_s
+            }
+            _ => segment.duration_s,
+        };
+        self.breakdown = SegmentBreakdown { commanded_s, ..SegmentBreakdown::default() };
+        let out = self.run_segment_kept(segment, meta, control);
+        self.close_breakdown();
+        out
+    }
+}
+
+impl ControllerBench {
+    /// Run the segment; after a cancel or a fault, stop everything and keep what was recorded.
+    fn run_segment_kept(
         &mut self,
         segment: &TimedSegment,
         meta: TraceMeta,

@@ -20,6 +20,15 @@ const READ_ROWS_WHILE_MOVING: usize = 10_000;
 /// with six decimals and refuse 0 (PI GCS error 8).
 const MIN_SPEED_FRACTION: f64 = 1e-4;
 
+/// Where the segment running is, in bench time (s): its start, its motion command, the end the
+/// controllers reported.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Marks {
+    pub(super) start_s: f64,
+    pub(super) motion_s: Option<f64>,
+    pub(super) end_s: Option<f64>,
+}
+
 /// How a segment that met no fault ended.
 pub(super) enum Stop {
     /// It ran to its end.
@@ -47,6 +56,7 @@ impl ControllerBench {
             }
         }
         let t_start = self.bench_now();
+        self.marks.motion_s = Some(t_start);
         let (t_trigger, trigger_rtt_s) = self.start_motion(seg)?;
         if let Some(a) = acq.as_mut() {
             if !a.external {
@@ -67,6 +77,7 @@ impl ControllerBench {
         let Some(done_at) = self.follow_motion(seg, acq, control, t_start, sweep.as_ref())? else {
             return Ok(Stop::Cancelled);
         };
+        self.marks.end_s = Some(done_at.max(self.bench_now()));
         let log = if sweep.is_some() { self.finish_sweep()? } else { None };
         if matches!(seg.motion, TimedMotion::Move { .. }) {
             self.check_arrival(seg)?;
@@ -177,6 +188,19 @@ impl ControllerBench {
         }
     }
 
+    /// The segment's breakdown from its marks, now that it has ended (a fault or a cancel: as far
+    /// as it got).
+    pub(super) fn close_breakdown(&mut self) {
+        let now = self.bench_now();
+        let m = self.marks;
+        let motion = m.motion_s.unwrap_or(now);
+        let end = m.end_s.unwrap_or(now);
+        let b = &mut self.breakdown;
+        b.setup_s = motion - m.start_s;
+        b.motion_s = end - motion;
+        b.finish_s = now - end;
+    }
+
     /// The segment ran past its deadline: the axes (or the sweep) that did not finish.
     fn overdue(&self, seg: &TimedSegment, sweep: bool, timeout_s: f64) -> HwError {
         if sweep {
@@ -229,11 +253,18 @@ impl ControllerBench {
         self.joints[j].zero + self.joints[j].sign * q
     }
 
+    /// The time (s) of a move's straight ramp: every joint arrives with the slowest, which moves
+    /// at its speed limit.
+    pub(super) fn ramp_s(&self, seg: &TimedSegment) -> f64 {
+        let limit = |j: usize| self.motion.for_joint(self.robot.links[j].joint).0;
+        (0..6).map(|j| (seg.to_display[j] - seg.from_display[j]).abs() / limit(j)).fold(0.0, f64::max)
+    }
+
     fn set_speeds(&mut self, seg: &TimedSegment) -> Result<(), HwError> {
         let d: [f64; 6] = std::array::from_fn(|j| (seg.to_display[j] - seg.from_display[j]).abs());
         let limit = |j: usize| self.motion.for_joint(self.robot.links[j].joint).0;
         // All joints arrive together: the slowest sets the time.
-        let time = (0..6).map(|j| d[j] / limit(j)).fold(0.0, f64::max);
+        let time = self.ramp_s(seg);
         for (j, &dj) in d.iter().enumerate() {
             // A joint that moves by rounding noise still gets a speed the controller can express.
             let v = if dj > 0.0 && time > 0.0 { (dj / time).max(MIN_SPEED_FRACTION * limit(j)) } else { limit(j) };
