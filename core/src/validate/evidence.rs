@@ -303,8 +303,8 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
     };
     // Confirmed: the tracked figure; on the rotation about the beam, whose gap stays within a
     // step, the model-free one. There the fringes barely move, the tracker leans on the hint of
-    // the model under test (tracked with the hint of Table II with β_et 1° off, the gap moved
-    // 9.3 nm where the truth moved 0.1; with a hint standing still, 0.3 nm), and the model-free
+    // the model under test (tracked with the hint of Table II with β_et 1° off, the gap strayed
+    // 9.3 nm from the truth's; with a hint standing still, 0.3 nm), and the model-free
     // reading needs no hint (its free sign costs little on a gap that moves by less than a step).
     // Contradicted: the largest figure any measurement supports.
     let small = model_free.as_ref().is_some_and(|m| m.peak_to_peak_nm < step_nm);
