@@ -130,7 +130,8 @@ fn calibrate_runs_a_plan_on_the_controllers_and_the_laser_of_a_hardware_bench_fi
     let mut runs: Vec<u64> =
         segments.iter().filter(|s| s["stage"] == "validate").map(|s| s["run"].as_u64().unwrap()).collect();
     runs.dedup();
-    assert_eq!(runs.len(), ran, "one run per validation motion that ran");
+    // A validation motion runs in pieces split at the sweeps of its stops: one run or more each.
+    assert!(runs.len() >= ran && ran > 0, "{} validation runs for {ran} motions", runs.len());
     for s in segments {
         let b = &s["breakdown"];
         let parts = ["setup_s", "motion_s", "finish_s"].map(|k| b[k].as_f64().unwrap_or_else(|| panic!("{s}")));
