@@ -108,7 +108,18 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
         r.dedup();
         r.len()
     };
-    assert_eq!((runs("measure"), runs("validate")), (3, 8), "three plans, eight validation runs");
+    // A validation motion runs in pieces split at the sweeps of its stops, each sweep a run of
+    // its own: eight motions (four, before and after), each one piece or more, and the sweeps.
+    let is_sweep = |s: &Value| s["label"].as_str().unwrap().starts_with("absolute gap");
+    let validate: Vec<&Value> = segments.iter().filter(|s| s["stage"] == "validate").collect();
+    let sweeps = validate.iter().filter(|s| is_sweep(s)).count();
+    for sweep in validate.iter().filter(|s| is_sweep(s)) {
+        let shared = validate.iter().filter(|s| s["run"] == sweep["run"]).count();
+        assert_eq!(shared, 1, "a sweep runs alone: {sweep}");
+    }
+    assert!(sweeps > 0, "the validation's sweeps are timed");
+    assert_eq!(runs("measure"), 3, "three plans");
+    assert!(runs("validate") >= 8 + sweeps, "{} validation runs, {sweeps} of them sweeps", runs("validate"));
     // The session: every trace, the extrinsics, the report.
     let traces = std::fs::read_dir(dir.path().join("traces")).unwrap().count();
     assert!(traces > 60, "{traces} traces written");

@@ -254,8 +254,13 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
         None => (None, None, None),
     };
     let model_free_nm = model_free.as_ref().filter(|_| known_tilt).map(|mf| {
-        // The model-free gap's sign is free: the larger figure of the two.
-        [1.0, -1.0]
+        // The model-free gap's sign is free: the sweeps' where they tell it, else the larger
+        // figure of the two.
+        let signs = match sign_from_sweeps(&gaps, &mf.gap, s) {
+            Some(sign) => vec![sign],
+            None => vec![1.0, -1.0],
+        };
+        signs
             .iter()
             .map(|sign| peak_to_peak((0..mf.gap.len()).map(|k| sign * mf.gap[k] + t_along(k))))
             .fold(0.0, f64::max)
@@ -635,6 +640,33 @@ fn cavity_length_um(inp: &Inputs<'_>, gaps: &[SweepGap], s: usize, notes: &mut V
         );
     }
     model.unwrap_or(900.0)
+}
+
+/// The sign of the model-free gap (indexed from sample `s`) that the sweeps' changes from the
+/// start support, when one sign fits them better than the other by more than 3σ.
+fn sign_from_sweeps(gaps: &[SweepGap], mf_gap: &[f64], s: usize) -> Option<f64> {
+    let start = gaps.iter().find(|g| g.pose.pose == 0)?;
+    let (g0, s0) = (start.pose.gap_um?, start.pose.sigma_um?);
+    let at = |sample: usize| mf_gap.get(sample.saturating_sub(s).min(mf_gap.len().checked_sub(1)?)).copied();
+    let m0 = at(start.sample)?;
+    let chi2 = |sign: f64| {
+        gaps.iter()
+            .filter(|g| g.pose.pose > 0)
+            .filter_map(|g| {
+                let swept_nm = (g.pose.gap_um? - g0) * 1e3;
+                let var_nm2 = (g.pose.sigma_um?.powi(2) + s0 * s0) * 1e6;
+                Some((swept_nm - sign * (at(g.sample)? - m0)).powi(2) / var_nm2)
+            })
+            .sum::<f64>()
+    };
+    let (plus, minus) = (chi2(1.0), chi2(-1.0));
+    if minus - plus > 9.0 {
+        Some(1.0)
+    } else if plus - minus > 9.0 {
+        Some(-1.0)
+    } else {
+        None
+    }
 }
 
 /// The spread of |L| over the poses with a sweep: the sweep's gap plus the tilt term there.
