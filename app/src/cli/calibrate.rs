@@ -764,7 +764,7 @@ fn print_validation(r: &CalibrationReport, out: &mut dyn Write) -> std::io::Resu
             f(v.before_nm),
             f(v.after_nm),
             f(e.map(|e| e.tracked_nm)),
-            f(e.and_then(|e| e.model_free_nm)),
+            e.and_then(|e| e.model_free_words()).unwrap_or("-".into()),
             f(e.and_then(|e| e.bounds).map(|b| b.lower_nm)),
             e.map_or("-", |e| e.verdict.word()),
             v.paper_nm,

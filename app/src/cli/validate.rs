@@ -161,7 +161,7 @@ fn print(bench: &str, results: &[MotionResult], out: &mut dyn Write) -> std::io:
             f(Some(e.measured_nm)),
             e.target_nm,
             f(Some(e.tracked_nm)),
-            f(e.model_free_nm),
+            e.model_free_words().unwrap_or("-".into()),
             f(e.bounds.map(|b| b.lower_nm)),
             f(e.sweep_spread_nm),
         )?;

@@ -114,7 +114,7 @@ fn checked_table(ui: &mut egui::Ui, check: &[CheckedMotion]) {
                     ui.monospace(nm(Some(e.measured_nm)));
                     ui.monospace(format!("{:.0} nm", e.target_nm));
                     ui.monospace(nm(Some(e.tracked_nm)));
-                    ui.monospace(nm(e.model_free_nm));
+                    ui.monospace(e.model_free_words().map_or("–".into(), |w| format!("{w} nm")));
                     ui.monospace(nm(e.bounds.map(|b| b.lower_nm)));
                     ui.monospace(nm(e.sweep_spread_nm));
                     verdict_label(ui, e);
@@ -164,7 +164,7 @@ fn before_after(ui: &mut egui::Ui, pairs: &[ValidationPair]) {
             match &p.after {
                 Ok(a) => {
                     ui.monospace(nm(Some(a.evidence.tracked_nm)));
-                    ui.monospace(nm(a.evidence.model_free_nm));
+                    ui.monospace(a.evidence.model_free_words().map_or("–".into(), |w| format!("{w} nm")));
                     verdict_label(ui, &a.evidence);
                 }
                 Err(_) => {

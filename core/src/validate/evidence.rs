@@ -123,6 +123,17 @@ pub struct Evidence {
 }
 
 impl Evidence {
+    /// The model-free figure in words (nm): "≤ floor" when it lies within its floor, where it
+    /// says only that the motion kept the gap within that (the transverse rotations' fringe
+    /// distortion), else the figure.
+    pub fn model_free_words(&self) -> Option<String> {
+        let mf = self.model_free_nm?;
+        Some(match self.model_free_floor_nm {
+            Some(floor) if mf <= floor => format!("≤ {floor:.1}"),
+            _ => format!("{mf:.1}"),
+        })
+    }
+
     /// One line: the verdict, the figure and what disagrees.
     pub fn summary(&self) -> String {
         let failed: Vec<&str> = self.checks.iter().filter(|c| !c.agrees).map(|c| c.detail.as_str()).collect();
