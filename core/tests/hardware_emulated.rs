@@ -323,7 +323,10 @@ fn fault_matrix_stops_keeps_data_explains_and_resumes() {
                 let j = if pi { 1 } else { 3 };
                 let (from, to) = (redone.joint_column(j)[0], *redone.joint_column(j).last().unwrap());
                 let (want_from, want_to) = if pi { (-10.0, 10.0) } else { (0.0, 2.0) };
-                assert!((from - want_from).abs() < 1e-3 && (to - want_to).abs() < 1e-3, "{case}: {from} -> {to}");
+                // The redone move's first sample is a poll after its start: the MCS stage, its
+                // acceleration control off, is already at speed (2 °/s, 0.002° per ms).
+                let from_tol = if pi { 1e-3 } else { 1e-2 };
+                assert!((from - want_from).abs() < from_tol && (to - want_to).abs() < 1e-3, "{case}: {from} -> {to}");
                 assert!((bench.position_display()[3] - 2.0).abs() < 1e-3, "{case}: {:?}", bench.position_display());
                 cases += 1;
             }

@@ -407,10 +407,9 @@ impl Bench for ControllerBench {
         control: &mut RunControl<'_>,
     ) -> Result<Option<Trace>, BenchError> {
         self.marks = Marks { start_s: self.bench_now(), ..Marks::default() };
+        let ramp_s = self.ramp_s(segment);
         let commanded_s = match segment.motion {
-            crate::plan::TimedMotion::Move { settle_s, .. } if self.ramp_s(segment) > 0.0 => {
-                self.ramp_s(segment) + settle_s
-            }
+            crate::plan::TimedMotion::Move { settle_s, .. } if ramp_s > 0.0 => ramp_s + settle_s,
             _ => segment.duration_s,
         };
         self.breakdown = SegmentBreakdown { commanded_s, ..SegmentBreakdown::default() };
