@@ -106,3 +106,36 @@ pub fn motions(doc: &Value) -> Vec<(String, f64, String, bool)> {
         })
         .collect()
 }
+
+/// Each motion of `doc` against the truth along it (planned with `e` on table2-ideal), printed:
+/// any figure at least 90 % of it (less 2 nm) unless contradicted; with `strict`, a confirmed
+/// figure within 10 % (or 2 nm) of it; within target only when the truth is (with the same
+/// slack). Returns what fails.
+pub fn check_against_truth(name: &str, e: &Extrinsics, doc: &Value, strict: bool) -> Vec<String> {
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    let mut failures = Vec::new();
+    for (m, (motion, measured, verdict, within)) in ValidationMotion::ALL.iter().zip(motions(doc)) {
+        let truth = true_peak_to_peak_nm(&preset, e, *m);
+        let slack = (0.1 * truth).max(2.0);
+        let row = doc["validation"].as_array().and_then(|v| v.iter().find(|r| r["motion"] == motion.as_str()));
+        let tilt = row.map_or(String::new(), |r| {
+            let t = r["checks"].as_array().and_then(|c| c.iter().find(|c| c["name"] == "tilt term"));
+            format!(" [tilt σ {} nm; {}]", r["tilt_sigma_nm"], t.map_or("-".into(), |t| t["detail"].to_string()))
+        });
+        let line = format!("{name}: {motion}: true {truth:.1} nm, reported {measured:.1} nm, {verdict}");
+        let shape = row
+            .and_then(|r| {
+                r["checks"].as_array()?.iter().find(|c| c["name"] == "fringe shape").map(|c| c["detail"].to_string())
+            })
+            .unwrap_or_default();
+        eprintln!("{line}{tilt} {shape}");
+        assert_eq!(motion, m.name(), "the motions in order");
+        let confirmed_off = strict && verdict == "confirmed" && (measured - truth).abs() > slack;
+        let under = verdict != "contradicted" && measured < truth - slack;
+        let wrongly_within = within && truth > m.target_nm() + slack;
+        if confirmed_off || under || wrongly_within {
+            failures.push(line);
+        }
+    }
+    failures
+}
