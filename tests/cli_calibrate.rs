@@ -85,7 +85,7 @@ fn joint_calibration_recovers_the_truth_with_honest_uncertainties_and_validates(
         ("circle r = 100 µm in the lamella plane", 10.0, 3325.0, 0.0),
         ("rotation 6° about X_f through P_r", 20.0, 188.0, 0.2),
         ("rotation 6° about Z_f (paper: Y_f) through P_r", 20.0, 446.0, 0.2),
-        ("rotation 45.5° about the optical axis through P_r", 20.0, 59.0, 0.7),
+        ("rotation 45.5° about the optical axis through P_r", 20.0, 335.0, 0.7),
     ] {
         let (before, after) = validation(&doc, m);
         eprintln!("{m}: {before:.1} → {after:.3} nm");
