@@ -21,7 +21,7 @@ fn cfg(free: bool) -> TrackConfig {
 }
 
 #[test]
-#[ignore]
+#[ignore = "an experiment that prints which half of the model biases the tracked gap: run with --ignored --nocapture"]
 fn which_half_biases() {
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
     let truth_m = PhaseModel::of_preset(&preset, preset.truth).unwrap();
@@ -88,7 +88,7 @@ fn which_half_biases() {
 
 /// The tracker's χ² against the tilt the shape is computed at: γ_e + s·(γ_t − γ_e).
 #[test]
-#[ignore]
+#[ignore = "an experiment that prints the tracker's χ² against the tilt of the fringe shape: run with --ignored --nocapture"]
 fn chi2_against_tilt() {
     use crate::measure::hint::FringeShapeTrace;
     use crate::measure::track::Harmonic;
