@@ -78,9 +78,16 @@ fn calibrate(bin: &Path, seed: u64, extra: &[String]) -> (f64, Vec<(String, f64)
         .output()
         .unwrap_or_else(|e| panic!("cannot run {bin:?}: {e}"));
     let wall_s = t0.elapsed().as_secs_f64();
-    assert!(out.status.success(), "calibrate failed:\n{}", String::from_utf8_lossy(&out.stderr));
-    let report: CalibrationReport = serde_json::from_slice(&out.stdout).expect("the report");
-    (wall_s, photorobot_e2e::logged_stages(&String::from_utf8_lossy(&out.stderr)), report)
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // A calibration its validation does not prove exits 1 with its report written: its time
+    // counts all the same, and the reason is printed.
+    if !out.status.success() {
+        let reason = stderr.lines().rev().find(|l| l.starts_with("error:")).unwrap_or("(no error line)");
+        println!("calibrate exited {:?}: {reason}", out.status.code());
+    }
+    let report: CalibrationReport =
+        serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("no report ({e}):\n{stderr}"));
+    (wall_s, photorobot_e2e::logged_stages(&stderr), report)
 }
 
 fn print(wall_s: f64, stages: &[(String, f64)], r: &CalibrationReport) {
