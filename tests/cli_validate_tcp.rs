@@ -11,22 +11,14 @@ use photorobot_e2e::validation::{check_against_truth, motions, run_validate};
 /// change unless contradicted, and the wrong calibration refused (exit 1).
 #[test]
 fn wrong_extrinsics_are_caught_on_emulated_controllers() {
-    use photorobot_core::hardware::controller_bench::{LaserConfig, LaserFamily};
-    use photorobot_core::hardware::emulator::{LaserEmulator, LaserEmulatorConfig, LocalEmulators};
+    use photorobot_core::hardware::emulator::EmulatedHardware;
     use photorobot_core::hardware::HardwareConfig;
     let dir = tempfile::tempdir().unwrap();
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
-    let robot = preset.robot_description().unwrap();
-    let config = HardwareConfig { time_scale: 2.0, ..HardwareConfig::femto() };
-    let stages = LocalEmulators::start(&preset, 17, &robot, &config, 0, 0).unwrap();
-    let laser =
-        LaserEmulator::start_on(0, stages.emu_laser(), LaserEmulatorConfig::new(LaserFamily::Keysight)).unwrap();
-    let a = stages.addresses();
-    let mut config = config.with_addresses(&[(a[0].0.as_str(), a[0].1.clone()), (a[1].0.as_str(), a[1].1.clone())]);
-    config.laser =
-        Some(LaserConfig { family: LaserFamily::Keysight, address: laser.addr().to_string(), timeout_s: 2.0 });
+    let emulated =
+        EmulatedHardware::start(&preset, 17, HardwareConfig { time_scale: 2.0, ..HardwareConfig::femto() }).unwrap();
     let file = dir.path().join("bench.ron");
-    photorobot_core::files::save_ron(&file, &config).unwrap();
+    photorobot_core::files::save_ron(&file, &emulated.config).unwrap();
     let bench = file.display().to_string();
 
     let (code, doc) = run_validate(&bench, &preset.truth, 17, &[], dir.path());

@@ -8,10 +8,10 @@
 //! and the same plan on the shipped MCS2 bench file through the MCS2's emulator.
 
 use photorobot_core::bench::BenchPreset;
-use photorobot_core::hardware::controller_bench::{ControllerKind, LaserConfig, LaserFamily};
+use photorobot_core::hardware::controller_bench::ControllerKind;
 use photorobot_core::hardware::emulator::adc::Adc;
 use photorobot_core::hardware::emulator::local::MONITOR_NM_PER_V;
-use photorobot_core::hardware::emulator::{LaserEmulator, LaserEmulatorConfig, LocalEmulators};
+use photorobot_core::hardware::emulator::EmulatedHardware;
 use photorobot_core::hardware::HardwareConfig;
 use photorobot_core::model::extrinsics::PARAMETER_NAMES;
 use photorobot_core::session::Session;
@@ -21,8 +21,7 @@ use std::process::Command;
 
 /// The emulators and the hardware bench file that points at them.
 struct EmulatedBench {
-    _stages: LocalEmulators,
-    _laser: LaserEmulator,
+    _emulated: EmulatedHardware,
     file: PathBuf,
 }
 
@@ -30,17 +29,10 @@ struct EmulatedBench {
 /// clock `config.time_scale` times faster than real time, and write a hardware bench file
 /// naming them (and that time scale) into `dir`.
 fn emulated_bench(preset: &BenchPreset, seed: u64, config: HardwareConfig, dir: &Path) -> EmulatedBench {
-    let robot = preset.robot_description().unwrap();
-    let stages = LocalEmulators::start(preset, seed, &robot, &config, 0, 0).unwrap();
-    let laser =
-        LaserEmulator::start_on(0, stages.emu_laser(), LaserEmulatorConfig::new(LaserFamily::Keysight)).unwrap();
-    let a = stages.addresses();
-    let mut config = config.with_addresses(&[(a[0].0.as_str(), a[0].1.clone()), (a[1].0.as_str(), a[1].1.clone())]);
-    config.laser =
-        Some(LaserConfig { family: LaserFamily::Keysight, address: laser.addr().to_string(), timeout_s: 2.0 });
+    let emulated = EmulatedHardware::start(preset, seed, config).unwrap();
     let file = dir.join("bench.ron");
-    std::fs::write(&file, ron::ser::to_string_pretty(&config, Default::default()).unwrap()).unwrap();
-    EmulatedBench { _stages: stages, _laser: laser, file }
+    std::fs::write(&file, ron::ser::to_string_pretty(&emulated.config, Default::default()).unwrap()).unwrap();
+    EmulatedBench { _emulated: emulated, file }
 }
 
 /// The two calibrations run one after the other: each runs emulators and the binary against the

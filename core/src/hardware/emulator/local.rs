@@ -251,3 +251,30 @@ fn wire(
     }
     <[Wire; 6]>::try_from(wires).map_err(|w| format!("expected a six-joint robot, found {}", w.len()))
 }
+
+/// The stage emulators and a Keysight laser emulator on free loopback ports, and the hardware
+/// configuration pointing at them: a bench that tests and examples drive through TCP.
+pub struct EmulatedHardware {
+    pub stages: LocalEmulators,
+    pub laser: super::LaserEmulator,
+    /// `config` as given, with the emulators' addresses and the laser.
+    pub config: HardwareConfig,
+}
+
+impl EmulatedHardware {
+    /// Serve `preset`'s optics (detector noise seeded by `seed`) on `config`'s clock.
+    pub fn start(preset: &BenchPreset, seed: u64, config: HardwareConfig) -> Result<Self, String> {
+        use crate::hardware::controller_bench::{LaserConfig, LaserFamily};
+        let robot = preset.robot_description().map_err(|e| e.to_string())?;
+        let stages = LocalEmulators::start(preset, seed, &robot, &config, 0, 0)?;
+        let laser_config = super::LaserEmulatorConfig::new(LaserFamily::Keysight);
+        let laser = super::LaserEmulator::start_on(0, stages.emu_laser(), laser_config)
+            .map_err(|e| format!("the laser emulator: {e}"))?;
+        let addresses = stages.addresses();
+        let named: Vec<(&str, String)> = addresses.iter().map(|(n, a)| (n.as_str(), a.clone())).collect();
+        let mut config = config.with_addresses(&named);
+        config.laser =
+            Some(LaserConfig { family: LaserFamily::Keysight, address: laser.addr().to_string(), timeout_s: 2.0 });
+        Ok(Self { stages, laser, config })
+    }
+}

@@ -27,7 +27,7 @@ use std::sync::{Arc, Mutex};
 
 pub use emu_laser::{EmuLaser, SweepProfile};
 pub use laser::{LaserEmulator, LaserEmulatorConfig, LaserRealism};
-pub use local::LocalEmulators;
+pub use local::{EmulatedHardware, LocalEmulators};
 pub use mcs2::{Mcs2Emulator, Mcs2EmulatorConfig};
 pub use pi::{PiEmulator, PiEmulatorConfig, PiRealism};
 pub use smaract::{SmarActEmulator, SmarActEmulatorConfig};
