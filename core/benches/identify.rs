@@ -38,7 +38,7 @@ fn observations(model: &PhaseModel, truth: &Extrinsics) -> Vec<Observation> {
                     2.0,
                 ),
                 TimedMotion::Sweep { .. } => {
-                    (ObservationKind::AbsoluteGap { at_display: s.from_display, gap_um: 0.0 }, 0.02)
+                    (ObservationKind::AbsoluteGap { at_display: s.from_display, gap_um: 0.0, sweep_nm_per_s: 0.0 }, 0.02)
                 }
                 _ => continue,
             };

@@ -62,6 +62,8 @@ pub const TEMPLATE_SIGMA_GAP_UM: f64 = 0.02;
 pub const TEMPLATE_WAVELENGTH_NM: f64 = 1560.0;
 /// Duration of a template sweep (s): 40 nm at 10 nm/s.
 const SWEEP_S: f64 = 4.0;
+/// Wavelength span of a template sweep (nm), from 1540 to 1580 nm ([`plan_of`]).
+const SWEEP_NM: f64 = 40.0;
 
 /// Estimated bench time of a motion (s): 100 µm/s, 2 °/s, plus a second for the setup move.
 pub fn duration_s(m: &DesignedMotion) -> f64 {
@@ -132,7 +134,11 @@ pub fn templates(motions: &[DesignedMotion], start_s: f64) -> Vec<Observation> {
             MotionKind::Sweep { at_display } => {
                 go(&mut approach, &at, at_display);
                 out.push(obs(
-                    ObservationKind::AbsoluteGap { at_display: *at_display, gap_um: 0.0 },
+                    ObservationKind::AbsoluteGap {
+                        at_display: *at_display,
+                        gap_um: 0.0,
+                        sweep_nm_per_s: SWEEP_NM / SWEEP_S,
+                    },
                     TEMPLATE_SIGMA_GAP_UM,
                     [t0, t0 + SWEEP_S],
                     [approach; 2],

@@ -272,6 +272,31 @@ impl Effect {
             _ => 0.0,
         }
     }
+
+    /// Rate of the optical gap's change (nm/s) at time `t_s` caused by the effect: the drift's
+    /// derivative. A wavelength sweep reads a gap that moves at this rate off by
+    /// −rate·λ/(dλ/dt) ([`sweep_reading_nm`]).
+    #[inline]
+    pub fn gap_rate_nm_per_s(&self, t_s: f64) -> f64 {
+        match self {
+            Effect::ThermalDrift { nm_per_s, nm_per_s2 } => nm_per_s + nm_per_s2 * t_s,
+            _ => 0.0,
+        }
+    }
+}
+
+/// How far a wavelength sweep's gap reads off (nm) when the gap moves at `rate_nm_per_s` during
+/// it: the sweep measures the gap from the fringe frequency in wavenumber, dφ/dk = 2n·L; with the
+/// gap moving, dφ/dt = 2n·(L·dk/dt + k·dL/dt), so the fitted gap is L + k·(dL/dt)/(dk/dt) =
+/// L − λ·(dL/dt)/(dλ/dt) at the sweep's middle. A 0.5 nm/s drift during a 1 nm/s sweep at
+/// 1560 nm reads 780 nm short; during a 10 nm/s sweep, 78 nm. Zero when the sweep rate is unknown.
+#[inline]
+pub fn sweep_reading_nm(rate_nm_per_s: f64, wavelength_nm: f64, sweep_nm_per_s: f64) -> f64 {
+    if sweep_nm_per_s == 0.0 || !sweep_nm_per_s.is_finite() {
+        0.0
+    } else {
+        -rate_nm_per_s * wavelength_nm / sweep_nm_per_s
+    }
 }
 
 /// Stages with play (reversal errors) as a backlash: each stage sits `offset` from its command
@@ -389,6 +414,37 @@ mod tests {
         assert_relative_eq!(d.gap_change_nm(10.0, 900.0), 1.0 + 0.1, epsilon = 1e-12);
         let s = Effect::PathScale { ppm: 268.0 };
         assert_relative_eq!(s.gap_change_nm(0.0, 300.0), 80.4, epsilon = 1e-9);
+    }
+
+    /// The sweep's reading against a brute-force fit: the fringe phase 4π·n·L(t)/λ(t) of a gap
+    /// drifting during a linear sweep, its slope in wavenumber fitted by least squares, against
+    /// the closed form L(t_mid) − λ·(dL/dt)/(dλ/dt).
+    #[test]
+    fn a_gap_drifting_during_a_sweep_reads_off_by_the_drift_over_the_sweep_rate() {
+        let d = Effect::ThermalDrift { nm_per_s: 0.5, nm_per_s2: 0.001 };
+        let (l0_nm, t0, duration, from_nm, to_nm) = (898_830.0, 100.0, 20.0, 1550.0, 1570.0);
+        let n = 2001;
+        let (mut sk, mut sp, mut skk, mut skp) = (0.0, 0.0, 0.0, 0.0);
+        for i in 0..n {
+            let f = i as f64 / (n - 1) as f64;
+            let t = t0 + f * duration;
+            let lambda = from_nm + f * (to_nm - from_nm);
+            let k = std::f64::consts::TAU / lambda;
+            let phase = 2.0 * k * (l0_nm + d.gap_change_nm(t, 0.0));
+            sk += k;
+            sp += phase;
+            skk += k * k;
+            skp += k * phase;
+        }
+        let nf = n as f64;
+        let fitted_nm = (nf * skp - sk * sp) / (nf * skk - sk * sk) / 2.0;
+        let t_mid = t0 + duration / 2.0;
+        let want = l0_nm
+            + d.gap_change_nm(t_mid, 0.0)
+            + sweep_reading_nm(d.gap_rate_nm_per_s(t_mid), 1560.0, (to_nm - from_nm) / duration);
+        assert!((fitted_nm - want).abs() < 1.0, "fitted {fitted_nm} nm, closed form {want} nm");
+        assert!((want - l0_nm - d.gap_change_nm(t_mid, 0.0) + 0.61 * 1560.0).abs() < 1e-6);
+        assert_eq!(sweep_reading_nm(0.5, 1560.0, 0.0), 0.0, "unknown sweep rate");
     }
 
     #[test]
