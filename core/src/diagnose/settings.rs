@@ -36,8 +36,11 @@ pub const DISCRIMINATING_PREFIX: &str = "D ";
 /// At most this many discriminating motions per design: room for a reversal of each prismatic
 /// stage (out and back) beside the q6 rotations that show a pivot offset best.
 pub const MAX_MOTIONS: usize = 14;
-/// At most this many effects are added.
-pub const MAX_EFFECTS: usize = 4;
+/// At most this many effects are added: femto-lab's five (six parameters) and room to spare.
+pub const MAX_EFFECTS: usize = 8;
+/// An added effect is exchanged for another candidate when, refitted in its place with the other
+/// effects, that one lowers χ² by more than this (2σ for one parameter).
+pub const EXCHANGE_MARGIN: f64 = 4.0;
 /// An effect added earlier is removed again when, refitted with those added after it, its
 /// estimate is within this many σ of neutral: a later one explains what it took up.
 pub const REMOVE_BELOW_SIGMA: f64 = 3.0;

@@ -57,7 +57,8 @@ pub enum ObservationKind {
         /// Measured gap (µm).
         gap_um: f64,
         /// Rate of the sweep's wavelength (nm/s; 0 when unknown): a gap that moves during the
-        /// sweep (drift) reads off by its rate times λ over this ([`crate::model::effects::sweep_reading_nm`]).
+        /// sweep (drift) reads off by whole fringe orders of its rate times λ over this
+        /// ([`crate::model::effects::sweep_reading_nm`]).
         #[serde(default)]
         sweep_nm_per_s: f64,
     },

@@ -190,6 +190,30 @@ impl Session {
         Ok(())
     }
 
+    /// [`Session::add_sourced_traces`] for traces recorded after the session's (a proposed plan
+    /// recorded on its bench), on the session's clock: when their clock starts before
+    /// `session_end_s` (a recorder started afresh), every sample's time moves by the same amount
+    /// so that they start `pause_s` after it, and their files are written anew; otherwise they
+    /// are copied as they are. Returns that shift (s; 0 when their clock continues the session's).
+    pub fn add_later_traces(
+        &mut self,
+        dir: &Path,
+        mut later: Sourced,
+        session_end_s: f64,
+        pause_s: f64,
+    ) -> Result<f64, SessionError> {
+        let first_s = later.traces.iter().filter_map(|t| t.t_s.first().copied()).fold(f64::INFINITY, f64::min);
+        let shift_s = if first_s.is_finite() && first_s < session_end_s { session_end_s + pause_s - first_s } else { 0.0 };
+        if shift_s != 0.0 {
+            for (trace, file) in later.traces.iter_mut().zip(&mut later.files) {
+                trace.t_s.iter_mut().for_each(|t| *t += shift_s);
+                file.native = None;
+            }
+        }
+        self.add_sourced_traces(dir, &later)?;
+        Ok(shift_s)
+    }
+
     /// Write a trace into the session folder (a new `traces/NNN.csv`, atomically) and reference it.
     pub fn add_trace(
         &mut self,
