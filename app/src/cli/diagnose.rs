@@ -191,7 +191,7 @@ fn analysis_model(preset: Option<&BenchPreset>, extrinsics: Extrinsics) -> Resul
 /// from the recorded traces', so the observations need no time offset.
 fn resumed_bench(preset: &BenchPreset, seed: Option<u64>, d: &Diagnosis) -> Result<VirtualBench, CliError> {
     let mut b = VirtualBench::new(preset, Some(seed.unwrap_or(preset.seed + 1)))?;
-    b.set_clock_s(d.end_time_s() + 60.0);
+    b.set_clock_s(d.end_time_s() + photorobot_core::session::LATER_PAUSE_S);
     Ok(b)
 }
 
@@ -311,12 +311,14 @@ fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()>
     for e in &r.effects {
         writeln!(
             out,
-            "  {} = {:+.4} ± {} {} (F {:.1}){}",
+            "  {} = {:+.4} ± {} {} (F {:.1}{}){}",
             e.name,
             e.estimate,
             e.sigma.map_or("undetermined".into(), |s| format!("{s:.4}")),
             e.unit,
             e.score,
+            e.held_out_chi2_gain
+                .map_or(String::new(), |g| format!("; traces predicted from the others: χ² {:.1} lower with it", g)),
             if e.ambiguous_with.is_empty() {
                 String::new()
             } else {

@@ -5,7 +5,7 @@
 use super::common::CliError;
 use photorobot_core::files::FileError;
 use photorobot_core::identify::verdict::Verdict as FitVerdict;
-use photorobot_core::session::{session_path, Session, TRACES_DIR};
+use photorobot_core::session::{session_path, Session, LATER_PAUSE_S, TRACES_DIR};
 use photorobot_core::trace::import::read_folder_sourced;
 use photorobot_core::trace::Trace;
 use serde::Serialize;
@@ -14,10 +14,6 @@ use std::path::{Path, PathBuf};
 /// Where `--bench none` writes the discriminating motions it proposes, in the session folder
 /// (a later pass that proposes more writes `discriminating-motions-2.ron`, and so on).
 pub const PROPOSED_PLAN_FILE: &str = "discriminating-motions.ron";
-
-/// The pause assumed between a session's last trace and traces added to it whose own clock
-/// starts before the session's end (s): a recorder started afresh.
-pub const ADDED_PAUSE_S: f64 = 60.0;
 
 /// Traces added to the session by `--add`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -69,7 +65,7 @@ pub fn read(session_dir: &Path, add: &[PathBuf]) -> Result<SessionTraces, CliErr
         let later = read_folder_sourced(dir, None)?;
         let count = later.traces.len();
         let end_s = traces.iter().filter_map(|t| t.t_s.last().copied()).fold(0.0, f64::max);
-        let clock_shift_s = session.add_later_traces(session_dir, later, end_s, ADDED_PAUSE_S)?;
+        let clock_shift_s = session.add_later_traces(session_dir, later, end_s, LATER_PAUSE_S)?;
         // Saved at once: the files are written and referenced, and a later save keeps them.
         session.save(session_dir)?;
         traces = session.load_traces(session_dir)?;
@@ -141,8 +137,5 @@ pub fn free_plan_file(session_dir: &Path) -> PathBuf {
     if !first.exists() {
         return first;
     }
-    (2..)
-        .map(|n| session_dir.join(format!("discriminating-motions-{n}.ron")))
-        .find(|p| !p.exists())
-        .unwrap_or(first)
+    (2..).map(|n| session_dir.join(format!("discriminating-motions-{n}.ron"))).find(|p| !p.exists()).unwrap_or(first)
 }

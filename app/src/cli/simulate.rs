@@ -36,9 +36,6 @@ pub struct SimulateArgs {
     pub after: Option<PathBuf>,
 }
 
-/// The pause between a session's end and a recording that continues it (s).
-pub const PAUSE_AFTER_SESSION_S: f64 = 60.0;
-
 /// The bench time at which the traces of a session folder end (s): those its `session.ron`
 /// references, or every trace of its `traces/`.
 fn session_end_s(dir: &std::path::Path) -> Result<f64, CliError> {
@@ -82,7 +79,7 @@ fn slug(label: &str) -> String {
 pub fn simulate(a: &SimulateArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let mut bench = VirtualBench::from_preset_name(&a.bench, a.seed)?;
     if let Some(session) = &a.after {
-        bench.set_clock_s(session_end_s(session)? + PAUSE_AFTER_SESSION_S);
+        bench.set_clock_s(session_end_s(session)? + photorobot_core::session::LATER_PAUSE_S);
     }
     let plan = load_plan(&a.plan)?;
     // One bar for the plan; Ctrl-C stops it at the segment and the traces so far are written.

@@ -277,7 +277,8 @@ impl Diagnosis {
                     && self.candidates[c].name != own.name
                     && !nf.state.effects.iter().any(|(e, _)| e.name == self.candidates[c].name)
             };
-            let Some(c) = (0..scores.len()).filter(|&c| open(c)).max_by(|&a, &b| scores[a].score.total_cmp(&scores[b].score))
+            let Some(c) =
+                (0..scores.len()).filter(|&c| open(c)).max_by(|&a, &b| scores[a].score.total_cmp(&scores[b].score))
             else {
                 continue;
             };
@@ -285,15 +286,21 @@ impl Diagnosis {
             start.effects.insert(k, (self.candidates[c].clone(), scores[c].estimate));
             let sf = self.refit(&start)?;
             let gain = f.chi2() - sf.chi2();
-            if gain > EXCHANGE_MARGIN && sf.effect_z(k) >= REMOVE_BELOW_SIGMA && best.as_ref().is_none_or(|b| gain > b.3) {
-                let ambiguous =
-                    scoring::ambiguity_set(c, &projected).into_iter().map(|o| self.candidates[o].name.clone()).collect();
+            if gain > EXCHANGE_MARGIN
+                && sf.effect_z(k) >= REMOVE_BELOW_SIGMA
+                && best.as_ref().is_none_or(|b| gain > b.3)
+            {
+                let ambiguous = scoring::ambiguity_set(c, &projected)
+                    .into_iter()
+                    .map(|o| self.candidates[o].name.clone())
+                    .collect();
                 best = Some((k, c, sf, gain, scores[c].clone(), ambiguous));
             }
         }
         let Some((k, c, sf, gain, sc, ambiguous)) = best else { return Ok(false) };
         let new = self.candidates[c].name.clone();
-        let reason = format!("{new} explains what it took up better, the other effects in the model (χ² lower by {gain:.1})");
+        let reason =
+            format!("{new} explains what it took up better, the other effects in the model (χ² lower by {gain:.1})");
         self.remove_added(f, k, sf.clone(), reason)?;
         let k_new = sf.state.effects.iter().position(|(e, _)| e.name == new).unwrap_or(k);
         let effect = NamedEffect {
