@@ -620,17 +620,22 @@ impl Thread {
         let offset = (d.end_time_s() + photorobot_core::session::LATER_PAUSE_S - self.bench.clock_s()).max(0.0);
         let mut runner = BenchRunner::new(self.bench.as_mut(), offset);
         let tx = self.tx.clone();
+        // One call can add several steps (an effect added, then one removed): each is sent.
+        let mut sent = d.steps.len();
         loop {
             let runner =
                 run_motions.then_some(&mut runner as &mut dyn photorobot_core::diagnose::motions::MotionRunner);
-            let step = match d.step(runner) {
-                Ok(Some(step)) => step,
+            match d.step(runner) {
+                Ok(Some(_)) => {}
                 Ok(None) => break,
                 // A motion the stop cancelled fails the step: it was stopped all the same.
                 Err(_) if self.cancel.load(Ordering::Relaxed) => return Err(STOPPED.into()),
                 Err(e) => return Err(e.to_string()),
-            };
-            let _ = tx.send(Event::DiagnosisStep(step.title().to_string(), step.summary()));
+            }
+            for step in &d.steps[sent..] {
+                let _ = tx.send(Event::DiagnosisStep(step.title().to_string(), step.summary()));
+            }
+            sent = d.steps.len();
             (self.notify)();
         }
         let effects = d.state().map(|s| s.library_effects()).unwrap_or_default();

@@ -205,16 +205,24 @@ fn run_steps(
     // A spinner per workflow step on stderr (the steps have no fraction to show).
     let mut progress = super::progress::Progress::new(Vec::new());
     progress.stage("diagnosis: starting");
+    // One call can add several steps (an effect added, then one removed): each is printed.
+    let mut shown = d.steps.len();
     loop {
-        let step = d
+        let more = d
             .step(runner.as_mut().map(|r| &mut **r as &mut dyn MotionRunner))
-            .map_err(|e| CliError::Failed { what: "diagnosis", problem: e.to_string() })?;
-        let Some(step) = step else { break };
-        tracing::info!("diagnosis step: {}", step.title());
-        progress.stage(&format!("diagnosis: after {}", step.title()));
-        if !json {
-            writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
+            .map_err(|e| CliError::Failed { what: "diagnosis", problem: e.to_string() })?
+            .is_some();
+        if !more {
+            break;
         }
+        for step in &d.steps[shown..] {
+            tracing::info!("diagnosis step: {}", step.title());
+            progress.stage(&format!("diagnosis: after {}", step.title()));
+            if !json {
+                writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
+            }
+        }
+        shown = d.steps.len();
     }
     Ok(())
 }
