@@ -66,6 +66,10 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
             .add_enabled(idle, egui::Button::new("Add recorded traces…"))
             .on_hover_text("traces recorded after this session (a proposed plan), on the session's clock")
             .clicked();
+        // Beside the other actions, so that it stays in view however long the steps above it.
+        if s.diagnosis.proposed_plan.is_some() && ui.button("Save the proposed plan…").clicked() {
+            save_proposed_plan(s);
+        }
         if s.busy.as_deref() == Some("diagnosing") {
             ui.spinner();
             ui.label("diagnosing…");
@@ -233,24 +237,27 @@ fn refused_calibration(ui: &mut egui::Ui, s: &AppState) {
 }
 
 /// The plan the last diagnosis proposed (it ran no motion), with the button that saves it.
-fn proposed_plan(ui: &mut egui::Ui, s: &mut AppState) {
+fn proposed_plan(ui: &mut egui::Ui, s: &AppState) {
     let Some(plan) = s.diagnosis.proposed_plan.clone() else { return };
     let motions: Vec<&str> = plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
     ui.add_space(6.0);
     ui.label(RichText::new("Proposed discriminating motions").size(16.0).strong());
     ui.label(drawable(&format!(
-        "{} recorded motions: {}. Record this plan on the bench, then add its traces (Add recorded traces…) and run \
-         the diagnosis again.",
+        "{} recorded motions: {}. Save it (Save the proposed plan…), record it on the bench, then add its traces \
+         (Add recorded traces…) and run the diagnosis again.",
         motions.len(),
         motions.join("; ")
     )));
-    if ui.button("Save the proposed plan…").clicked() {
-        if let Some(path) = s.dialogs.save_plan("discriminating-motions.ron") {
-            s.status = match plan.save(&path) {
-                Ok(()) => format!("saved the proposed plan to {}", path.display()),
-                Err(e) => format!("plan not saved: {e}"),
-            };
-        }
+}
+
+/// Ask where to save the proposed plan and save it there; the status says what happened.
+fn save_proposed_plan(s: &mut AppState) {
+    let Some(plan) = s.diagnosis.proposed_plan.clone() else { return };
+    if let Some(path) = s.dialogs.save_plan("discriminating-motions.ron") {
+        s.status = match plan.save(&path) {
+            Ok(()) => format!("saved the proposed plan to {}", path.display()),
+            Err(e) => format!("plan not saved: {e}"),
+        };
     }
 }
 
