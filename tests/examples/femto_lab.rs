@@ -12,7 +12,8 @@
 //!     cargo run --release -p photorobot-e2e --example femto_lab [-- --seeds 1..6] [--plan PLAN]
 //!
 //! `--plan PLAN` calibrates on that plan instead of the joint mode's (`optimised`: the experiment
-//! design's plan, what `tests/cli_femto_lab.rs` runs in CI).
+//! design's plan). The figures this measures, and how far they are from these targets, are in
+//! docs/diagnosis.md ("Several effects at once").
 
 use photorobot_core::bench::BenchPreset;
 use photorobot_e2e::multi_effect::{calibrate_then_diagnose, score, validation_on_the_truth};

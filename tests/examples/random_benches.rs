@@ -2,8 +2,8 @@
 //! joints at random sizes (`photorobot_e2e::multi_effect::random_effects`), through the path users
 //! run: `photorobot calibrate --bench FILE --seed S --plan optimised --out D`, then `photorobot
 //! diagnose D --bench FILE --json`. Each bench's line says what was named within 3σ, what was
-//! missed (and how the result reports it) and what was wrongly named; the tally ends the run and
-//! is asserted against the figures docs/diagnosis.md gives.
+//! missed (and how the result reports it) and what was wrongly named; the tally ends the run,
+//! which asserts that every bench goes through both commands.
 //!
 //!     cargo run --release -p photorobot-e2e --example random_benches [-- --benches 0..20]
 
