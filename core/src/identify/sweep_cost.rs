@@ -20,13 +20,13 @@
 use crate::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
 use crate::identify::joint::{self, analyse_estimate, JointOptions};
 use crate::identify::measurements::{observations_from_traces, ExtractOptions};
-use crate::identify::{Observation, ObservationKind};
-use crate::model::optics::FabryPerot;
 use crate::identify::multistart::extract_options;
 use crate::identify::observability::IdentifiabilityReport;
 use crate::identify::signs::{translation_signs, SignSource, TranslationSign};
 use crate::identify::verdict::FitCheck;
+use crate::identify::{Observation, ObservationKind};
 use crate::model::extrinsics::{Extrinsics, PARAMETER_NAMES};
+use crate::model::optics::FabryPerot;
 use crate::model::phase::PhaseModel;
 use crate::plan::Plan;
 use serde::{Deserialize, Serialize};
@@ -126,7 +126,15 @@ impl SweepCost {
             .filter(|l| without.signs.iter().find(|s| &s.label == *l).is_none_or(|s| s.evidence.is_empty()))
             .cloned()
             .collect();
-        SweepCost { lost: vec![], undetermined, unseen, sign_open: sign_open(fit), signed_by_sweeps, unsigned, predicted }
+        SweepCost {
+            lost: vec![],
+            undetermined,
+            unseen,
+            sign_open: sign_open(fit),
+            signed_by_sweeps,
+            unsigned,
+            predicted,
+        }
     }
 
     /// Leaving the sweeps out costs nothing these analyses can see.
@@ -204,7 +212,8 @@ pub fn lost(
     for l in &lost {
         let mut o = Observation {
             label: l.label.clone(),
-            kind: ObservationKind::AbsoluteGap { at_display: l.at_display, gap_um: 0.0 },
+            // The identification models no drift, so the sweep's rate moves no reading.
+            kind: ObservationKind::AbsoluteGap { at_display: l.at_display, gap_um: 0.0, sweep_nm_per_s: 0.0 },
             sigma,
             wavelength_nm: l.wavelength_nm,
             time_s: l.time_s,
