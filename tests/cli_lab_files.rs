@@ -63,7 +63,9 @@ fn figures(text: &str) -> Vec<(String, f64, f64)> {
         .as_array()
         .unwrap()
         .iter()
-        .map(|p| (p["name"].as_str().unwrap().to_string(), p["value"].as_f64().unwrap(), p["sigma"].as_f64().unwrap_or(0.0)))
+        .map(|p| {
+            (p["name"].as_str().unwrap().to_string(), p["value"].as_f64().unwrap(), p["sigma"].as_f64().unwrap_or(0.0))
+        })
         .collect()
 }
 

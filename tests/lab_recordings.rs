@@ -42,7 +42,13 @@ fn move_to(rng: &mut StdRng, from: f64, span: f64, limit: f64) -> f64 {
         (true, true) => from + if rng.random_bool(0.5) { span } else { -span },
         (true, false) => from + span,
         (false, true) => from - span,
-        (false, false) => if from > 0.0 { -limit } else { limit },
+        (false, false) => {
+            if from > 0.0 {
+                -limit
+            } else {
+                limit
+            }
+        }
     }
 }
 
@@ -281,7 +287,7 @@ impl CaseOutcome {
 
     /// Determined parameters more than `k` total σ from the truth.
     pub fn beyond(&self, k: f64) -> Vec<&ParameterError> {
-        self.determined.iter().filter(|p| !(p.in_sigma().abs() <= k)).collect()
+        self.determined.iter().filter(|p| p.in_sigma().is_nan() || p.in_sigma().abs() > k).collect()
     }
 
     /// Validation motions whose true gap exceeds the target although the report forecast it
@@ -289,7 +295,7 @@ impl CaseOutcome {
     pub fn broken_promises(&self) -> Vec<String> {
         self.validation
             .iter()
-            .filter(|(_, true_nm, forecast, target)| true_nm > target && !(forecast > target))
+            .filter(|(_, true_nm, forecast, target)| true_nm > target && (forecast.is_nan() || forecast <= target))
             .map(|(m, t, f, target)| format!("{m}: true gap {t:.1} nm, forecast {f:.1} nm, target {target:.0} nm"))
             .collect()
     }

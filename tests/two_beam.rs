@@ -150,7 +150,14 @@ impl TwoBeamOptics {
     }
 
     /// One returning beam: the coupling over `d_um` at the tilt of `normal`, with the path phase.
-    fn beam(&self, g: &Geometry, normal: &Vector3<f64>, d_um: f64, extra_phase: f64, wavelength_nm: f64) -> Complex<f64> {
+    fn beam(
+        &self,
+        g: &Geometry,
+        normal: &Vector3<f64>,
+        d_um: f64,
+        extra_phase: f64,
+        wavelength_nm: f64,
+    ) -> Complex<f64> {
         let k = 2.0 * PI * self.air_index / (wavelength_nm * 1e-3);
         let tilt = self.tilt_uv(g, normal);
         let c = self.coupling(d_um, tilt, wavelength_nm);
@@ -255,11 +262,8 @@ mod tests {
         let launched: Vec<(f64, Complex<f64>)> =
             grid.iter().map(|&x| (x, Complex::new((-(x / w_l).powi(2)).exp(), 0.0))).collect();
         let at_mirror = fresnel(&launched, &grid, d);
-        let kicked: Vec<(f64, Complex<f64>)> = grid
-            .iter()
-            .zip(at_mirror)
-            .map(|(&x, u)| (x, u * Complex::new(0.0, -k * alpha * x).exp()))
-            .collect();
+        let kicked: Vec<(f64, Complex<f64>)> =
+            grid.iter().zip(at_mirror).map(|(&x, u)| (x, u * Complex::new(0.0, -k * alpha * x).exp())).collect();
         let near: Vec<f64> = (0..400).map(|j| -25.0 + 50.0 * j as f64 / 400.0).collect();
         let back = fresnel(&kicked, &near, d);
         let numeric: Complex<f64> =

@@ -12,7 +12,18 @@ fn lost_sweeps_leave_an_incomplete_calibration_not_one_that_fits() {
     let out = dir.path().join("session");
     let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/optimised-two-sweeps-lost.ron");
     let run = Command::new(env!("CARGO_BIN_EXE_photorobot"))
-        .args(["calibrate", "--bench", "table2-ideal", "--seed", "7", "--plan", plan, "--no-validation", "--json", "--out"])
+        .args([
+            "calibrate",
+            "--bench",
+            "table2-ideal",
+            "--seed",
+            "7",
+            "--plan",
+            plan,
+            "--no-validation",
+            "--json",
+            "--out",
+        ])
         .arg(&out)
         .output()
         .unwrap();
@@ -25,12 +36,18 @@ fn lost_sweeps_leave_an_incomplete_calibration_not_one_that_fits() {
     let undetermined: Vec<&str> =
         cost["undetermined"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
     eprintln!("lost sweeps cost: {}\n{stderr}", cost);
-    assert!(!undetermined.is_empty() || !cost["unsigned"].as_array().unwrap().is_empty(), "losing them costs something: {cost}");
+    assert!(
+        !undetermined.is_empty() || !cost["unsigned"].as_array().unwrap().is_empty(),
+        "losing them costs something: {cost}"
+    );
     for name in &undetermined {
         let p = report["parameters"].as_array().unwrap().iter().find(|p| p["name"] == *name).unwrap();
         assert_eq!(p["determined"], false, "{name} is not reported as determined");
         assert!(p["reason"].as_str().unwrap().contains("its sweeps were lost"), "{p}");
     }
     assert_eq!(run.status.code(), Some(1), "refused as a calibration:\n{stderr}");
-    assert!(stderr.contains("the calibration is incomplete") && stderr.contains("measured but not analysed"), "{stderr}");
+    assert!(
+        stderr.contains("the calibration is incomplete") && stderr.contains("measured but not analysed"),
+        "{stderr}"
+    );
 }

@@ -17,11 +17,8 @@ fn jog_log(level: tracing::Level) -> String {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join(LOG_FILE);
     let file = RotatingFile::open(&path, 10 << 20, 3).unwrap();
-    let subscriber = tracing_subscriber::fmt()
-        .with_max_level(level)
-        .with_ansi(false)
-        .with_writer(Mutex::new(file))
-        .finish();
+    let subscriber =
+        tracing_subscriber::fmt().with_max_level(level).with_ansi(false).with_writer(Mutex::new(file)).finish();
     tracing::subscriber::with_default(subscriber, || {
         let preset = BenchPreset::resolve("table2-ideal").unwrap();
         let robot = preset.robot_description().unwrap();

@@ -511,7 +511,8 @@ fn add_systematic(rows: &mut [ParameterRow], id: &Identification, discrepancy: &
         row.sigma_from_jackknife = spread > families && spread > 0.0;
         let bound = if row.unit == "°" { DEFAULT_USEFUL_ANGLE_DEG } else { DEFAULT_USEFUL_LENGTH_UM };
         if total > bound {
-            let why = if row.sigma_from_jackknife { "the traces disagree" } else { "the families of observations disagree" };
+            let why =
+                if row.sigma_from_jackknife { "the traces disagree" } else { "the families of observations disagree" };
             row.determined = false;
             row.reason = Some(format!("{why}: total σ {total:.3} {} (above its useful bound)", row.unit));
             (row.sigma, row.sigma_noise, row.sigma_systematic) = (None, None, None);

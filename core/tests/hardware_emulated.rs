@@ -70,7 +70,8 @@ fn rig(scale: f64, preset: &BenchPreset, seed: u64) -> Rig {
             let m = mcs_axes.lock().unwrap().iter().map(|a| a.position_at(t) * 1e-6).collect::<Vec<_>>();
             let q = [p[2] - 150.0, p[1] - 150.0, p[0] - 150.0, m[0], m[1], m[2]];
             let noise: f64 = StandardNormal.sample(&mut *rng.lock().unwrap());
-            PHOTODIODE_V_PER_MW * (optics.reflected_power_mw(t, &q, l.wavelength_at(t)).unwrap_or(f64::NAN) + sigma * noise)
+            PHOTODIODE_V_PER_MW
+                * (optics.reflected_power_mw(t, &q, l.wavelength_at(t)).unwrap_or(f64::NAN) + sigma * noise)
         }),
     );
     let l = laser.clone();
@@ -486,7 +487,8 @@ fn smaract_session_transcript_follows_the_mcs_subset() {
     let err = mcs.move_absolute(&[(0, 20.0)]).unwrap_err().to_string();
     assert!(err.contains("outside the travel range"), "{err}");
     let t = transcript.lock().unwrap().clone();
-    const SUBSET: [&str; 13] = ["SCM", "GNC", "GST", "GPPK", "GP", "GA", "GS", "MPA", "MPR", "MAA", "MAR", "SCLS", "FRM"];
+    const SUBSET: [&str; 13] =
+        ["SCM", "GNC", "GST", "GPPK", "GP", "GA", "GS", "MPA", "MPR", "MAA", "MAR", "SCLS", "FRM"];
     for line in &t {
         if let Some(cmd) = line.strip_prefix("> :") {
             let known = SUBSET.iter().any(|s| cmd.starts_with(s))

@@ -37,8 +37,14 @@ fn preset() -> BenchPreset {
 }
 
 fn model(preset: &BenchPreset) -> PhaseModel {
-    PhaseModel::new(RobotDescription::femto_6dof(), preset.truth, preset.optics, &preset.ambient, preset.laser.wavelength_nm)
-        .unwrap()
+    PhaseModel::new(
+        RobotDescription::femto_6dof(),
+        preset.truth,
+        preset.optics,
+        &preset.ambient,
+        preset.laser.wavelength_nm,
+    )
+    .unwrap()
 }
 
 fn run(bench: &mut dyn Bench, plan: &Plan) -> photorobot_core::bench::PlanRun {
@@ -117,12 +123,15 @@ fn a_laser_without_a_time_base_sweeps_nothing() {
     let mut config = HardwareConfig::femto();
     config.photodiode.wavelength_input = None;
     let emus = LocalEmulators::start(&preset, 5, &robot, &config, 0, 0).unwrap();
-    let laser_emu = LaserEmulator::start_on(0, emus.emu_laser(), LaserEmulatorConfig::new(LaserFamily::Keysight)).unwrap();
+    let laser_emu =
+        LaserEmulator::start_on(0, emus.emu_laser(), LaserEmulatorConfig::new(LaserFamily::Keysight)).unwrap();
     let a = emus.addresses();
     config = config.with_addresses(&[(a[0].0.as_str(), a[0].1.clone()), (a[1].0.as_str(), a[1].1.clone())]);
-    config.laser = Some(LaserConfig { family: LaserFamily::Keysight, address: laser_emu.addr().to_string(), timeout_s: 1.0 });
+    config.laser =
+        Some(LaserConfig { family: LaserFamily::Keysight, address: laser_emu.addr().to_string(), timeout_s: 1.0 });
     let laser = connect_laser(&config, preset.laser.wavelength_nm).unwrap();
-    let mut bench = ControllerBench::connect(robot, config, preset.motion, preset.ambient, laser, emus.clock()).unwrap();
+    let mut bench =
+        ControllerBench::connect(robot, config, preset.motion, preset.ambient, laser, emus.clock()).unwrap();
     assert!(!bench.tunable_laser());
     let p = plan(vec![Segment::Sweep { from_nm: 1550.0, to_nm: 1551.0, rate_nm_per_s: 10.0, label: "s".into() }]);
     let e = run(&mut bench, &p).outcome.unwrap_err().to_string();
@@ -230,7 +239,10 @@ fn mcs_channels_are_typed_by_their_sensors_and_a_locked_one_is_named() {
     mcs.set_transcript(Some(transcript.clone()));
     mcs.reconnect().unwrap();
     let t = transcript.lock().unwrap().clone();
-    assert!(t.iter().any(|l| l == "> :GST1") && !t.iter().any(|l| l.starts_with("> :GP") || l.starts_with("> :GA")), "{t:?}");
+    assert!(
+        t.iter().any(|l| l == "> :GST1") && !t.iter().any(|l| l.starts_with("> :GP") || l.starts_with("> :GA")),
+        "{t:?}"
+    );
     emu.set_locked(1, true);
     let e = mcs.on_target(&[1]).unwrap_err().to_string();
     assert!(e.contains("MCS error 146") && e.contains("Movement locked"), "{e}");
@@ -280,9 +292,14 @@ fn a_bench_on_an_mcs2_moves_its_wrist() {
     let config = config.with_addresses(&[(a[0].0.as_str(), a[0].1.clone()), (a[1].0.as_str(), a[1].1.clone())]);
     let mut bench =
         ControllerBench::connect(robot, config, preset.motion, preset.ambient, emus.laser(), emus.clock()).unwrap();
-    assert!(bench.identification().iter().any(|(_, id)| id.starts_with("SmarAct MCS2")), "{:?}", bench.identification());
+    assert!(
+        bench.identification().iter().any(|(_, id)| id.starts_with("SmarAct MCS2")),
+        "{:?}",
+        bench.identification()
+    );
     let to = [0.0, 0.0, 0.0, 1.0, -1.0, 2.0];
-    let got = run(&mut bench, &plan(vec![Segment::Move { to: JointTarget::all(to), record: true, label: "wrist".into() }]));
+    let got =
+        run(&mut bench, &plan(vec![Segment::Move { to: JointTarget::all(to), record: true, label: "wrist".into() }]));
     got.outcome.unwrap();
     let q = bench.position_display();
     assert!((3..6).all(|j| (q[j] - to[j]).abs() < 1e-6), "{q:?}");

@@ -42,16 +42,16 @@ fn summary(outcomes: &[CaseOutcome]) -> bool {
         let count = |v: &str| of.iter().filter(|o| o.verdict == v).count();
         let determined: usize = of.iter().map(|o| o.determined.len()).sum();
         let beyond: usize = of.iter().map(|o| o.beyond(3.0).len()).sum();
-        let beyond_noise: usize =
-            of.iter().flat_map(|o| &o.determined).filter(|p| !(p.in_noise_sigma().abs() <= 3.0)).count();
+        let beyond_noise: usize = of
+            .iter()
+            .flat_map(|o| &o.determined)
+            .filter(|p| p.in_noise_sigma().is_nan() || p.in_noise_sigma().abs() > 3.0)
+            .count();
         let motions: usize = of.iter().map(|o| o.validation.len()).sum();
         let kept = |o: &&CaseOutcome| o.validation.iter().filter(|(_, t, _, target)| t <= target).count();
         let within: usize = of.iter().map(kept).sum();
-        let said: usize = of
-            .iter()
-            .flat_map(|o| &o.validation)
-            .filter(|(_, t, f, target)| t > target && f > target)
-            .count();
+        let said: usize =
+            of.iter().flat_map(|o| &o.validation).filter(|(_, t, f, target)| t > target && f > target).count();
         let broken: Vec<String> = of.iter().flat_map(|o| o.broken_promises()).collect();
         let share = 1.0 - beyond as f64 / determined.max(1) as f64;
         println!(

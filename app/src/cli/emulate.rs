@@ -153,7 +153,10 @@ fn serve(a: &EmulateArgs, out: &mut dyn Write, stop: &AtomicBool) -> Result<(), 
             run_optical_bench(&preset, &hardware, (f, seed, !a.ideal), stop, &mut |addresses| {
                 let list: Vec<String> = addresses.iter().map(|(n, at)| format!("{n} at {at}")).collect();
                 let (name, pace, kind) = (&preset.name, pace(a.time_scale), realism(a.ideal));
-                say(format!("optical bench `{name}` emulated: {}; {pace}, {kind}, seed {seed}; Ctrl-C to stop", list.join(", ")))
+                say(format!(
+                    "optical bench `{name}` emulated: {}; {pace}, {kind}, seed {seed}; Ctrl-C to stop",
+                    list.join(", ")
+                ))
             })
             .map_err(|problem| CliError::Failed { what: "emulate all", problem })?;
             return ready_error.map_or(Ok(()), |e| Err(e.into()));

@@ -137,7 +137,12 @@ fn families(ui: &mut egui::Ui, r: &CalibrationReport) {
             ui.monospace(f.observations.to_string());
             ui.monospace(format!("{:.2}", f.birge_ratio));
             ui.monospace(format!("{:.3} {}", f.excess_sigma, f.unit));
-            let text = format!("χ² {:.1} for {}: {}", f.shift_chi2, f.shift_dof, if f.disagrees { "disagrees" } else { "agrees" });
+            let text = format!(
+                "χ² {:.1} for {}: {}",
+                f.shift_chi2,
+                f.shift_dof,
+                if f.disagrees { "disagrees" } else { "agrees" }
+            );
             if f.disagrees {
                 ui.colored_label(ui.visuals().warn_fg_color, text);
             } else {

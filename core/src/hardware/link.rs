@@ -205,8 +205,11 @@ impl Link {
     fn read_line_inner(&mut self, command: &str) -> Result<String, HwError> {
         let controller = self.controller.clone();
         let timeout_s = self.timeout_s;
-        let disconnected =
-            |reason: &str| HwError::Disconnected { controller: controller.clone(), command: command.into(), reason: reason.into() };
+        let disconnected = |reason: &str| HwError::Disconnected {
+            controller: controller.clone(),
+            command: command.into(),
+            reason: reason.into(),
+        };
         let reader = self.reader.as_mut().ok_or(HwError::NotConnected { controller: controller.clone() })?;
         let mut buf: Vec<u8> = Vec::new();
         let mut counted = 0usize;

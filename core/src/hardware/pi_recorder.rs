@@ -55,11 +55,16 @@ impl RecorderFacts {
         let max_points = parse_count(pi, "SPA?", &points)?;
         let tables = tables(pi)?;
         if !(servo_cycle_s > 0.0 && servo_cycle_s < 0.1) || max_points == 0 {
-            return Err(pi.bad("SPA?", &format!("{servo} s, {points} points"), "a servo cycle in (0, 0.1) s and recorder points > 0"));
+            return Err(pi.bad(
+                "SPA?",
+                &format!("{servo} s, {points} points"),
+                "a servo cycle in (0, 0.1) s and recorder points > 0",
+            ));
         }
         let lines = pi.query("HDR?")?;
         let (record_options, trigger_options, _) = replies::record_options(&lines);
-        let facts = RecorderFacts { servo_cycle_s, max_points, tables, record_options, trigger_options, capacity: None };
+        let facts =
+            RecorderFacts { servo_cycle_s, max_points, tables, record_options, trigger_options, capacity: None };
         for (option, listed, what) in [
             (RECORD_ACTUAL_POSITION, &facts.record_options, "record option"),
             (RECORD_INPUT_NORMALIZED, &facts.record_options, "record option"),
@@ -68,7 +73,9 @@ impl RecorderFacts {
             if !listed.contains(&option) {
                 return Err(HwError::Usage {
                     controller: pi.name.clone(),
-                    problem: format!("`HDR?` does not list {what} {option}, which the recording needs (it lists {listed:?})"),
+                    problem: format!(
+                        "`HDR?` does not list {what} {option}, which the recording needs (it lists {listed:?})"
+                    ),
                 });
             }
         }
@@ -151,7 +158,10 @@ impl DataRecorder for PiGcs {
         if !self.recorder.trigger_options.contains(&option) {
             return Err(HwError::Usage {
                 controller: self.name.clone(),
-                problem: format!("`HDR?` does not list trigger option {option} (it lists {:?})", self.recorder.trigger_options),
+                problem: format!(
+                    "`HDR?` does not list trigger option {option} (it lists {:?})",
+                    self.recorder.trigger_options
+                ),
             });
         }
         self.command(&format!("DRT 0 {option} {value}"))?;

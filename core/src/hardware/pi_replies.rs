@@ -92,7 +92,13 @@ pub fn input_value(controller: &str, command: &str, lines: &[String]) -> Result<
 
 /// `SPA? <item> <param>` (GCS 2 parameter query, as PIPython's `qSPA` reads it): the value of the
 /// line `<item> <param>=<value>`; the parameter id matches in any hexadecimal spelling.
-pub fn param_value(controller: &str, command: &str, lines: &[String], item: &str, param: u32) -> Result<String, HwError> {
+pub fn param_value(
+    controller: &str,
+    command: &str,
+    lines: &[String],
+    item: &str,
+    param: u32,
+) -> Result<String, HwError> {
     lines
         .iter()
         .find_map(|l| {
@@ -103,7 +109,12 @@ pub fn param_value(controller: &str, command: &str, lines: &[String], item: &str
             (i == item && u32::from_str_radix(p, 16).ok()? == param).then(|| value.trim().to_string())
         })
         .ok_or_else(|| {
-            HwError::bad_reply(controller, command, &lines.join("\\n"), &format!("a line `{item} 0x{param:08X}=<value>`"))
+            HwError::bad_reply(
+                controller,
+                command,
+                &lines.join("\\n"),
+                &format!("a line `{item} 0x{param:08X}=<value>`"),
+            )
         })
 }
 
@@ -203,7 +214,16 @@ mod tests {
         let l = lines(&["1 0xe000200=2e-05"]);
         assert_eq!(param_value("pi", "SPA?", &l, "1", 0x0E00_0200).unwrap(), "2e-05");
         assert!(param_value("pi", "SPA?", &l, "1", 0x1600_0200).is_err());
-        let hdr = lines(&["#RecordOptions", "0=Nothing", "17=Normalized value of input signal channel", "#TriggerOptions", "1=any command changing position", "3=external trigger", "#Additional information", "32768 datapoints per table"]);
+        let hdr = lines(&[
+            "#RecordOptions",
+            "0=Nothing",
+            "17=Normalized value of input signal channel",
+            "#TriggerOptions",
+            "1=any command changing position",
+            "3=external trigger",
+            "#Additional information",
+            "32768 datapoints per table",
+        ]);
         let (r, t, i) = record_options(&hdr);
         assert_eq!((r, t, i.len()), (vec![0, 17], vec![1, 3], 1));
     }

@@ -310,8 +310,9 @@ impl SmarActMcs {
     fn request(&mut self, command: &str) -> Result<McsReply, HwError> {
         self.link.send(command)?;
         let line = self.link.read_line(command)?;
-        parse_reply(&line)
-            .ok_or_else(|| self.bad(command, &line, "an MCS reply `:E`, `:P`, `:A`, `:S`, `:ST`, `:PPK`, `:N` or `:ID`"))
+        parse_reply(&line).ok_or_else(|| {
+            self.bad(command, &line, "an MCS reply `:E`, `:P`, `:A`, `:S`, `:ST`, `:PPK`, `:N` or `:ID`")
+        })
     }
 
     /// Send a command whose only reply is the acknowledgement `:E<ch>,0`.
@@ -576,7 +577,10 @@ mod tests {
         let without = SmarActEmulator::start(clock, config).unwrap();
         let mcs = SmarActMcs::connect("MCS", &without.addr().to_string(), 1.0, &[]).unwrap();
         assert_eq!(mcs.system_id(), None);
-        assert_eq!(mcs.identification(), "SmarAct MCS, 3 channels (rotary sensor 16, rotary sensor 17, rotary sensor 26)");
+        assert_eq!(
+            mcs.identification(),
+            "SmarAct MCS, 3 channels (rotary sensor 16, rotary sensor 17, rotary sensor 26)"
+        );
     }
 
     proptest::proptest! {

@@ -96,7 +96,12 @@ impl SmarActMcs2 {
                 Some(true) => AxisUnit::Degree,
                 Some(false) => AxisUnit::Micrometre,
                 None => {
-                    return Err(HwError::bad_reply(&self.name, &command, &kind.to_string(), "0 (linear), 1 (rotary) or 2 (goniometer)"))
+                    return Err(HwError::bad_reply(
+                        &self.name,
+                        &command,
+                        &kind.to_string(),
+                        "0 (linear), 1 (rotary) or 2 (goniometer)",
+                    ))
                 }
             };
             if self.state(ch as usize)? & state::SENSOR_PRESENT == 0 {
@@ -108,7 +113,12 @@ impl SmarActMcs2 {
             self.command(&format!(":CHAN{ch}:MMOD 0"))?;
             let mode = self.query_int(&format!(":CHAN{ch}:MMOD?"))?;
             if mode != 0 {
-                return Err(HwError::bad_reply(&self.name, &format!(":CHAN{ch}:MMOD?"), &mode.to_string(), "0 (absolute) as just set"));
+                return Err(HwError::bad_reply(
+                    &self.name,
+                    &format!(":CHAN{ch}:MMOD?"),
+                    &mode.to_string(),
+                    "0 (absolute) as just set",
+                ));
             }
             self.command(&format!(":CHAN{ch}:HOLD -1"))?;
             axes.push(AxisInfo { id: ch.to_string(), unit });
@@ -342,7 +352,12 @@ impl StageController for SmarActMcs2 {
         self.command(&format!(":CHAN{axis}:VEL {v}"))?;
         let read = self.query_int(&format!(":CHAN{axis}:VEL?"))?;
         if read != v {
-            return Err(HwError::bad_reply(&self.name, &format!(":CHAN{axis}:VEL?"), &read.to_string(), &format!("{v}, the velocity just set")));
+            return Err(HwError::bad_reply(
+                &self.name,
+                &format!(":CHAN{axis}:VEL?"),
+                &read.to_string(),
+                &format!("{v}, the velocity just set"),
+            ));
         }
         Ok(())
     }

@@ -52,7 +52,8 @@ pub enum Family {
 
 impl Family {
     /// All four, in the order reported.
-    pub const ALL: [Family; 4] = [Family::Translations, Family::Rotations, Family::AbsoluteGaps, Family::FringeAmplitudes];
+    pub const ALL: [Family; 4] =
+        [Family::Translations, Family::Rotations, Family::AbsoluteGaps, Family::FringeAmplitudes];
 
     /// The family of an observation.
     pub fn of(o: &Observation) -> Family {
@@ -152,7 +153,7 @@ fn pinv_sym(h: &DMatrix<f64>) -> (DMatrix<f64>, Vec<f64>) {
     for (k, &l) in eig.eigenvalues.iter().enumerate() {
         let v = eig.eigenvectors.column(k);
         if l > tol {
-            inv += &v * v.transpose() / l;
+            inv += v * v.transpose() / l;
         } else {
             for (i, share) in null_share.iter_mut().enumerate() {
                 *share += v[i] * v[i];

@@ -302,7 +302,7 @@ impl Effect {
 /// few % of the frequency's error. Zero when the sweep rate is unknown.
 #[inline]
 pub fn sweep_reading_nm(rate_nm_per_s: f64, wavelength_nm: f64, sweep_nm_per_s: f64, index: f64) -> f64 {
-    if sweep_nm_per_s == 0.0 || !sweep_nm_per_s.is_finite() || !(index > 0.0) {
+    if sweep_nm_per_s == 0.0 || !sweep_nm_per_s.is_finite() || index.is_nan() || index <= 0.0 {
         return 0.0;
     }
     let frequency_nm = -rate_nm_per_s * wavelength_nm / sweep_nm_per_s;

@@ -378,12 +378,29 @@ pub(crate) fn read_table_sized<R: Read>(
 /// What is wrong with a data row, before the file and line are known.
 #[derive(Debug)]
 pub(super) enum BadRow {
-    FieldCount { expected: usize, found: usize },
-    NotANumber { column: usize, text: String },
+    FieldCount {
+        expected: usize,
+        found: usize,
+    },
+    NotANumber {
+        column: usize,
+        text: String,
+    },
     /// A number with the other decimal mark than the file's earlier numbers.
-    MixedDecimalMarks { column: usize, text: String, earlier: &'static str },
-    NonFinite { column: usize, value: f64 },
-    NonMonotonicTime { column: usize, t: f64, previous_t: f64 },
+    MixedDecimalMarks {
+        column: usize,
+        text: String,
+        earlier: &'static str,
+    },
+    NonFinite {
+        column: usize,
+        value: f64,
+    },
+    NonMonotonicTime {
+        column: usize,
+        t: f64,
+        previous_t: f64,
+    },
 }
 
 impl BadRow {
@@ -470,7 +487,9 @@ impl Rows {
                 None => {
                     let value = if self.decimal_comma {
                         parse_with_mark(field, &mut self.mark).map_err(|earlier| match earlier {
-                            Some(m) => BadRow::MixedDecimalMarks { column, text: field_text(field), earlier: m.words() },
+                            Some(m) => {
+                                BadRow::MixedDecimalMarks { column, text: field_text(field), earlier: m.words() }
+                            }
                             None => BadRow::NotANumber { column, text: field_text(field) },
                         })?
                     } else {

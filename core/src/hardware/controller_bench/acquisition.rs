@@ -293,7 +293,10 @@ impl ControllerBench {
             .zip(now.iter().zip(&a.traffic_at_arm))
             .filter_map(|(name, (now, then))| {
                 let d = now.as_ref()?.since(then.as_ref()?);
-                Some(format!("{name}: {} commands, {} B out, {} B in, {} lines", d.commands, d.bytes_out, d.bytes_in, d.lines_in))
+                Some(format!(
+                    "{name}: {} commands, {} B out, {} B in, {} lines",
+                    d.commands, d.bytes_out, d.bytes_in, d.lines_in
+                ))
             })
             .collect();
         let t = a.timing;

@@ -201,7 +201,9 @@ impl HardwareConfig {
             ));
         }
         let p = &c.photodiode;
-        for (name, v) in [("photodiode.mw_per_unit", p.mw_per_unit), ("photodiode.wavelength_nm_per_unit", p.wavelength_nm_per_unit)] {
+        for (name, v) in
+            [("photodiode.mw_per_unit", p.mw_per_unit), ("photodiode.wavelength_nm_per_unit", p.wavelength_nm_per_unit)]
+        {
             if !(v.is_finite() && v != 0.0) {
                 return Err(bad(name, format!("expected a finite non-zero scale, found {v}")));
             }
@@ -265,7 +267,10 @@ mod tests {
         let text = include_str!("../../../../assets/benches/femto-mcs2-hardware.ron");
         let c = HardwareConfig::from_ron_str(text, Path::new("assets/benches/femto-mcs2-hardware.ron")).unwrap();
         let femto = HardwareConfig::femto();
-        assert_eq!((c.controllers[1].kind, femto.controllers[1].kind), (ControllerKind::SmarActMcs2, ControllerKind::SmarActMcs));
+        assert_eq!(
+            (c.controllers[1].kind, femto.controllers[1].kind),
+            (ControllerKind::SmarActMcs2, ControllerKind::SmarActMcs)
+        );
         assert_eq!(c.controllers[1].address, "127.0.0.1:55551");
         assert_eq!((c.joints.clone(), c.photodiode.clone()), (femto.joints, femto.photodiode), "the same wiring");
     }

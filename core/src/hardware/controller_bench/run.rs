@@ -94,7 +94,8 @@ impl ControllerBench {
             _ => 0.0,
         };
         let expected_s = sweep.map_or(seg.duration_s, |s| s.duration_s());
-        let deadline = t_start + 2.0 * (expected_s + sweep.map_or(0.0, |_| SWEEP_ALLOWANCE_S)) + self.config.timeout_margin_s;
+        let deadline =
+            t_start + 2.0 * (expected_s + sweep.map_or(0.0, |_| SWEEP_ALLOWANCE_S)) + self.config.timeout_margin_s;
         let mut done_at: Option<f64> = None;
         let mut reported = 0;
         let mut laser_asked = std::time::Instant::now();
@@ -121,12 +122,10 @@ impl ControllerBench {
                         TimedMotion::Move { .. } => self.all_on_target()?,
                         TimedMotion::Sweep { .. } => {
                             // The laser's state, asked every 10 ms of real time once its time is up.
-                            now >= t_start + expected_s
-                                && laser_asked.elapsed().as_secs_f64() >= 0.01
-                                && {
-                                    laser_asked = std::time::Instant::now();
-                                    !self.laser.sweep_running()?
-                                }
+                            now >= t_start + expected_s && laser_asked.elapsed().as_secs_f64() >= 0.01 && {
+                                laser_asked = std::time::Instant::now();
+                                !self.laser.sweep_running()?
+                            }
                         }
                         TimedMotion::Dwell => now >= t_start + seg.duration_s,
                     };

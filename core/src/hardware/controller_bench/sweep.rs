@@ -81,7 +81,12 @@ impl ControllerBench {
 
     /// Give each recorded sample its wavelength by the bench's time base and keep only the samples
     /// of the sweep at constant speed.
-    pub(super) fn apply_sweep(&self, a: &mut Acquisition, setup: &SweepSetup, log: Option<&LambdaLog>) -> Result<(), HwError> {
+    pub(super) fn apply_sweep(
+        &self,
+        a: &mut Acquisition,
+        setup: &SweepSetup,
+        log: Option<&LambdaLog>,
+    ) -> Result<(), HwError> {
         let timed = match self.time_base_or_refuse()? {
             SweepTimeBase::Monitor { .. } => from_monitor(&a.trace.t_s, &a.trace.wavelength_nm, setup, log),
             SweepTimeBase::Trigger { .. } => match log {

@@ -71,8 +71,11 @@ pub fn from_monitor(
     // One pass dropping outliers (a glitch of the input), then the line of the rest.
     let first = line_of(&central);
     let sigma = rms(&central, first);
-    let kept: Vec<usize> =
-        central.iter().copied().filter(|&k| (progress[k] - first.0 - first.1 * t_s[k]).abs() <= 5.0 * sigma.max(1e-9)).collect();
+    let kept: Vec<usize> = central
+        .iter()
+        .copied()
+        .filter(|&k| (progress[k] - first.0 - first.1 * t_s[k]).abs() <= 5.0 * sigma.max(1e-9))
+        .collect();
     let (a, b) = line_of(if kept.len() >= MIN_CENTRAL_SAMPLES { &kept } else { &central });
     let sigma = rms(&kept, (a, b));
     if (b - setup.rate_nm_per_s).abs() > SPEED_TOLERANCE * setup.rate_nm_per_s {
@@ -108,7 +111,7 @@ pub fn from_monitor(
 /// sample `k`, `k·dt` after it, gets the log at that time (its points `step / speed` apart at
 /// constant speed); samples after the last logged point are left out.
 pub fn from_trigger(samples: usize, dt_s: f64, log: &LambdaLog) -> Result<SweepSamples, String> {
-    if log.wavelengths_nm.len() < 2 || !(log.step_nm > 0.0) {
+    if log.wavelengths_nm.len() < 2 || log.step_nm.is_nan() || log.step_nm <= 0.0 {
         return Err(format!("the laser logged {} points: no sweep to time", log.wavelengths_nm.len()));
     }
     let end_s = log.duration_s();
@@ -160,16 +163,15 @@ mod tests {
         let m: Vec<f64> =
             t.iter().map(|&t| ((truth(t) + rng.random_range(-0.0035..0.0035)) / lsb).round() * lsb).collect();
         let got = from_monitor(&t, &m, &setup(), None).unwrap();
-        let worst = got
-            .wavelengths_nm
-            .iter()
-            .enumerate()
-            .map(|(i, w)| (w - truth(t[got.first + i])).abs())
-            .fold(0.0, f64::max);
+        let worst =
+            got.wavelengths_nm.iter().enumerate().map(|(i, w)| (w - truth(t[got.first + i])).abs()).fold(0.0, f64::max);
         assert!(worst < 1e-3, "worst {worst} nm");
         assert!(got.wavelengths_nm.windows(2).all(|w| w[1] > w[0]), "strictly monotonic");
         let first_t = t[got.first];
-        assert!(first_t >= 0.045 - dt && first_t < 0.045 + 3.0 * dt, "starts where the laser reaches 1550 nm at speed: {first_t}");
+        assert!(
+            first_t >= 0.045 - dt && first_t < 0.045 + 3.0 * dt,
+            "starts where the laser reaches 1550 nm at speed: {first_t}"
+        );
         assert!(got.wavelengths_nm.len() > 380, "{}", got.wavelengths_nm.len());
         // A monitor whose scale is off by 20 % is refused, not believed.
         let scaled: Vec<f64> = m.iter().map(|w| 1550.0 + 1.2 * (w - 1550.0)).collect();

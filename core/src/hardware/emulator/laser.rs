@@ -488,8 +488,11 @@ pub fn run_laser_emulator(
     on_ready: &mut dyn FnMut(SocketAddr),
 ) -> std::io::Result<()> {
     let config = if realistic { LaserEmulatorConfig::new(family) } else { LaserEmulatorConfig::ideal(family) };
-    let emu =
-        LaserEmulator::start_on(port.unwrap_or(default_port(family)), EmuLaser::new(EmuClock::new(time_scale), 1550.0), config)?;
+    let emu = LaserEmulator::start_on(
+        port.unwrap_or(default_port(family)),
+        EmuLaser::new(EmuClock::new(time_scale), 1550.0),
+        config,
+    )?;
     on_ready(emu.addr());
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(std::time::Duration::from_millis(50));

@@ -3,9 +3,11 @@
 //! the start with its latency and run-up, the state and `FLAG?` queries, the abort, and the log of
 //! every step reached, ready only after the sweep's post-processing.
 
-use super::laser::{quantity, unit_nm, wavelength_arg, Reply, Scpi, Shared, State, CONFLICT, DATA_TYPE, OUT_OF_RANGE, UNDEFINED_HEADER};
-use crate::hardware::laser::{keysight, santec};
+use super::laser::{
+    quantity, unit_nm, wavelength_arg, Reply, Scpi, Shared, State, CONFLICT, DATA_TYPE, OUT_OF_RANGE, UNDEFINED_HEADER,
+};
 use crate::hardware::laser::scpi::encode_block;
+use crate::hardware::laser::{keysight, santec};
 
 /// A sweep: from, to (nm), speed (nm/s), log step (nm); the first log point reached at `t0_s`,
 /// the stop (or the abort) at `end_s`, the laser busy (run-out, return) until `busy_until_s`,
@@ -197,7 +199,8 @@ fn start(shared: &Shared, st: &mut State, now: f64) -> Scpi<()> {
     let (from, to, rate, step) = (st.start_nm, st.stop_nm, st.speed, st.step);
     let realism = st.config.realism;
     let (t0_s, end_s) = shared.laser.sweep_with(from, to, rate, realism.profile, stepping.then_some(step));
-    let run_out = if realism.profile.accel_nm_per_s2.is_finite() { rate / realism.profile.accel_nm_per_s2 } else { 0.0 };
+    let run_out =
+        if realism.profile.accel_nm_per_s2.is_finite() { rate / realism.profile.accel_nm_per_s2 } else { 0.0 };
     let busy_until_s = end_s + run_out;
     st.sweep = Some(Sweep {
         from,

@@ -153,7 +153,9 @@ impl LocalEmulators {
         let mcs2_config = Mcs2EmulatorConfig::default();
         // Controller units per display unit of each wrist channel.
         let wrist_scale: Vec<f64> = match wrist_kind {
-            ControllerKind::SmarActMcs2 => mcs2_config.channels.iter().map(|c| if c.0 == 0 { 1e6 } else { 1e9 }).collect(),
+            ControllerKind::SmarActMcs2 => {
+                mcs2_config.channels.iter().map(|c| if c.0 == 0 { 1e6 } else { 1e9 }).collect()
+            }
             _ => mcs_config.channels.iter().map(|c| if c.0 == ChannelKind::Linear { 1e3 } else { 1e6 }).collect(),
         };
         let wires = wire(robot, config, &pi_config, (&pi_name, &mcs_name), wrist_scale.len())?;

@@ -109,7 +109,12 @@ impl Mcs2Emulator {
             .collect();
         let shared = Arc::new(Shared {
             clock,
-            state: Mutex::new(State { channels, errors: VecDeque::new(), faults: Faults::default(), serial: config.serial }),
+            state: Mutex::new(State {
+                channels,
+                errors: VecDeque::new(),
+                faults: Faults::default(),
+                serial: config.serial,
+            }),
             axes: Arc::new(Mutex::new(axes)),
         });
         let s2 = shared.clone();

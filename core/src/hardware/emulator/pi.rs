@@ -33,7 +33,12 @@ pub struct PiRealism {
 impl PiRealism {
     /// As strict and as imperfect as the instrument.
     pub fn realistic(seed: u64) -> Self {
-        PiRealism { adc: Some(Adc::e712(seed)), velocity_needs_vco: true, step_speed_um_per_s: 50_000.0, frf_supported: false }
+        PiRealism {
+            adc: Some(Adc::e712(seed)),
+            velocity_needs_vco: true,
+            step_speed_um_per_s: 50_000.0,
+            frf_supported: false,
+        }
     }
 
     /// An ideal controller: exact inputs, `VEL` always acts, `FRF?` answers.

@@ -83,7 +83,13 @@ fn param_id(text: &str) -> Gcs<u32> {
 }
 
 /// The recorder's configuration: tables, rate, trigger, parameters, and the points recorded.
-pub(super) fn setup(shared: &Shared, st: &mut PiState, now: f64, name: &str, args: &[&str]) -> Gcs<Option<Vec<String>>> {
+pub(super) fn setup(
+    shared: &Shared,
+    st: &mut PiState,
+    now: f64,
+    name: &str,
+    args: &[&str],
+) -> Gcs<Option<Vec<String>>> {
     let one = |v: String| Ok(Some(vec![v]));
     match name {
         "DRC" => {
@@ -214,7 +220,8 @@ pub(super) fn recorded_data(shared: &Shared, st: &mut PiState, now: f64, args: &
                     let p = ids.iter().position(|i| i == src).map_or(0.0, |i| axes[i].position_at(t));
                     format!("{p:.9}")
                 } else {
-                    let v = input_value(shared, "TNS?", src, t, trigger_key ^ (index as u64).wrapping_mul(0x100_0000_01B3));
+                    let v =
+                        input_value(shared, "TNS?", src, t, trigger_key ^ (index as u64).wrapping_mul(0x100_0000_01B3));
                     format!("{v:.11e}")
                 }
             })

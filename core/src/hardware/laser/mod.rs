@@ -210,7 +210,10 @@ impl ScpiLaser {
             if Instant::now() > deadline {
                 return Err(HwError::Usage {
                     controller: self.name.clone(),
-                    problem: format!("the lambda log never became ready after the sweep (`{}` stays {flag})", keysight::FLAG),
+                    problem: format!(
+                        "the lambda log never became ready after the sweep (`{}` stays {flag})",
+                        keysight::FLAG
+                    ),
                 });
             }
             std::thread::sleep(Duration::from_millis(5));
@@ -272,7 +275,8 @@ impl Laser for ScpiLaser {
             (santec::LOG_POINTS, santec::LOG_DATA)
         };
         let points = self.query_int(q)?;
-        let points = usize::try_from(points).map_err(|_| HwError::bad_reply(&self.name, q, &points.to_string(), "a count ≥ 0"))?;
+        let points = usize::try_from(points)
+            .map_err(|_| HwError::bad_reply(&self.name, q, &points.to_string(), "a count ≥ 0"))?;
         self.link.send(d)?;
         let data = scpi::read_block(&mut self.link, d)?;
         let wavelengths_nm = scpi::decode_log(&data, points)

@@ -80,10 +80,7 @@ pub fn decode_log(data: &[u8], points: usize) -> Result<Vec<f64>, String> {
     } else if data.len() == 4 * points {
         Ok(decode_u32_le(data)?.into_iter().map(|v| v as f64 * 1e-4).collect())
     } else {
-        Err(format!(
-            "{points} points of 8 bytes (f64 metres) or 4 bytes (u32 0.1 pm), found {} bytes",
-            data.len()
-        ))
+        Err(format!("{points} points of 8 bytes (f64 metres) or 4 bytes (u32 0.1 pm), found {} bytes", data.len()))
     }
 }
 

@@ -6,6 +6,10 @@ use super::{keysight, same_word, santec, ScpiLaser};
 use crate::hardware::controller_bench::SweepSetup;
 use crate::hardware::HwError;
 
+/// A laser family's sweep: its configuring commands, the numbers and words to read back, and
+/// its speed query.
+type SweepDialect = (Vec<String>, [(&'static str, f64); 3], &'static [(&'static str, &'static str)], &'static str);
+
 /// Most points a sweep logs: the step is the sweep's span over this less one (at least 0.1 pm).
 pub const LOG_POINTS_MAX: usize = 10_001;
 
@@ -60,24 +64,28 @@ impl ScpiLaser {
 
     /// Configure the sweep (not started), read every setting back, and (Keysight) ask the laser
     /// whether the set is consistent (`:WAV:SWE:CHEC?`). Returns the sweep as read back.
-    pub(super) fn configure_sweep(&mut self, from_nm: f64, to_nm: f64, rate_nm_per_s: f64) -> Result<SweepSetup, HwError> {
+    pub(super) fn configure_sweep(
+        &mut self,
+        from_nm: f64,
+        to_nm: f64,
+        rate_nm_per_s: f64,
+    ) -> Result<SweepSetup, HwError> {
         let want = self.plan(from_nm, to_nm, rate_nm_per_s)?;
-        let (commands, numbers, words, speed_q): (Vec<String>, [(&str, f64); 3], &[(&str, &str)], &str) =
-            if self.keysight() {
-                (
-                    keysight::configure_sweep(want.from_nm, want.to_nm, want.rate_nm_per_s, want.step_nm),
-                    keysight::readback(want.from_nm, want.to_nm, want.step_nm),
-                    &keysight::STATE_READBACK,
-                    keysight::SPEED_QUERY,
-                )
-            } else {
-                (
-                    santec::configure_sweep(want.from_nm, want.to_nm, want.rate_nm_per_s, want.step_nm),
-                    santec::readback(want.from_nm, want.to_nm, want.step_nm),
-                    &santec::STATE_READBACK,
-                    santec::SPEED_QUERY,
-                )
-            };
+        let (commands, numbers, words, speed_q): SweepDialect = if self.keysight() {
+            (
+                keysight::configure_sweep(want.from_nm, want.to_nm, want.rate_nm_per_s, want.step_nm),
+                keysight::readback(want.from_nm, want.to_nm, want.step_nm),
+                &keysight::STATE_READBACK,
+                keysight::SPEED_QUERY,
+            )
+        } else {
+            (
+                santec::configure_sweep(want.from_nm, want.to_nm, want.rate_nm_per_s, want.step_nm),
+                santec::readback(want.from_nm, want.to_nm, want.step_nm),
+                &santec::STATE_READBACK,
+                santec::SPEED_QUERY,
+            )
+        };
         for c in commands {
             self.command(&c)?;
         }
@@ -86,7 +94,12 @@ impl ScpiLaser {
         for (k, (query, set)) in numbers.iter().enumerate() {
             read[k] = self.query_f64(query)? * unit;
             if (read[k] - set).abs() > READBACK_TOLERANCE_NM {
-                return Err(HwError::bad_reply(&self.name, query, &format!("{:.4} nm", read[k]), &format!("{set:.4} nm, as just set")));
+                return Err(HwError::bad_reply(
+                    &self.name,
+                    query,
+                    &format!("{:.4} nm", read[k]),
+                    &format!("{set:.4} nm, as just set"),
+                ));
             }
         }
         for (query, expected) in words {
@@ -96,8 +109,13 @@ impl ScpiLaser {
             }
         }
         let rate = self.query_f64(speed_q)? * unit;
-        if !(rate > 0.0) || (rate - want.rate_nm_per_s).abs() > 0.01 * want.rate_nm_per_s {
-            return Err(HwError::bad_reply(&self.name, speed_q, &format!("{rate} nm/s"), &format!("{} nm/s, as just set", want.rate_nm_per_s)));
+        if rate.is_nan() || rate <= 0.0 || (rate - want.rate_nm_per_s).abs() > 0.01 * want.rate_nm_per_s {
+            return Err(HwError::bad_reply(
+                &self.name,
+                speed_q,
+                &format!("{rate} nm/s"),
+                &format!("{} nm/s, as just set", want.rate_nm_per_s),
+            ));
         }
         if self.keysight() {
             let check = self.query(keysight::CHECK_PARAMS)?;
@@ -106,7 +124,10 @@ impl ScpiLaser {
             if code != 0 {
                 return Err(HwError::Usage {
                     controller: self.name.clone(),
-                    problem: format!("the laser finds the sweep's settings inconsistent: `{}` answers {code}, \"{message}\"", keysight::CHECK_PARAMS),
+                    problem: format!(
+                        "the laser finds the sweep's settings inconsistent: `{}` answers {code}, \"{message}\"",
+                        keysight::CHECK_PARAMS
+                    ),
                 });
             }
         }

@@ -31,17 +31,8 @@ pub struct Constants {
 }
 
 /// The quantity names each of our columns answers to (lower case).
-const STEMS: [&[&str]; 9] = [
-    &["t", "time"],
-    &["q1"],
-    &["q2"],
-    &["q3"],
-    &["q4"],
-    &["q5"],
-    &["q6"],
-    &["wavelength", "lambda"],
-    &["irradiance"],
-];
+const STEMS: [&[&str]; 9] =
+    [&["t", "time"], &["q1"], &["q2"], &["q3"], &["q4"], &["q5"], &["q6"], &["wavelength", "lambda"], &["irradiance"]];
 
 /// A name split into a quantity of ours (index into [`REQUIRED_COLUMNS`]) and its unit as written.
 fn recognise(name: &str) -> Option<(usize, Option<String>)> {
@@ -76,9 +67,9 @@ fn factor(column: usize, unit: Option<&str>) -> Result<f64, String> {
         )),
         Some(u) => {
             let lower = u.to_lowercase();
-            unit_factor(ours, &lower).or_else(|| unit_factor(ours, u)).ok_or_else(|| {
-                format!("unknown unit `{u}` for {ours} (expected one of: {})", known_units(ours))
-            })
+            unit_factor(ours, &lower)
+                .or_else(|| unit_factor(ours, u))
+                .ok_or_else(|| format!("unknown unit `{u}` for {ours} (expected one of: {})", known_units(ours)))
         }
     }
 }
@@ -94,7 +85,10 @@ enum From {
 
 /// The separator of a header line: `,`, `;` or a tab, whichever gives the most fields.
 fn separator_of(header: &[u8]) -> u8 {
-    [b',', b';', b'\t'].into_iter().max_by_key(|&s| (header.iter().filter(|&&b| b == s).count(), s == b',')).unwrap_or(b',')
+    [b',', b';', b'\t']
+        .into_iter()
+        .max_by_key(|&s| (header.iter().filter(|&&b| b == s).count(), s == b','))
+        .unwrap_or(b',')
 }
 
 /// The first line that is neither a comment nor blank (after a byte-order mark).
@@ -170,7 +164,8 @@ fn header_columns(names: &[String], path: &Path, line: usize) -> Result<Vec<Opti
         found[column] = Some((i, f));
     }
     if found[0].is_none() || found[8].is_none() {
-        let missing: Vec<&str> = [0, 8].into_iter().filter(|&c| found[c].is_none()).map(|c| REQUIRED_COLUMNS[c]).collect();
+        let missing: Vec<&str> =
+            [0, 8].into_iter().filter(|&c| found[c].is_none()).map(|c| REQUIRED_COLUMNS[c]).collect();
         return Err(TraceError::LabColumnMissing {
             file: path.to_path_buf(),
             line,

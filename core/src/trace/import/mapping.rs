@@ -28,9 +28,9 @@
 //! row, and the scaled values finite: errors name the file, the line and the column.
 //! Columns the mapping does not read are kept as extra columns.
 
+use crate::files::{self, FieldError, FileError};
 use crate::trace::table::{open_limited, read_table, ReadOptions, Table};
 use crate::trace::{is_sweep, ExtraColumn, Trace, TraceError, TraceKind, REQUIRED_COLUMNS};
-use crate::files::{self, FieldError, FileError};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::io::Read;

@@ -39,7 +39,8 @@ fn reference() -> Trace {
 /// The required columns of two traces, bit for bit (the metadata and extra columns aside).
 fn same_samples(a: &Trace, b: &Trace) {
     for ((name, x), (_, y)) in a.required_columns().iter().zip(b.required_columns().iter()) {
-        let (x, y): (Vec<u64>, Vec<u64>) = (x.iter().map(|v| v.to_bits()).collect(), y.iter().map(|v| v.to_bits()).collect());
+        let (x, y): (Vec<u64>, Vec<u64>) =
+            (x.iter().map(|v| v.to_bits()).collect(), y.iter().map(|v| v.to_bits()).collect());
         assert_eq!(x, y, "column {name}");
     }
 }
@@ -116,10 +117,16 @@ fn a_wavelength_given_once_replaces_the_column() {
     assert!(e.contains("m.csv:1: no `wavelength_nm` column") && e.contains("# wavelength_nm:"), "{e}");
     assert!(e.contains("--wavelength-nm"), "{e}");
     // Given twice, as a column and a line: refused at the line.
-    let e = one(&format!("# comment\n# wavelength_nm: 1550\n{}", ours_text().replacen(OURS, &OURS.replace("t_s", "T_S"), 1)))
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("m.csv:2: metadata `wavelength_nm`: expected either a wavelength_nm column or this line"), "{e}");
+    let e = one(&format!(
+        "# comment\n# wavelength_nm: 1550\n{}",
+        ours_text().replacen(OURS, &OURS.replace("t_s", "T_S"), 1)
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("m.csv:2: metadata `wavelength_nm`: expected either a wavelength_nm column or this line"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -127,7 +134,8 @@ fn upper_case_names_after_a_byte_order_mark_read_the_same() {
     let text = format!("\u{feff}{}", ours_text().replacen(OURS, &OURS.to_uppercase(), 1));
     same_samples(&one(&text).unwrap(), &reference());
     // Our own header after a byte-order mark is our format, its bytes kept.
-    let (_dir, read) = folder(&[("m.csv", format!("\u{feff}# label: x\n{}", ours_text()).into_bytes())], Constants::default());
+    let (_dir, read) =
+        folder(&[("m.csv", format!("\u{feff}# label: x\n{}", ours_text()).into_bytes())], Constants::default());
     assert!(read.unwrap().files[0].native.is_some());
 }
 
@@ -157,9 +165,10 @@ fn a_quantity_without_a_unit_is_refused_at_its_header_column() {
     let e = one(&ours_text().replacen("q3_um", "q3_inch", 1)).unwrap_err().to_string();
     assert!(e.contains("m.csv:1: header column 4: `q3_inch`: unknown unit `inch` for q3_um"), "{e}");
     let upper = OURS.to_uppercase();
-    let e = one(&format!("{upper},time_ms\n{}\n", ROWS.iter().map(|r| format!("{r},1")).collect::<Vec<_>>().join("\n")))
-        .unwrap_err()
-        .to_string();
+    let e =
+        one(&format!("{upper},time_ms\n{}\n", ROWS.iter().map(|r| format!("{r},1")).collect::<Vec<_>>().join("\n")))
+            .unwrap_err()
+            .to_string();
     assert!(e.contains("header column 10: `time_ms` gives t_s again (also column 1 `T_S`)"), "{e}");
     let e = one(&ours_text().replacen("irradiance", "power_mW", 1)).unwrap_err().to_string();
     assert!(e.contains("m.csv:1: no `irradiance` column") && e.contains("--mapping"), "{e}");
@@ -167,9 +176,7 @@ fn a_quantity_without_a_unit_is_refused_at_its_header_column() {
 
 #[test]
 fn labels_are_distinct_and_kinds_come_from_the_data() {
-    let sweep = format!(
-        "{OURS}\n0.0,0,0,0,0,0,0,1555.0,0.1\n0.1,0,0,0,0,0,0,1556.0,0.2\n0.2,0,0,0,0,0,0,1557.0,0.3\n"
-    );
+    let sweep = format!("{OURS}\n0.0,0,0,0,0,0,0,1555.0,0.1\n0.1,0,0,0,0,0,0,1556.0,0.2\n0.2,0,0,0,0,0,0,1557.0,0.3\n");
     let labelled = |label: &str, body: &str| format!("# label: {label}\n{body}").into_bytes();
     let (_dir, read) = folder(
         &[
