@@ -3,12 +3,12 @@
 //! `photorobot calibrate --bench table2-ideal --traces DIR`, then `photorobot diagnose S --bench
 //! none --json`. When the diagnosis proposes motions (a plan file), that simulator records them
 //! on the same bench, later on the same clock, the traces join the session's, and the diagnosis
-//! runs again.
+//! runs again (`diagnose --add`).
 
 use photorobot_app::cli::diagnose::PROPOSED_PLAN_FILE;
 use photorobot_core::plan::Plan;
 use photorobot_e2e::independent::{lab_records, records_of, Hidden, Recorder};
-use photorobot_e2e::recordings::{add_traces, assert_named, cli, diagnose_without_bench as diagnose};
+use photorobot_e2e::recordings::{assert_named, cli, diagnose_adding, diagnose_without_bench as diagnose};
 use serde_json::Value;
 
 /// The lab motions recorded with `hidden`, calibrated, diagnosed without a bench; then, if
@@ -32,8 +32,7 @@ fn from_recordings(hidden: Hidden, seed: u64) -> (Value, Option<Value>) {
         later.start_clock_s = end_s + 60.0;
         let added = dir.path().join("proposed");
         later.write_folder(&records_of(&plan), &added).unwrap();
-        add_traces(&added, &session);
-        diagnose(&session)
+        diagnose_adding(&session, Some(&added))
     });
     (first, second)
 }

@@ -82,6 +82,7 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
 pub mod independent;
 pub mod lab_files;
 pub mod lab_recordings;
+pub mod multi_effect;
 pub mod random;
 pub mod recordings;
 

@@ -1,5 +1,6 @@
 //! Diagnosis from recordings alone, as a user runs it: the CLI called with arguments, the
-//! session diagnosed without a bench, and the traces of a proposed plan added to the session.
+//! session diagnosed without a bench, and the traces of a proposed plan added to the session
+//! (`diagnose --add`) and diagnosed again.
 
 use photorobot_app::cli::run;
 use serde_json::Value;
@@ -18,29 +19,30 @@ pub fn cli(args: &[&str]) -> (bool, String) {
 
 /// `photorobot diagnose SESSION --bench none --json`, its outcome printed in brief.
 pub fn diagnose_without_bench(session: &Path) -> Value {
-    let (ok, text) = cli(&["photorobot", "diagnose", session.to_str().unwrap(), "--bench", "none", "--json"]);
+    diagnose_adding(session, None)
+}
+
+/// `photorobot diagnose SESSION [--add FOLDER] --bench none --json`: the traces of `added` (a
+/// proposed plan recorded on the bench) joined to the session first; the outcome printed in brief.
+pub fn diagnose_adding(session: &Path, added: Option<&Path>) -> Value {
+    let mut args = vec!["photorobot", "diagnose", session.to_str().unwrap(), "--bench", "none", "--json"];
+    if let Some(a) = added {
+        args.extend(["--add", a.to_str().unwrap()]);
+    }
+    let (ok, text) = cli(&args);
     assert!(ok, "diagnose: {text}");
     let v: Value = serde_json::from_str(&text).unwrap();
     eprintln!(
-        "  verdict {}, residual {:.2} → {:.2}σ, effects {}, need motions {}, proposed {}",
+        "  verdict {}, residual {:.2} → {:.2}σ, effects {}, need motions {}, proposed {}, settled {}",
         v["verdict"],
         v["residual_rms_before_sigma"].as_f64().unwrap_or(f64::NAN),
         v["residual_rms_after_sigma"].as_f64().unwrap_or(f64::NAN),
         v["effects"],
         v["need_motions"],
-        v["proposed_plan_file"]
+        v["proposed_plan_file"],
+        v["settled"]
     );
     v
-}
-
-/// Copy every trace of folder `from` into `session/traces/`, named `z-NAME` so that none
-/// replaces a recorded one.
-pub fn add_traces(from: &Path, session: &Path) {
-    for f in std::fs::read_dir(from).unwrap() {
-        let f = f.unwrap().path();
-        let name = format!("z-{}", f.file_name().unwrap().to_str().unwrap());
-        std::fs::copy(&f, session.join("traces").join(name)).unwrap();
-    }
 }
 
 /// The first named effect is one of `names`, within 3σ of `value` (its magnitude when `abs`).

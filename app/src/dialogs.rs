@@ -15,6 +15,8 @@ pub trait Dialogs {
     fn save_session(&mut self) -> Option<PathBuf>;
     /// Pick where to write the HTML report (`None` when cancelled).
     fn save_report(&mut self) -> Option<PathBuf>;
+    /// Pick where to write a motion plan (RON) (`None` when cancelled).
+    fn save_plan(&mut self, suggested_name: &str) -> Option<PathBuf>;
 }
 
 /// Native dialogs (rfd).
@@ -41,6 +43,10 @@ impl Dialogs for NativeDialogs {
     fn save_report(&mut self) -> Option<PathBuf> {
         rfd::FileDialog::new().add_filter("HTML report", &["html"]).set_file_name("report.html").save_file()
     }
+
+    fn save_plan(&mut self, suggested_name: &str) -> Option<PathBuf> {
+        rfd::FileDialog::new().add_filter("motion plan (RON)", &["ron"]).set_file_name(suggested_name).save_file()
+    }
 }
 
 /// Answers given in advance (tests, headless runs): each call takes the next one.
@@ -48,7 +54,8 @@ impl Dialogs for NativeDialogs {
 pub struct ScriptedDialogs {
     /// Answers to [`Dialogs::open_traces`], first first.
     pub opens: Vec<Vec<PathBuf>>,
-    /// Answers to [`Dialogs::save_trace`] and [`Dialogs::save_report`], first first.
+    /// Answers to [`Dialogs::save_trace`], [`Dialogs::save_report`] and [`Dialogs::save_plan`],
+    /// first first.
     pub saves: Vec<Option<PathBuf>>,
     /// Answers to [`Dialogs::open_session`] and [`Dialogs::save_session`], first first.
     pub folders: Vec<Option<PathBuf>>,
@@ -84,6 +91,10 @@ impl Dialogs for ScriptedDialogs {
     }
 
     fn save_report(&mut self) -> Option<PathBuf> {
+        next(&mut self.saves)
+    }
+
+    fn save_plan(&mut self, _suggested_name: &str) -> Option<PathBuf> {
         next(&mut self.saves)
     }
 }

@@ -242,6 +242,10 @@ pub struct DiagnosisState {
     pub validation: Option<EffectValidation>,
     /// The diagnosis record of an opened session, kept so that saving it again keeps it.
     pub loaded_record: Option<photorobot_core::session::DiagnosisRecord>,
+    /// Propose the discriminating motions as a plan instead of running them on the bench.
+    pub propose_only: bool,
+    /// The plan the last diagnosis proposed (it ran no motion), to record and add.
+    pub proposed_plan: Option<Plan>,
 }
 
 /// What a Position preview was planned for: it is planned again when any of it changes.
@@ -583,12 +587,44 @@ impl AppState {
         self.worker.send(Command::Identify { traces, duration_s, mode });
     }
 
-    /// Start the diagnosis on every recorded trace from the identified extrinsics.
+    /// Start the diagnosis on every recorded and imported trace from the identified extrinsics.
     pub fn diagnose(&mut self) {
-        let traces: Vec<Trace> = self.wizard.steps.iter().flat_map(|s| s.traces.iter().cloned()).collect();
+        let traces: Vec<Trace> = self.all_traces().into_iter().cloned().collect();
+        let propose_only = self.diagnosis.propose_only;
         self.clear_diagnosis();
+        self.diagnosis.propose_only = propose_only;
         self.diagnosis.from_calibration = self.extrinsics != self.worker.nominal.extrinsics;
-        self.worker.send(Command::Diagnose { traces, extrinsics: self.extrinsics });
+        self.worker.send(Command::Diagnose { traces, extrinsics: self.extrinsics, run_motions: !propose_only });
+    }
+
+    /// Add traces recorded after the session (a proposed plan recorded on the bench) as imported
+    /// ones, on the session's clock ([`photorobot_core::session::continue_clock`]); the status
+    /// says what happened. Nothing is added when one of the files cannot be read.
+    pub fn add_recorded_traces(&mut self, files: &[std::path::PathBuf]) {
+        let mut later = Vec::new();
+        for path in files {
+            match Trace::read_csv(path) {
+                Ok(t) => later.push(t),
+                Err(e) => {
+                    self.status = format!("traces not added: {e}");
+                    return;
+                }
+            }
+        }
+        let end_s = self.all_traces().iter().filter_map(|t| t.t_s.last().copied()).fold(0.0, f64::max);
+        let shift_s =
+            photorobot_core::session::continue_clock(&mut later, end_s, photorobot_core::session::LATER_PAUSE_S);
+        self.status = format!(
+            "added {} recorded traces{}",
+            later.len(),
+            if shift_s != 0.0 {
+                format!(" (their clock moved by {shift_s:+.1} s to continue the session's)")
+            } else {
+                String::new()
+            }
+        );
+        self.imported.extend(later);
+        self.session.mark_dirty();
     }
 
     /// A plan designed for this bench becomes the designed step's plan (when that step holds no
@@ -612,6 +648,7 @@ impl AppState {
         self.diagnosis.validation = None;
         self.diagnosis.from_calibration = false;
         self.diagnosis.loaded_record = None;
+        self.diagnosis.proposed_plan = None;
     }
 
     /// Forget the session's data for a new one on the same bench: the steps, imported traces,
@@ -938,6 +975,7 @@ impl AppState {
                 self.results.check = Some(motions);
             }
             Event::DiagnosisStep(title, summary) => self.diagnosis.steps.push((title, summary)),
+            Event::DiagnosisPlan(plan) => self.diagnosis.proposed_plan = plan,
             Event::Diagnosed(r) => {
                 self.status = match &r {
                     Ok(d) => format!("diagnosis: {}", d.verdict.word()),

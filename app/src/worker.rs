@@ -84,12 +84,15 @@ pub enum Command {
         extrinsics: Extrinsics,
     },
     /// Run the discrepancy workflow on the traces from the calibrated extrinsics, with
-    /// discriminating motions on this bench.
+    /// discriminating motions on this bench, or (`run_motions` false) proposed as a plan.
     Diagnose {
         /// The recorded traces.
         traces: Vec<Trace>,
         /// The calibrated extrinsics.
         extrinsics: Extrinsics,
+        /// Run the discriminating motions on the bench; otherwise propose them
+        /// ([`Event::DiagnosisPlan`]) to be recorded and added later.
+        run_motions: bool,
     },
     /// Place the lamella at a target ([`photorobot_core::position::move_to`]), proven as the bench
     /// allows; the record comes back in [`Event::Moved`].
@@ -222,6 +225,9 @@ pub enum Event {
     DiagnosisStep(String, String),
     /// The diagnosis finished (or failed).
     Diagnosed(Result<Box<DiagnosisResult>, String>),
+    /// After a diagnosis that ran no motion: the discriminating motions it proposes as a plan
+    /// (`None`: settled, or nothing would help).
+    DiagnosisPlan(Option<Plan>),
     /// After a diagnosis that finished: the effects it added (its extended model, empty when
     /// none) and the validation motions planned without and with them.
     EffectsValidated {
@@ -534,14 +540,17 @@ impl Thread {
                     self.send(Event::Checked(checked));
                     self.send(Event::Busy(None));
                 }
-                Command::Diagnose { traces, extrinsics } => {
+                Command::Diagnose { traces, extrinsics, run_motions } => {
                     self.send(Event::Busy(Some("diagnosing".into())));
-                    let outcome = self.diagnose(&traces, extrinsics);
+                    let outcome = self.diagnose(&traces, extrinsics, run_motions);
                     self.send(Event::Position(self.bench.position_display()));
                     match outcome {
-                        Ok((result, effects)) => {
+                        Ok((result, effects, proposed)) => {
                             let with = result.extrinsics;
                             self.send(Event::Diagnosed(Ok(Box::new(result))));
+                            if !run_motions {
+                                self.send(Event::DiagnosisPlan(proposed));
+                            }
                             // As `photorobot diagnose` does: the validation motions planned with
                             // the calibrated model and with the extended one, on this bench.
                             let validation = if effects.is_empty() {
@@ -612,9 +621,15 @@ impl Thread {
         }
     }
 
-    /// The diagnosis, step by step (each step reported), discriminating motions on this bench;
-    /// the result and the library effects of its final model.
-    fn diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics) -> Result<(DiagnosisResult, Vec<Effect>), String> {
+    /// The diagnosis, step by step (each step reported), discriminating motions on this bench
+    /// (or, without `run_motions`, proposed); the result, the library effects of its final model
+    /// and the proposed plan.
+    fn diagnose(
+        &mut self,
+        traces: &[Trace],
+        extrinsics: Extrinsics,
+        run_motions: bool,
+    ) -> Result<(DiagnosisResult, Vec<Effect>, Option<Plan>), String> {
         // The stop ends the computing too: the traces' analysis within one trace, the steps
         // within one model evaluation.
         let cancel = self.cancel.clone();
@@ -632,23 +647,30 @@ impl Thread {
         }
         // The bench's own times are already after the session when it recorded it (its clock
         // runs on); a bench started since (a session opened from disk) is shifted after it.
-        let offset = (d.end_time_s() + 60.0 - self.bench.clock_s()).max(0.0);
+        let offset = (d.end_time_s() + photorobot_core::session::LATER_PAUSE_S - self.bench.clock_s()).max(0.0);
         let mut runner = BenchRunner::new(self.bench.as_mut(), offset);
         let tx = self.tx.clone();
+        // One call can add several steps (an effect added, then one removed): each is sent.
+        let mut sent = d.steps.len();
         loop {
-            let step = match d.step(Some(&mut runner)) {
-                Ok(Some(step)) => step,
+            let runner =
+                run_motions.then_some(&mut runner as &mut dyn photorobot_core::diagnose::motions::MotionRunner);
+            match d.step(runner) {
+                Ok(Some(_)) => {}
                 Ok(None) => break,
                 // A motion the stop cancelled fails the step: it was stopped all the same.
                 Err(_) if self.cancel.load(Ordering::Relaxed) => return Err(STOPPED.into()),
                 Err(e) => return Err(e.to_string()),
-            };
-            let _ = tx.send(Event::DiagnosisStep(step.title().to_string(), step.summary()));
+            }
+            for step in &d.steps[sent..] {
+                let _ = tx.send(Event::DiagnosisStep(step.title().to_string(), step.summary()));
+            }
+            sent = d.steps.len();
             (self.notify)();
         }
         let effects = d.state().map(|s| s.library_effects()).unwrap_or_default();
         let result = d.result().cloned().ok_or("the diagnosis ended without a result")?;
-        Ok((result, effects))
+        Ok((result, effects, d.proposed_plan()))
     }
 
     /// One live dither half-cycle along the beam (q2), at real time: a staircase of small recorded

@@ -746,3 +746,89 @@ fn a_save_that_fails_keeps_the_session_unsaved_and_the_window_asks_again() {
     assert!(good.join("session.ron").is_file());
     assert_eq!(state.session.dir.as_deref(), Some(good.as_path()));
 }
+
+/// `photorobot ARGS…` in this process (its output discarded); panics with the error.
+fn cli(args: &[&str]) {
+    photorobot_app::cli::run(args.iter().copied(), &mut Vec::new()).unwrap_or_else(|e| panic!("{args:?}: {e}"));
+}
+
+/// The CSV files of `dir`, in name order.
+fn csv_files(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut files: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+    files.retain(|f| f.extension().is_some_and(|x| x == "csv"));
+    files.sort();
+    files
+}
+
+/// Click "Run the diagnosis" and wait until the worker is idle again (the diagnosis, its
+/// proposed plan and the validation that follows).
+fn diagnose_to_the_end(h: &mut Harness<'_, Workbench>) -> photorobot_core::diagnose::DiagnosisResult {
+    h.get_by_label("Run the diagnosis").click();
+    wait_until(h, "the diagnosis", Duration::from_secs(600), |w| w.state.diagnosis.validation.is_some());
+    *h.state().state.diagnosis.result.clone().unwrap().expect("the diagnosis runs")
+}
+
+/// For a bench the workbench does not drive: a session calibrated by `photorobot calibrate` is
+/// opened, the diagnosis proposes its discriminating motions instead of running them, the plan
+/// is saved, recorded on the bench (`photorobot simulate --after`), its traces added on the
+/// session's clock, and the second pass proposes none of the motions already recorded.
+#[test]
+fn diagnosis_view_proposes_saves_and_adds_the_discriminating_motions() {
+    let tmp = tempfile::tempdir().unwrap();
+    let session = tmp.path().join("session");
+    let s = session.to_str().unwrap();
+    cli(&["photorobot", "calibrate", "--bench", "table2-ideal", "--plan", "optimised", "--seed", "3", "--out", s]);
+    let mut h = harness(workbench(Settings::default(), ScriptedDialogs::default()));
+    h.state_mut().request(photorobot_app::gui::Pending::Open(session.clone()));
+    h.run_steps(3);
+    let recorded = h.state().state.all_traces().len();
+    assert!(recorded > 0 && h.state().state.results.report.is_some(), "the calibrated session is open");
+    open(&mut h, Tab::Diagnosis);
+    h.get_by_label("propose the discriminating motions instead of running them").click();
+    h.run_steps(2);
+    assert!(h.state().state.diagnosis.propose_only);
+    let result = diagnose_to_the_end(&mut h);
+    assert!(!result.discriminating_motions_ran);
+    let proposed = h.state().state.diagnosis.proposed_plan.clone().expect("the calibration leaves motions to propose");
+    let labels: Vec<String> =
+        proposed.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label().to_string()).collect();
+    assert_eq!(labels, result.discriminating_motions, "the plan holds the designed motions");
+    h.get_by_label("Proposed discriminating motions").scroll_to_me();
+    h.run_steps(4);
+    screenshot(&mut h, "diagnosis-proposed");
+    // Saved through the plan dialog, recorded on the bench, added back.
+    let saved = tmp.path().join("proposed.ron");
+    h.state_mut().state.dialogs = Box::new(ScriptedDialogs { saves: vec![Some(saved.clone())], ..Default::default() });
+    h.get_by_label("Save the proposed plan…").click();
+    h.run_steps(2);
+    assert_eq!(h.state().state.status, format!("saved the proposed plan to {}", saved.display()));
+    assert_eq!(photorobot_core::plan::Plan::load(&saved).expect("the saved plan loads"), proposed);
+    let later_dir = tmp.path().join("later");
+    let (p, o) = (saved.to_str().unwrap(), later_dir.to_str().unwrap());
+    cli(&["photorobot", "simulate", "--bench", "table2-ideal", "--plan", p, "--seed", "4", "--after", s, "--out", o]);
+    let later = csv_files(&later_dir);
+    assert_eq!(later.len(), labels.len());
+    let session_end = h.state().state.all_traces().iter().filter_map(|t| t.t_s.last().copied()).fold(0.0, f64::max);
+    h.state_mut().state.dialogs = Box::new(ScriptedDialogs { opens: vec![later.clone()], ..Default::default() });
+    h.get_by_label("Add recorded traces…").click();
+    h.run_steps(2);
+    let status = h.state().state.status.clone();
+    assert!(status.starts_with(&format!("added {} recorded traces", later.len())), "{status}");
+    let traces = h.state().state.all_traces();
+    assert_eq!(traces.len(), recorded + later.len());
+    // The added traces continue the session's clock: each starts after the session ended.
+    assert!(traces[recorded..].iter().all(|t| t.t_s[0] > session_end), "the added traces start after {session_end} s");
+    // The second pass knows those motions: it proposes none of them again.
+    let again = diagnose_to_the_end(&mut h);
+    for m in &again.discriminating_motions {
+        assert!(!labels.contains(m), "{m} was recorded and is proposed again");
+    }
+    assert!(again.effects.is_empty(), "a clean bench: nothing named ({:?})", again.effects);
+    if again.settled {
+        h.get_by_label(photorobot_app::views::diagnosis::SETTLED).scroll_to_me();
+    } else {
+        h.get_by_label_contains("Verdict: ").scroll_to_me();
+    }
+    h.run_steps(2);
+    screenshot(&mut h, "diagnosis-added");
+}

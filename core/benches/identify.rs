@@ -37,9 +37,10 @@ fn observations(model: &PhaseModel, truth: &Extrinsics) -> Vec<Observation> {
                     ObservationKind::GapChange { from_display: s.from_display, to_display: s.to_display, dl_nm: 0.0 },
                     2.0,
                 ),
-                TimedMotion::Sweep { .. } => {
-                    (ObservationKind::AbsoluteGap { at_display: s.from_display, gap_um: 0.0 }, 0.02)
-                }
+                TimedMotion::Sweep { .. } => (
+                    ObservationKind::AbsoluteGap { at_display: s.from_display, gap_um: 0.0, sweep_nm_per_s: 0.0 },
+                    0.02,
+                ),
                 _ => continue,
             };
             let mut o = Observation {

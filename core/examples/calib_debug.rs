@@ -191,9 +191,9 @@ fn print_step_a(traces: &[Trace], nominal: &PhaseModel, preset: &BenchPreset) {
     let sweeps: Vec<Trace> = traces.iter().filter(|t| photorobot_core::trace::is_sweep(t)).cloned().collect();
     let g = photorobot_core::identify::measurements::observations_from_traces(&sweeps, nominal, &Default::default());
     for o in &g.observations {
-        if let ObservationKind::AbsoluteGap { at_display, gap_um } = o.kind {
+        if let ObservationKind::AbsoluteGap { at_display, gap_um, sweep_nm_per_s } = o.kind {
             let mut o2 = o.clone();
-            o2.kind = ObservationKind::AbsoluteGap { at_display, gap_um: 0.0 };
+            o2.kind = ObservationKind::AbsoluteGap { at_display, gap_um: 0.0, sweep_nm_per_s };
             let fp = photorobot_core::model::optics::FabryPerot::new(&preset.optics, 1560.0, nominal.n_air).unwrap();
             let p = photorobot_core::identify::predict(&m2, &fp, &preset.truth, &o2, 1.0);
             println!("gap {:?} {:.4} truth {:.4} σ {:.4} {}", at_display, gap_um, p, o.sigma, o.label);

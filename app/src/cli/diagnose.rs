@@ -1,15 +1,19 @@
-//! `photorobot diagnose <session> [--bench PRESET] [--seed N] [--json]`: the discrepancy workflow on a
-//! session written by `photorobot calibrate`. Owns only reading the session folder, choosing the bench and
-//! printing; the work is `photorobot_core::diagnose`.
+//! `photorobot diagnose <session> [--add DIR]... [--bench PRESET] [--seed N] [--json]`: the discrepancy
+//! workflow on a session written by `photorobot calibrate`. Owns only choosing the bench and
+//! printing; the session folder is read and extended by `diagnose_session`, the work is
+//! `photorobot_core::diagnose`.
 //!
-//! The session folder has `traces/*.csv` and `extrinsics.ron`. The bench is the one the traces
-//! name (`# bench: virtual bench <preset>`), or `--bench`; discriminating motions run on a fresh
-//! virtual bench of that preset (seed `--seed`, default the preset's + 1). With `--bench none`
-//! nothing runs: the report says which motions would tell the absorbed candidates apart, and
-//! writes them as a plan file (`discriminating-motions.ron` in the session folder) to record on
-//! the bench and add to the session's traces.
+//! The session folder has `session.ron` (the traces it references are diagnosed) and
+//! `extrinsics.ron`; a folder of bare `traces/*.csv` without `session.ron` is read whole. The
+//! bench is the one the traces name (`# bench: virtual bench <preset>`), or `--bench`;
+//! discriminating motions run on a fresh virtual bench of that preset (seed `--seed`, default the
+//! preset's + 1). With `--bench none` nothing runs: the report says which motions would tell the
+//! absorbed candidates apart, and writes them as a plan file (`discriminating-motions.ron` in the
+//! session folder) to record on the bench; `--add DIR` then adds the recorded traces to the session
+//! and diagnoses again, which proposes only motions not recorded yet, or says it is settled.
 
 use super::common::{json_text, timed, CliError};
+use super::diagnose_session::{self as folder, AddedTraces};
 use photorobot_core::bench::{Bench, BenchPreset, VirtualBench};
 use photorobot_core::diagnose::fit::StopCheck;
 use photorobot_core::diagnose::motions::{BenchRunner, MotionRunner};
@@ -19,7 +23,6 @@ use photorobot_core::files::FileError;
 use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
-use photorobot_core::trace::Trace;
 use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -27,8 +30,14 @@ use std::path::{Path, PathBuf};
 /// Arguments of `photorobot diagnose`.
 #[derive(Debug, clap::Args)]
 pub struct DiagnoseArgs {
-    /// Session folder written by `photorobot calibrate` (traces/*.csv, extrinsics.ron).
+    /// Session folder written by `photorobot calibrate` (session.ron, traces/, extrinsics.ron).
     pub session: PathBuf,
+    /// Add the traces of this folder to the session before diagnosing (repeatable): motions
+    /// recorded after it, such as a proposed `discriminating-motions.ron`. Their files are copied
+    /// into traces/ and referenced by session.ron; a clock that starts before the session's end
+    /// (a recorder started afresh) is moved to continue it.
+    #[arg(long, value_name = "DIR")]
+    pub add: Vec<PathBuf>,
     /// Bench preset to run discriminating motions on (default: the one the traces name;
     /// `none`: run nothing).
     #[arg(long, value_name = "PRESET")]
@@ -52,28 +61,25 @@ struct JsonOut<'a> {
     validation: &'a [EffectValidationRow],
     /// The plan file of the discriminating motions designed but not run (`--bench none`).
     proposed_plan_file: Option<&'a Path>,
+    /// Traces added to the session by `--add`.
+    added_traces: &'a [AddedTraces],
+    /// What to know before trusting the result (a refused calibration, unreferenced files).
+    warnings: &'a [String],
 }
 
-/// Where `--bench none` writes the discriminating motions it proposes, in the session folder.
-pub const PROPOSED_PLAN_FILE: &str = "discriminating-motions.ron";
+pub use folder::PROPOSED_PLAN_FILE;
 
 fn invalid(file: &Path, field: &str, problem: String) -> CliError {
     CliError::File(FileError::Invalid { file: file.to_path_buf(), field: field.into(), problem })
 }
 
-/// Read the session's traces, in file-name order, on every core.
-fn read_traces(session: &Path) -> Result<Vec<Trace>, CliError> {
-    let dir = session.join("traces");
-    if !dir.is_dir() {
-        let problem = "not a folder: expected a session written by `photorobot calibrate --out`";
-        return Err(invalid(&dir, "traces", problem.into()));
-    }
-    Ok(photorobot_core::trace::import::read_folder(&dir, None)?)
-}
-
 /// Run the workflow and print it.
 pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let traces = timed("read_traces", || read_traces(&a.session))?;
+    let read = timed("read_traces", || folder::read(&a.session, &a.add))?;
+    let traces = read.traces;
+    if traces.is_empty() {
+        return Err(invalid(&a.session.join("session.ron"), "traces", "no complete trace to diagnose".into()));
+    }
     let extrinsics = Extrinsics::load(&a.session.join("extrinsics.ron"))?;
     let named = traces[0].meta.bench.trim().trim_start_matches("virtual bench ").to_string();
     let preset = chosen_preset(a, &named)?;
@@ -87,6 +93,22 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let mut bench = preset.as_ref().map(|p| resumed_bench(p, a.seed, &d)).transpose()?;
     let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, 0.0));
     if !a.json {
+        for added in &read.added {
+            writeln!(
+                out,
+                "added {} traces from {} to the session{}",
+                added.traces,
+                added.from.display(),
+                if added.clock_shift_s != 0.0 {
+                    format!(" (their clock moved by {:+.1} s to continue the session's)", added.clock_shift_s)
+                } else {
+                    String::new()
+                }
+            )?;
+        }
+        for w in &read.warnings {
+            writeln!(out, "warning: {w}")?;
+        }
         writeln!(out, "diagnosis of {} ({} traces, bench {named})", a.session.display(), traces.len())?;
         for (label, why) in &skipped {
             writeln!(out, "trace `{label}` not used: {why}")?;
@@ -104,7 +126,7 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let validation = timed("validate", || {
         validate_added_effects(bench.as_mut(), &base, &extrinsics, &result, &effects, a.json, out)
     })?;
-    save_record(&a.session, &result, &effects, &validation)?;
+    save_record(&a.session, read.session, &result, &effects, &validation)?;
     let proposed = save_proposed_plan(&d, &a.session)?;
     if a.json {
         let text = json_text(&JsonOut {
@@ -113,13 +135,21 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
             skipped_traces: &skipped,
             validation: &validation,
             proposed_plan_file: proposed.as_deref(),
+            added_traces: &read.added,
+            warnings: &read.warnings,
         })?;
         writeln!(out, "{text}")?;
     } else {
         print_validation(&validation, out)?;
         print_result(&result, out)?;
-        if let Some(file) = &proposed {
-            print_proposed_plan(file, &a.session, out)?;
+        match &proposed {
+            Some(file) => print_proposed_plan(file, &a.session, out)?,
+            None if result.settled => writeln!(
+                out,
+                "settled: no discriminating motion that these data lack would tell more (the candidates are named, \
+                 ruled out at their typical size, equivalent to an extrinsic change, or too small for any motion)"
+            )?,
+            None => {}
         }
     }
     Ok(())
@@ -161,7 +191,7 @@ fn analysis_model(preset: Option<&BenchPreset>, extrinsics: Extrinsics) -> Resul
 /// from the recorded traces', so the observations need no time offset.
 fn resumed_bench(preset: &BenchPreset, seed: Option<u64>, d: &Diagnosis) -> Result<VirtualBench, CliError> {
     let mut b = VirtualBench::new(preset, Some(seed.unwrap_or(preset.seed + 1)))?;
-    b.set_clock_s(d.end_time_s() + 60.0);
+    b.set_clock_s(d.end_time_s() + photorobot_core::session::LATER_PAUSE_S);
     Ok(b)
 }
 
@@ -175,16 +205,24 @@ fn run_steps(
     // A spinner per workflow step on stderr (the steps have no fraction to show).
     let mut progress = super::progress::Progress::new(Vec::new());
     progress.stage("diagnosis: starting");
+    // One call can add several steps (an effect added, then one removed): each is printed.
+    let mut shown = d.steps.len();
     loop {
-        let step = d
+        let more = d
             .step(runner.as_mut().map(|r| &mut **r as &mut dyn MotionRunner))
-            .map_err(|e| CliError::Failed { what: "diagnosis", problem: e.to_string() })?;
-        let Some(step) = step else { break };
-        tracing::info!("diagnosis step: {}", step.title());
-        progress.stage(&format!("diagnosis: after {}", step.title()));
-        if !json {
-            writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
+            .map_err(|e| CliError::Failed { what: "diagnosis", problem: e.to_string() })?
+            .is_some();
+        if !more {
+            break;
         }
+        for step in &d.steps[shown..] {
+            tracing::info!("diagnosis step: {}", step.title());
+            progress.stage(&format!("diagnosis: after {}", step.title()));
+            if !json {
+                writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
+            }
+        }
+        shown = d.steps.len();
     }
     Ok(())
 }
@@ -218,11 +256,12 @@ fn validate_added_effects(
     }
 }
 
-/// Write the discriminating motions designed but not run as a plan file in the session folder.
+/// Write the discriminating motions designed but not run as a new plan file in the session
+/// folder (an earlier pass's plan is kept).
 fn save_proposed_plan(d: &Diagnosis, session: &Path) -> Result<Option<PathBuf>, CliError> {
     Ok(match d.proposed_plan() {
         Some(plan) => {
-            let file = session.join(PROPOSED_PLAN_FILE);
+            let file = folder::free_plan_file(session);
             photorobot_core::files::save_ron(&file, &plan)?;
             Some(file)
         }
@@ -235,11 +274,12 @@ fn print_proposed_plan(file: &Path, session: &Path, out: &mut dyn Write) -> std:
     writeln!(
         out,
         "the discriminating motions, as a plan: {}\nrecord it on the bench that recorded these traces \
-         (e.g. `photorobot simulate --bench PRESET --plan {} --out DIR` on a virtual one), put the traces \
-         in {}, and diagnose again",
+         (e.g. `photorobot simulate --bench PRESET --plan {} --after {} --out DIR` on a virtual one), then \
+         add them and diagnose again: `photorobot diagnose {} --add DIR`",
         file.display(),
         file.display(),
-        session.join("traces").display()
+        session.display(),
+        session.display()
     )
 }
 
@@ -247,15 +287,13 @@ fn print_proposed_plan(file: &Path, session: &Path, out: &mut dyn Write) -> std:
 /// when there is one (atomically; a folder of bare traces is left as it is).
 fn save_record(
     dir: &Path,
+    session: Option<photorobot_core::session::Session>,
     result: &DiagnosisResult,
     effects: &[Effect],
     validation: &[EffectValidationRow],
 ) -> Result<(), CliError> {
-    use photorobot_core::session::{session_path, DiagnosisRecord, Session};
-    if !session_path(dir).exists() {
-        return Ok(());
-    }
-    let mut session = Session::load(dir)?;
+    use photorobot_core::session::DiagnosisRecord;
+    let Some(mut session) = session else { return Ok(()) };
     session.diagnosis = Some(DiagnosisRecord::with_model(result, effects, validation));
     session.save(dir)?;
     Ok(())
@@ -281,12 +319,14 @@ fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()>
     for e in &r.effects {
         writeln!(
             out,
-            "  {} = {:+.4} ± {} {} (F {:.1}){}",
+            "  {} = {:+.4} ± {} {} (F {:.1}{}){}",
             e.name,
             e.estimate,
             e.sigma.map_or("undetermined".into(), |s| format!("{s:.4}")),
             e.unit,
             e.score,
+            e.held_out_chi2_gain
+                .map_or(String::new(), |g| format!("; traces predicted from the others: χ² {:.1} lower with it", g)),
             if e.ambiguous_with.is_empty() {
                 String::new()
             } else {

@@ -6,6 +6,7 @@ pub mod calibrate;
 pub mod common;
 pub mod design;
 pub mod diagnose;
+pub mod diagnose_session;
 pub mod emulate;
 pub mod frames;
 pub mod fringes;

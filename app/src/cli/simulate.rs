@@ -1,6 +1,10 @@
-//! `photorobot simulate --bench PRESET --plan PLAN --out DIR|FILE [--seed N]`: run a motion plan on a
-//! virtual bench and write the recorded traces as CSV. Owns only argument parsing and printing; the work
-//! is `photorobot_core::bench::run_plan`.
+//! `photorobot simulate --bench PRESET --plan PLAN --out DIR|FILE [--seed N] [--after SESSION]`: run a
+//! motion plan on a virtual bench and write the recorded traces as CSV. Owns only argument parsing and
+//! printing; the work is `photorobot_core::bench::run_plan`.
+//!
+//! Files are numbered after the highest number the folder's files start with, so that they sort
+//! after any already there. With `--after SESSION` the bench's clock (and its drift) starts a
+//! minute after the session's last trace ends, as a bench that goes on recording does.
 
 use super::common::{load_plan, CliError};
 use super::progress::{Progress, INTERRUPT};
@@ -26,6 +30,37 @@ pub struct SimulateArgs {
     /// Random seed (default: the preset's).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// A session folder this recording continues: the bench's clock starts a minute after its
+    /// last trace ends (default: at 0).
+    #[arg(long, value_name = "SESSION")]
+    pub after: Option<PathBuf>,
+}
+
+/// The bench time at which the traces of a session folder end (s): those its `session.ron`
+/// references, or every trace of its `traces/`.
+fn session_end_s(dir: &std::path::Path) -> Result<f64, CliError> {
+    use photorobot_core::session::{session_path, Session, TRACES_DIR};
+    let traces = if session_path(dir).exists() {
+        Session::load(dir)?.load_traces(dir)?
+    } else {
+        photorobot_core::trace::import::read_folder(&dir.join(TRACES_DIR), None)?
+    };
+    Ok(traces.iter().filter_map(|t| t.t_s.last().copied()).fold(0.0, f64::max))
+}
+
+/// The first file number after those the `.csv` files of `dir` start with (`002-…`, `017.csv`):
+/// 1 in an empty or new folder.
+fn next_file_number(dir: &std::path::Path) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else { return 1 };
+    entries
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let digits: String = name.chars().take_while(|c| c.is_ascii_digit()).collect();
+            (name.to_ascii_lowercase().ends_with(".csv") && !digits.is_empty()).then(|| digits.parse::<usize>().ok())?
+        })
+        .max()
+        .map_or(1, |n| n + 1)
 }
 
 /// A file-system-safe name for a trace file.
@@ -43,6 +78,9 @@ fn slug(label: &str) -> String {
 /// Run the plan and write its traces, even those of a run that stopped early.
 pub fn simulate(a: &SimulateArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let mut bench = VirtualBench::from_preset_name(&a.bench, a.seed)?;
+    if let Some(session) = &a.after {
+        bench.set_clock_s(session_end_s(session)? + photorobot_core::session::LATER_PAUSE_S);
+    }
     let plan = load_plan(&a.plan)?;
     // One bar for the plan; Ctrl-C stops it at the segment and the traces so far are written.
     let progress = RefCell::new(Progress::new(vec![(plan.name.clone(), plan.segments.len())]));
@@ -78,8 +116,9 @@ pub fn simulate(a: &SimulateArgs, out: &mut dyn Write) -> Result<(), CliError> {
             action: "cannot create directory",
             source,
         })?;
+        let first = next_file_number(&a.out);
         for (i, t) in run.traces.iter().enumerate() {
-            let path = a.out.join(format!("{:03}-{}.csv", i + 1, slug(&t.meta.label)));
+            let path = a.out.join(format!("{:03}-{}.csv", first + i, slug(&t.meta.label)));
             t.write_csv(&path)?;
             written.push(path);
         }

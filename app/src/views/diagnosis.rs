@@ -3,6 +3,8 @@
 //! worker: baseline, candidates scored, discriminating motions run on the bench, effects named
 //! and added, the verdict with the residual before and after; then the validation motions planned
 //! without and with the effects it added (`photorobot_core::diagnose::validation`), run on the bench.
+//! Or the loop of a bench the workbench does not drive: the discriminating motions proposed as a
+//! plan to save, the traces recorded from it added, and the diagnosis run again until it is settled.
 
 use crate::state::AppState;
 use crate::views::results::equation_of;
@@ -40,28 +42,48 @@ pub fn ui(ui: &mut egui::Ui, s: &mut AppState) {
             ui.label("not identified in this session: the diagnosis starts from the extrinsics in use and refits them");
         }
     }
-    if s.wizard.steps.iter().all(|st| st.traces.is_empty()) {
+    refused_calibration(ui, s);
+    if s.all_traces().is_empty() {
         ui.label("no recorded trace yet: run the wizard's steps first");
         saved_diagnosis(ui, s);
         return;
     }
     let idle = s.busy.is_none() && s.wizard.running.is_none();
-    let mut start = false;
+    let (mut start, mut add) = (false, false);
     ui.horizontal(|ui| {
         start = ui
             .add_enabled(idle, egui::Button::new(RichText::new("Run the diagnosis").size(18.0)))
             .on_hover_text(
-                "score every effect of the library against the residual, run discriminating motions on the bench, \
-                 add what is found",
+                "score every effect of the library against the residual, run discriminating motions on the bench \
+                 (or propose them), add what is found",
             )
             .clicked();
+        ui.checkbox(&mut s.diagnosis.propose_only, "propose the discriminating motions instead of running them")
+            .on_hover_text(
+                "for a bench this workbench does not drive: save them as a plan, record it there, add the traces",
+            );
+        add = ui
+            .add_enabled(idle, egui::Button::new("Add recorded traces…"))
+            .on_hover_text("traces recorded after this session (a proposed plan), on the session's clock")
+            .clicked();
+        // Beside the other actions, so that it stays in view however long the steps above it.
+        if s.diagnosis.proposed_plan.is_some() && ui.button("Save the proposed plan…").clicked() {
+            save_proposed_plan(s);
+        }
         if s.busy.as_deref() == Some("diagnosing") {
             ui.spinner();
             ui.label("diagnosing…");
         }
     });
+    if add {
+        let files = s.dialogs.open_traces();
+        if !files.is_empty() {
+            s.add_recorded_traces(&files);
+        }
+    }
     egui::ScrollArea::vertical().id_salt("diagnosis").show(ui, |ui| {
         workflow(ui, s);
+        proposed_plan(ui, s);
         effect_validation(ui, s);
         saved_diagnosis(ui, s);
         ui.separator();
@@ -180,7 +202,62 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
                     d.discriminating_motions.join("; ")
                 )));
             }
+            if !d.need_motions.is_empty() {
+                ui.label(drawable(&format!(
+                    "the recorded data cannot tell these from an extrinsic change: {}",
+                    d.need_motions.join(", ")
+                )));
+            }
+            if d.settled {
+                ui.label(RichText::new(SETTLED).strong());
+            }
         }
+    }
+}
+
+/// What a settled diagnosis says.
+pub const SETTLED: &str = "Settled: no discriminating motion that these data lack would tell more (the candidates are \
+     named, ruled out at their typical size, equivalent to an extrinsic change, or too small for any motion).";
+
+/// A warning when the calibration the diagnosis starts from was refused or is ambiguous.
+fn refused_calibration(ui: &mut egui::Ui, s: &AppState) {
+    use photorobot_core::identify::verdict::Verdict;
+    let Some(fit) = s.results.report.as_deref().and_then(|r| r.fit.as_ref()) else { return };
+    let text = match fit.verdict {
+        Verdict::Fits => return,
+        Verdict::DoesNotFit => format!(
+            "The calibration was refused (residual {:.2} σ, above the {:.2} σ noise allows): the diagnosis starts from its \
+             best extrinsics and names what the model lacks; do not use those extrinsics before recalibrating with the \
+             named effects.",
+            fit.rms_sigma, fit.threshold_sigma
+        ),
+        Verdict::Ambiguous => "The calibration is ambiguous (branches tie): the diagnosis starts from the chosen branch.".into(),
+    };
+    ui.colored_label(ui.visuals().warn_fg_color, text);
+}
+
+/// The plan the last diagnosis proposed (it ran no motion), with the button that saves it.
+fn proposed_plan(ui: &mut egui::Ui, s: &AppState) {
+    let Some(plan) = s.diagnosis.proposed_plan.clone() else { return };
+    let motions: Vec<&str> = plan.segments.iter().filter(|g| g.is_recorded()).map(|g| g.label()).collect();
+    ui.add_space(6.0);
+    ui.label(RichText::new("Proposed discriminating motions").size(16.0).strong());
+    ui.label(drawable(&format!(
+        "{} recorded motions: {}. Save it (Save the proposed plan…), record it on the bench, then add its traces \
+         (Add recorded traces…) and run the diagnosis again.",
+        motions.len(),
+        motions.join("; ")
+    )));
+}
+
+/// Ask where to save the proposed plan and save it there; the status says what happened.
+fn save_proposed_plan(s: &mut AppState) {
+    let Some(plan) = s.diagnosis.proposed_plan.clone() else { return };
+    if let Some(path) = s.dialogs.save_plan("discriminating-motions.ron") {
+        s.status = match plan.save(&path) {
+            Ok(()) => format!("saved the proposed plan to {}", path.display()),
+            Err(e) => format!("plan not saved: {e}"),
+        };
     }
 }
 

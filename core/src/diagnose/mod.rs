@@ -20,6 +20,7 @@
 //! reported as equivalent to an extrinsic change, never named.
 
 pub mod candidates;
+pub mod crossval;
 pub mod fit;
 pub mod motions;
 pub mod projection;
@@ -33,8 +34,8 @@ mod workflow;
 
 pub use result::{DiagnoseError, DiagnosisResult, NamedEffect, Verdict};
 pub use settings::{
-    DETECTABLE_SCORE, DISCRIMINATING_PREFIX, EQUIVALENT_SHARE, EXTRACT_OPTIONS, MAX_EFFECTS, MAX_MOTIONS,
-    NOISE_FLOOR_FACTOR, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA,
+    DETECTABLE_SCORE, DISCRIMINATING_PREFIX, EQUIVALENT_SHARE, EXCHANGE_MARGIN, EXTRACT_OPTIONS, MAX_EFFECTS,
+    MAX_MOTIONS, NOISE_FLOOR_FACTOR, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA,
 };
 pub use step::Step;
 pub use workflow::Diagnosis;

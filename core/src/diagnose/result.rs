@@ -47,6 +47,11 @@ pub struct NamedEffect {
     pub absorbed_share: f64,
     /// Candidates that could not be told apart from it (nearly collinear projected signatures).
     pub ambiguous_with: Vec<String>,
+    /// How much lower the χ² of the recorded traces, each predicted from the model fitted to
+    /// the others, is with it than without it (leave-one-trace-out cross-validation, the other
+    /// effects in both; `None` before it was checked).
+    #[serde(default)]
+    pub held_out_chi2_gain: Option<f64>,
 }
 
 /// The diagnosis result, serialisable (for sessions and `--json`).
@@ -95,6 +100,12 @@ pub struct DiagnosisResult {
     pub discriminating_motions: Vec<String>,
     /// Whether the discriminating motions were run.
     pub discriminating_motions_ran: bool,
+    /// Nothing more to learn from the discriminating motions: no motion of the pool that the
+    /// data lack would show a candidate they cannot (each is named, ruled out at its typical
+    /// size, equivalent to an extrinsic change, or too small for any motion). When false, the
+    /// designed motions would tell more.
+    #[serde(default)]
+    pub settled: bool,
     /// Where the final residual lives, worst groups first (unexplained structure).
     pub residual_where: Vec<ResidualGroup>,
     /// Extrinsics of the final model.

@@ -131,6 +131,12 @@ pub fn chi2_1_threshold(alpha: f64) -> f64 {
     z * z
 }
 
+/// The score a candidate must exceed to be significant among `n_candidates` (the Bonferroni
+/// threshold for [`FAMILY_FALSE_ALARM`]).
+pub fn naming_threshold(n_candidates: usize) -> f64 {
+    chi2_1_threshold(FAMILY_FALSE_ALARM / n_candidates.max(1) as f64)
+}
+
 /// Score candidates, given their whitened signatures, against the fit's residual `r` and
 /// Jacobian `j` (its columns: the parameters already free).
 pub fn score(
@@ -143,7 +149,7 @@ pub fn score(
     let n = r.len() as f64;
     let dof = (r.len() as f64 - j.ncols() as f64 - 1.0).max(1.0);
     let rss = r.norm_squared();
-    let threshold = chi2_1_threshold(FAMILY_FALSE_ALARM / candidates.len().max(1) as f64);
+    let threshold = naming_threshold(candidates.len());
     let mut projected = Vec::new();
     let scores = candidates
         .iter()

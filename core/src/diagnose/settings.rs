@@ -36,8 +36,18 @@ pub const DISCRIMINATING_PREFIX: &str = "D ";
 /// At most this many discriminating motions per design: room for a reversal of each prismatic
 /// stage (out and back) beside the q6 rotations that show a pivot offset best.
 pub const MAX_MOTIONS: usize = 14;
-/// At most this many effects are added.
-pub const MAX_EFFECTS: usize = 4;
+/// At most this many rounds of discriminating motions run on a bench. A round's motions are
+/// chosen from the model's templates; the traces they give can show less than the templates
+/// promised (a q6 turn predicted to show a 0.5 nm/s drift at a score of 28 gave 18 as recorded),
+/// so the design is done again on the data, without the motions recorded, while no candidate
+/// is significant and some target still lacks evidence the pool can add (the 30 s dwell, then).
+/// Once a candidate is significant there is something to name, and the naming goes first.
+pub const MAX_DESIGN_ROUNDS: usize = 3;
+/// At most this many effects are added: femto-lab's five (six parameters) and room to spare.
+pub const MAX_EFFECTS: usize = 8;
+/// An added effect is exchanged for another candidate when, refitted in its place with the other
+/// effects, that one lowers χ² by more than this (2σ for one parameter).
+pub const EXCHANGE_MARGIN: f64 = 4.0;
 /// An effect added earlier is removed again when, refitted with those added after it, its
 /// estimate is within this many σ of neutral: a later one explains what it took up.
 pub const REMOVE_BELOW_SIGMA: f64 = 3.0;

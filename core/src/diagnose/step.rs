@@ -45,6 +45,14 @@ pub enum Step {
         /// their tracking can miss by many σ.
         #[serde(default)]
         avoided: Vec<String>,
+        /// Pool motions left out because the gap travels under
+        /// [`motions::MIN_FRINGES`](crate::diagnose::motions::MIN_FRINGES) fringes in them: their
+        /// fringes cannot be analysed.
+        #[serde(default)]
+        short: Vec<String>,
+        /// Pool motions left out because the observations hold them already.
+        #[serde(default)]
+        recorded: Vec<String>,
     },
     /// An effect added and the model refitted.
     Added {
@@ -125,7 +133,7 @@ impl Step {
                 }
                 s.trim_end().to_string()
             }
-            Step::Designed { needy, motions, ran_on, added_observations, rms_sigma, avoided } => {
+            Step::Designed { needy, motions, ran_on, added_observations, rms_sigma, avoided, short, recorded } => {
                 let mut s = format!(
                     "candidates the data cannot see at typical size: {}",
                     if needy.is_empty() { "none".into() } else { needy.join(", ") }
@@ -133,6 +141,16 @@ impl Step {
                 s += &format!("\nmotions chosen ({}): {}", motions.len(), motions.join("; "));
                 if !avoided.is_empty() {
                     s += &format!("\navoided, the gap turns inside them: {}", avoided.join("; "));
+                }
+                if !short.is_empty() {
+                    s += &format!(
+                        "\navoided, the gap moves under {} fringes in them: {}",
+                        crate::diagnose::motions::MIN_FRINGES,
+                        short.join("; ")
+                    );
+                }
+                if !recorded.is_empty() {
+                    s += &format!("\nrecorded already: {}", recorded.join("; "));
                 }
                 match ran_on {
                     Some(b) => {

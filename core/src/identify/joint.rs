@@ -392,7 +392,11 @@ mod tests {
                 push(ObservationKind::GapChange { from_display: from, to_display: to, dl_nm: 0.0 }, 2.0);
             }
             push(
-                ObservationKind::AbsoluteGap { at_display: [lateral, -100.0, lateral, 0.0, 0.0, 0.0], gap_um: 0.0 },
+                ObservationKind::AbsoluteGap {
+                    at_display: [lateral, -100.0, lateral, 0.0, 0.0, 0.0],
+                    gap_um: 0.0,
+                    sweep_nm_per_s: 0.0,
+                },
                 0.02,
             );
         }

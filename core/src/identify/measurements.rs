@@ -167,7 +167,11 @@ fn traced(
         Measurement::Sweep(s) => {
             out.push(Observation {
                 label,
-                kind: ObservationKind::AbsoluteGap { at_display: trace.joints_display(0), gap_um: s.gap.gap_um },
+                kind: ObservationKind::AbsoluteGap {
+                    at_display: trace.joints_display(0),
+                    gap_um: s.gap.gap_um,
+                    sweep_nm_per_s: sweep_rate_nm_per_s(trace),
+                },
                 sigma: s.gap.sigma_um.hypot(options.gap_sigma_floor_um),
                 wavelength_nm: trace.wavelength_nm[trace.len() / 2],
                 time_s: [trace.t_s[0], trace.t_s[trace.len() - 1]],
@@ -229,6 +233,21 @@ fn traced(
 }
 
 /// At most `max` of `v`, evenly spread (the first and the last kept).
+/// A sweep's wavelength rate (nm/s): its span over its duration; 0 when it cannot be told.
+fn sweep_rate_nm_per_s(trace: &Trace) -> f64 {
+    let n = trace.len();
+    if n < 2 || trace.wavelength_nm.len() != n {
+        return 0.0;
+    }
+    let duration_s = trace.t_s[n - 1] - trace.t_s[0];
+    let rate = (trace.wavelength_nm[n - 1] - trace.wavelength_nm[0]) / duration_s;
+    if rate.is_finite() {
+        rate
+    } else {
+        0.0
+    }
+}
+
 fn evenly_thinned<T>(v: Vec<T>, max: Option<usize>) -> Vec<T> {
     match max {
         Some(m) if v.len() > m && m >= 2 => {

@@ -56,6 +56,11 @@ pub enum ObservationKind {
         at_display: [f64; 6],
         /// Measured gap (µm).
         gap_um: f64,
+        /// Rate of the sweep's wavelength (nm/s; 0 when unknown): a gap that moves during the
+        /// sweep (drift) reads off by whole fringe orders of its rate times λ over this
+        /// ([`crate::model::effects::sweep_reading_nm`]).
+        #[serde(default)]
+        sweep_nm_per_s: f64,
     },
     /// Fringe amplitude at a pose (mW), from a tilt scan; `group` shares one unknown detector
     /// gain between the observations of one scan.
@@ -379,8 +384,12 @@ pub fn predict_with_path(
         ObservationKind::GapChange { from_display, to_display, .. } => {
             phase_gap_nm(&real(to_display, 1), obs.time_s[1]) - phase_gap_nm(&real(from_display, 0), obs.time_s[0])
         }
-        ObservationKind::AbsoluteGap { at_display, .. } => cavity(&real(at_display, 1))
-            .map_or(f64::NAN, |c| optical_gap_um(c.length_um, t_mid) * (1.0 - c.tilt_rad * c.tilt_rad / 2.0)),
+        ObservationKind::AbsoluteGap { at_display, sweep_nm_per_s, .. } => {
+            cavity(&real(at_display, 1)).map_or(f64::NAN, |c| {
+                optical_gap_um(c.length_um, t_mid) * (1.0 - c.tilt_rad * c.tilt_rad / 2.0)
+                    + forward.sweep_reading_um(t_mid, obs.wavelength_nm, *sweep_nm_per_s)
+            })
+        }
         ObservationKind::FringeAmplitude { at_display, neighbours: None, .. } => cavity(&real(at_display, 1))
             .map_or(f64::NAN, |c| gain * half_peak_to_peak_mw(fp, optical_gap_um(c.length_um, t_mid), c.tilt_rad)),
         ObservationKind::FringeAmplitude { at_display, neighbours: Some(n), .. } => {

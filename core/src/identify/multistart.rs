@@ -519,7 +519,10 @@ mod tests {
     }
 
     fn gap() -> Observation {
-        Observation { kind: ObservationKind::AbsoluteGap { at_display: [0.0; 6], gap_um: 100.0 }, ..amplitude(0, 0) }
+        Observation {
+            kind: ObservationKind::AbsoluteGap { at_display: [0.0; 6], gap_um: 100.0, sweep_nm_per_s: 0.0 },
+            ..amplitude(0, 0)
+        }
     }
 
     /// Kept per group: the budget shared evenly, the ends of each kept, the other kinds kept.

@@ -85,7 +85,7 @@ pub fn translation_signs(observations: &[Observation], estimate: &JointEstimate)
     let gaps: Vec<(&[f64; 6], f64, f64)> = observations
         .iter()
         .filter_map(|o| match &o.kind {
-            ObservationKind::AbsoluteGap { at_display, gap_um } => Some((at_display, *gap_um, o.sigma)),
+            ObservationKind::AbsoluteGap { at_display, gap_um, .. } => Some((at_display, *gap_um, o.sigma)),
             _ => None,
         })
         .collect();

@@ -212,7 +212,8 @@ pub fn lost(
     for l in &lost {
         let mut o = Observation {
             label: l.label.clone(),
-            kind: ObservationKind::AbsoluteGap { at_display: l.at_display, gap_um: 0.0 },
+            // The identification models no drift, so the sweep's rate moves no reading.
+            kind: ObservationKind::AbsoluteGap { at_display: l.at_display, gap_um: 0.0, sweep_nm_per_s: 0.0 },
             sigma,
             wavelength_nm: l.wavelength_nm,
             time_s: l.time_s,

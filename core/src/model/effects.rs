@@ -272,6 +272,42 @@ impl Effect {
             _ => 0.0,
         }
     }
+
+    /// Rate of the optical gap's change (nm/s) at time `t_s` caused by the effect: the drift's
+    /// derivative. A wavelength sweep reads a gap that moves at this rate off by whole orders
+    /// of −rate·λ/(dλ/dt) ([`sweep_reading_nm`]).
+    #[inline]
+    pub fn gap_rate_nm_per_s(&self, t_s: f64) -> f64 {
+        match self {
+            Effect::ThermalDrift { nm_per_s, nm_per_s2 } => nm_per_s + nm_per_s2 * t_s,
+            _ => 0.0,
+        }
+    }
+}
+
+/// How far a wavelength sweep's gap reads off (nm) when the gap moves at `rate_nm_per_s` during
+/// it, at vacuum wavelength `wavelength_nm` in a medium of index `index`. The gap comes in two
+/// steps ([`crate::measure::analyse_sweep`]): the fringe frequency in wavenumber (dφ/dk = 2n·L)
+/// seeds it, and a fit of the full multi-beam field refines it. With the gap moving, dφ/dt =
+/// 2n·(L·dk/dt + k·dL/dt), so the frequency reads L + k·(dL/dt)/(dk/dt) = L − λ·(dL/dt)/(dλ/dt)
+/// at the sweep's middle: a 0.5 nm/s drift during a 1 nm/s sweep at 1560 nm reads 780 nm short.
+/// The refinement reads the gap's absolute phase (the beams' mutual interference does not depend
+/// on the fit's free phase), which does not move with the sweep: it takes the gap at the sweep's
+/// middle, in the fringe order nearest the seed. So the reading is off by whole orders of
+/// λ/(2n): the frequency's error rounded to the nearest order. On table2-ideal with 0.5 nm/s
+/// (`fringes` on `simulate`d sweeps, against the same seed without drift): 20 nm in 20 s reads
+/// 775 nm short (the model: 780 − 5 nm of drift to mid-sweep), 40 nm in 20 s 754 nm short (the
+/// frequency's 390 nm, half an order, went to the lower one), 40 nm in 4 s (78 nm by the
+/// frequency) −5 nm and 40 nm down in 4 s +5 nm, where the model says 0: the refinement keeps a
+/// few % of the frequency's error. Zero when the sweep rate is unknown.
+#[inline]
+pub fn sweep_reading_nm(rate_nm_per_s: f64, wavelength_nm: f64, sweep_nm_per_s: f64, index: f64) -> f64 {
+    if sweep_nm_per_s == 0.0 || !sweep_nm_per_s.is_finite() || index.is_nan() || index <= 0.0 {
+        return 0.0;
+    }
+    let frequency_nm = -rate_nm_per_s * wavelength_nm / sweep_nm_per_s;
+    let order_nm = wavelength_nm / (2.0 * index);
+    order_nm * (frequency_nm / order_nm).round()
 }
 
 /// Stages with play (reversal errors) as a backlash: each stage sits `offset` from its command
@@ -389,6 +425,40 @@ mod tests {
         assert_relative_eq!(d.gap_change_nm(10.0, 900.0), 1.0 + 0.1, epsilon = 1e-12);
         let s = Effect::PathScale { ppm: 268.0 };
         assert_relative_eq!(s.gap_change_nm(0.0, 300.0), 80.4, epsilon = 1e-9);
+    }
+
+    /// The frequency's error against a brute-force fit (the fringe phase 4π·n·L(t)/λ(t) of a gap
+    /// drifting during a linear sweep, its slope in wavenumber fitted by least squares: the
+    /// closed form L(t_mid) − λ·(dL/dt)/(dλ/dt)), and the reading: that error in whole orders.
+    #[test]
+    fn a_gap_drifting_during_a_sweep_reads_off_by_whole_orders_of_the_frequencys_error() {
+        let d = Effect::ThermalDrift { nm_per_s: 0.5, nm_per_s2: 0.001 };
+        let (l0_nm, t0, duration, from_nm, to_nm, n_air) = (898_830.0, 100.0, 20.0, 1550.0, 1570.0, 1.000268);
+        let n = 2001;
+        let (mut sk, mut sp, mut skk, mut skp) = (0.0, 0.0, 0.0, 0.0);
+        for i in 0..n {
+            let f = i as f64 / (n - 1) as f64;
+            let t = t0 + f * duration;
+            let k = std::f64::consts::TAU / (from_nm + f * (to_nm - from_nm));
+            let phase = 2.0 * n_air * k * (l0_nm + d.gap_change_nm(t, 0.0));
+            sk += k;
+            sp += phase;
+            skk += k * k;
+            skp += k * phase;
+        }
+        let nf = n as f64;
+        let frequency_nm = (nf * skp - sk * sp) / (nf * skk - sk * sk) / (2.0 * n_air);
+        let t_mid = t0 + duration / 2.0;
+        let rate = d.gap_rate_nm_per_s(t_mid);
+        let sweep_rate = (to_nm - from_nm) / duration;
+        let want = l0_nm + d.gap_change_nm(t_mid, 0.0) - rate * 1560.0 / sweep_rate;
+        assert!((frequency_nm - want).abs() < 1.0, "frequency {frequency_nm} nm, closed form {want} nm");
+        // 0.61 nm/s at 1 nm/s: 952 nm by the frequency, one order (779.9 nm) by the reading.
+        let order = 1560.0 / (2.0 * n_air);
+        assert!((sweep_reading_nm(rate, 1560.0, sweep_rate, n_air) + order).abs() < 1e-9);
+        assert_eq!(sweep_reading_nm(rate, 1560.0, 10.0, n_air), 0.0, "95 nm by the frequency: no order");
+        assert!((sweep_reading_nm(-rate, 1560.0, 1.0, n_air) - order).abs() < 1e-9);
+        assert_eq!(sweep_reading_nm(0.5, 1560.0, 0.0, n_air), 0.0, "unknown sweep rate");
     }
 
     #[test]

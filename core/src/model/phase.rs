@@ -109,6 +109,17 @@ impl<'a> PathForward<'a> {
         gap_um
     }
 
+    /// How far a wavelength sweep at time `t_s` reads the gap off (µm) when the path effects move
+    /// it during the sweep (drift): [`crate::model::effects::sweep_reading_nm`] of their rate,
+    /// whole orders of the fringe.
+    pub fn sweep_reading_um(&self, t_s: f64, wavelength_nm: f64, sweep_nm_per_s: f64) -> f64 {
+        let rate: f64 = self.path.iter().map(|p| p.gap_rate_nm_per_s(t_s)).sum();
+        if rate == 0.0 {
+            return 0.0;
+        }
+        crate::model::effects::sweep_reading_nm(rate, wavelength_nm, sweep_nm_per_s, self.fp.medium_index()) * 1e-3
+    }
+
     /// The real joints at a pose read as `q_display`, approached in the directions
     /// `approach`: the reading moved by any reversal error.
     pub fn real_joints(&self, q_display: &[f64; 6], approach: &[i8; 6]) -> [f64; 6] {

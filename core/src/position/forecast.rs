@@ -84,8 +84,8 @@ pub fn forecast_at(
     for i in 0..8 {
         let h = 1e-4;
         let (plus, minus) = (reached(i, h)?, reached(i, -h)?);
-        for k in 0..6 {
-            g[k][i] = (plus[k] - minus[k]) / (2.0 * h);
+        for (row, (p, m)) in g.iter_mut().zip(plus.iter().zip(&minus)) {
+            row[i] = (p - m) / (2.0 * h);
         }
     }
     let s = |k: usize| u.variance(&g[k]).sqrt();

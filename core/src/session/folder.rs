@@ -190,6 +190,25 @@ impl Session {
         Ok(())
     }
 
+    /// [`Session::add_sourced_traces`] for traces recorded after the session's (a proposed plan
+    /// recorded on its bench), on the session's clock ([`continue_clock`]): when their times
+    /// move, their files are written anew; otherwise they are copied as they are. Returns the
+    /// shift of their times (s; 0 when their clock continues the session's).
+    pub fn add_later_traces(
+        &mut self,
+        dir: &Path,
+        mut later: Sourced,
+        session_end_s: f64,
+        pause_s: f64,
+    ) -> Result<f64, SessionError> {
+        let shift_s = continue_clock(&mut later.traces, session_end_s, pause_s);
+        if shift_s != 0.0 {
+            later.files.iter_mut().for_each(|f| f.native = None);
+        }
+        self.add_sourced_traces(dir, &later)?;
+        Ok(shift_s)
+    }
+
     /// Write a trace into the session folder (a new `traces/NNN.csv`, atomically) and reference it.
     pub fn add_trace(
         &mut self,
@@ -320,6 +339,26 @@ impl Session {
             .into_iter()
             .collect()
     }
+}
+
+/// The pause assumed between a session's last trace and traces recorded after it whose own
+/// clock starts before the session's end (s): a recorder, or a bench, started afresh.
+pub const LATER_PAUSE_S: f64 = 60.0;
+
+/// Put traces recorded after a session on its clock: when their clock starts before
+/// `session_end_s` (a recorder started afresh), every sample's time moves by the same amount so
+/// that they start `pause_s` after it (a drift then goes on where it was). Returns that shift
+/// (s; 0 when their clock already continues the session's).
+pub fn continue_clock(later: &mut [Trace], session_end_s: f64, pause_s: f64) -> f64 {
+    let first_s = later.iter().filter_map(|t| t.t_s.first().copied()).fold(f64::INFINITY, f64::min);
+    if !(first_s.is_finite() && first_s < session_end_s) {
+        return 0.0;
+    }
+    let shift_s = session_end_s + pause_s - first_s;
+    for t in later {
+        t.t_s.iter_mut().for_each(|v| *v += shift_s);
+    }
+    shift_s
 }
 
 /// Refuse a version this program cannot read, saying what to do.

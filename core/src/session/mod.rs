@@ -33,7 +33,7 @@ pub mod recording;
 pub mod writer;
 
 pub use diagnosis::{DiagnosisRecord, EffectFinding};
-pub use folder::{autosave_path, find_recovery, session_path, Recovery};
+pub use folder::{autosave_path, continue_clock, find_recovery, session_path, Recovery, LATER_PAUSE_S};
 pub use lab::{
     check_range, now_utc_rfc3339, ControllerIdentity, LabRecord, HUMIDITY_RANGE_PERCENT, PRESSURE_RANGE_HPA,
     TEMPERATURE_RANGE_C,

@@ -222,3 +222,43 @@ fn many_sourced_traces_are_copied_in_groups_in_order() {
     }
     assert_eq!(s.load_traces(out.path()).unwrap(), read.traces);
 }
+
+/// Traces recorded after a session by a recorder whose clock restarted join it on the session's
+/// clock: their times move to start a pause after its end, their files are new ones referenced
+/// after the session's, and the earlier files and references are untouched; traces whose clock
+/// already continues the session's are copied as they are.
+#[test]
+fn later_traces_join_the_session_on_its_clock() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = sample_session(dir.path());
+    s.save(dir.path()).unwrap();
+    let before = s.traces.clone();
+    let end_s = s.load_traces(dir.path()).unwrap().iter().map(|t| t.t_s[t.len() - 1]).fold(0.0, f64::max);
+    let later_dir = dir.path().join("later");
+    std::fs::create_dir_all(&later_dir).unwrap();
+    small_trace("D q4 -4 -> +4°", 12).write_csv(&later_dir.join("001-a.csv")).unwrap();
+    let sourced = crate::trace::import::read_folder_sourced(&later_dir, None).unwrap();
+    let shift = s.add_later_traces(dir.path(), sourced, end_s, LATER_PAUSE_S).unwrap();
+    assert!((shift - (end_s + LATER_PAUSE_S)).abs() < 1e-12, "a clock from 0 moves to after the end: {shift}");
+    s.save(dir.path()).unwrap();
+    let again = Session::load(dir.path()).unwrap();
+    assert_eq!(&again.traces[..before.len()], &before[..]);
+    assert_eq!(again.traces.len(), before.len() + 1);
+    let added = again.load_trace(dir.path(), &again.traces[before.len()]).unwrap();
+    assert_eq!(added.meta.label, "D q4 -4 -> +4°");
+    assert!((added.t_s[0] - (end_s + LATER_PAUSE_S)).abs() < 1e-9, "{}", added.t_s[0]);
+    for r in &again.traces {
+        assert!(dir.path().join(&r.file).is_file(), "{} kept", r.file);
+    }
+    // On the session's clock already: copied byte for byte, no shift.
+    let mut on_clock = small_trace("later still", 5);
+    on_clock.t_s.iter_mut().for_each(|t| *t += 1000.0);
+    let onward_dir = dir.path().join("onward");
+    std::fs::create_dir_all(&onward_dir).unwrap();
+    on_clock.write_csv(&onward_dir.join("a.csv")).unwrap();
+    let sourced = crate::trace::import::read_folder_sourced(&onward_dir, None).unwrap();
+    let mut s = again;
+    assert_eq!(s.add_later_traces(dir.path(), sourced, end_s, LATER_PAUSE_S).unwrap(), 0.0);
+    let r = s.traces.last().unwrap();
+    assert_eq!(std::fs::read(dir.path().join(&r.file)).unwrap(), std::fs::read(onward_dir.join("a.csv")).unwrap());
+}

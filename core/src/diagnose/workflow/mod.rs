@@ -48,6 +48,10 @@ pub struct Diagnosis {
     /// nonlinearity), then by the baseline (with those no observation or pool motion depends on).
     not_seen: Vec<String>,
     separated: Vec<String>,
+    /// Rounds of discriminating motions run on a bench so far.
+    design_rounds: usize,
+    /// No motion of the pool not yet recorded would show a candidate the data cannot.
+    settled: bool,
     session_traces: Vec<crate::trace::Trace>,
     stage: Stage,
     /// The steps done so far.
@@ -125,6 +129,8 @@ impl Diagnosis {
             equivalent: Vec::new(),
             not_seen: Vec::new(),
             separated: Vec::new(),
+            design_rounds: 0,
+            settled: false,
             session_traces: Vec::new(),
             stage: Stage::Baseline,
             steps: Vec::new(),
@@ -369,6 +375,7 @@ impl Diagnosis {
             not_seen: self.not_seen.clone(),
             discriminating_motions: self.designed.iter().map(|m| m.label.clone()).collect(),
             discriminating_motions_ran: self.ran,
+            settled: self.settled,
             residual_where: if verdict == Verdict::Unexplained {
                 replay::localise(&obs, &f.residuals).into_iter().take(8).collect()
             } else {

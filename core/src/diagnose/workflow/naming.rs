@@ -2,11 +2,14 @@
 //! again with the new model, and remove the effects the final model does not need.
 
 use super::{held_out_mask, Diagnosis, Stage};
+use crate::diagnose::crossval;
 use crate::diagnose::fit::Fit;
 use crate::diagnose::motions::MotionRunner;
 use crate::diagnose::result::{DiagnoseError, NamedEffect};
 use crate::diagnose::scoring;
-use crate::diagnose::settings::{DISCRIMINATING_PREFIX, MAX_EFFECTS, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA};
+use crate::diagnose::settings::{
+    DISCRIMINATING_PREFIX, EXCHANGE_MARGIN, MAX_EFFECTS, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA,
+};
 use crate::diagnose::step::Step;
 use crate::diagnose::validation;
 use crate::identify::{Observation, ObservationKind};
@@ -56,6 +59,7 @@ impl Diagnosis {
             delta_bic: sc.delta_bic,
             absorbed_share: sc.absorbed_share,
             ambiguous_with: ambiguous,
+            held_out_chi2_gain: None,
         };
         self.steps.push(Step::Added {
             effect: effect.clone(),
@@ -123,8 +127,8 @@ impl Diagnosis {
     }
 
     /// A confirmed effect joins the model. The data analysed with the new model are the data
-    /// every added effect must explain: each is tested again on them, and the traces analysed
-    /// again while any is removed.
+    /// every added effect must explain: each is tested again on them, against the others, and
+    /// the traces analysed again while any is removed or exchanged.
     fn keep_added<'r>(
         &mut self,
         effect: NamedEffect,
@@ -135,8 +139,8 @@ impl Diagnosis {
         self.fit = Some(refitted);
         self.rescore()?;
         self.reanalyse(runner.as_deref_mut())?;
-        for _ in 0..MAX_EFFECTS {
-            if !self.remove_unneeded()? {
+        for _ in 0..2 * MAX_EFFECTS {
+            if !self.recheck_added()? {
                 break;
             }
             self.reanalyse(runner.as_deref_mut())?;
@@ -194,51 +198,142 @@ impl Diagnosis {
         self.rescore()
     }
 
-    /// Every added effect tested again on the final analysis of the data: it stays only if
-    /// its estimate is at least [`REMOVE_BELOW_SIGMA`] from neutral, removing it raises χ² by
-    /// more than the BIC margin (ln N for one parameter), and the held-out motions are not
-    /// worse with it. The failing effect with the weakest estimate is removed (one at a time,
-    /// never proposed again), with the reason in the step list. Returns whether any was removed.
+    /// Every added effect tested again on the final analysis of the data, each against all the
+    /// others (refitted without it): it stays only if its estimate is at least
+    /// [`REMOVE_BELOW_SIGMA`] from neutral, removing it raises χ² by more than the BIC margin
+    /// (ln N for one parameter), the held-out motions are not worse with it, and the recorded
+    /// traces, each predicted from the others, are predicted better with it
+    /// ([`crossval::leave_one_trace_out_chi2`]). The failing effect with the weakest estimate is
+    /// removed (one at a time, never proposed again), with the reason in the step list. When none
+    /// fails, an effect that another candidate explains better, the others in the model, is
+    /// exchanged for it ([`Diagnosis::exchange`]). Returns whether the model changed.
+    ///
     /// The pivot offsets of joint 6 along X_w and Z_w both take up most of a hidden joint-4
     /// pivot on the pool's motions: the one named first can end at 1σ once the other is added;
-    /// and an effect chosen while some motions were still tracked from the hint can be at 0σ
-    /// once they are tracked from their samples.
-    fn remove_unneeded(&mut self) -> Result<bool, DiagnoseError> {
-        let mut removed_any = false;
-        loop {
-            let Some(f) = self.fit.clone() else { return Ok(removed_any) };
-            let mut failing: Vec<(usize, f64, String, Fit)> = Vec::new();
-            for k in 0..f.state.effects.len() {
-                let mut without = f.state.clone();
-                without.effects.remove(k);
-                let nf = self.refit(&without)?;
-                if let Some(reason) = self.unneeded_because(&f, &nf, k)? {
-                    failing.push((k, f.effect_z(k), reason, nf));
-                }
+    /// an effect chosen while some motions were still tracked from the hint can be at 0σ once
+    /// they are tracked from their samples; and an effect named first against a baseline that
+    /// carried several others can be the wrong parameter of the right effect.
+    fn recheck_added(&mut self) -> Result<bool, DiagnoseError> {
+        let Some(f) = self.fit.clone() else { return Ok(false) };
+        let obs = self.fit_set();
+        let cv_with = crossval::leave_one_trace_out_chi2(&f, &obs);
+        let mut failing: Vec<(usize, f64, String, Fit)> = Vec::new();
+        let mut without_each = Vec::new();
+        for k in 0..f.state.effects.len() {
+            let mut without = f.state.clone();
+            without.effects.remove(k);
+            let nf = self.refit(&without)?;
+            let cv_gain = crossval::leave_one_trace_out_chi2(&nf, &obs) - cv_with;
+            if let Some(e) = self.added.iter_mut().find(|e| e.name == f.state.effects[k].0.name) {
+                e.held_out_chi2_gain = Some(cv_gain);
             }
-            let Some((k, _, reason, nf)) = failing.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-                return Ok(removed_any);
-            };
-            let (cand, estimate) = f.state.effects[k].clone();
-            let Some(i) = self.added.iter().position(|e| e.name == cand.name) else {
-                return Err(DiagnoseError::Model(format!("{} fitted but not among the added", cand.name)));
-            };
-            let mut removed = self.added.remove(i);
-            removed.estimate = estimate;
-            removed.sigma = f.effect_sigma[k];
-            if let Some(c) = self.candidates.iter().position(|c| c.name == cand.name) {
-                self.excluded.push(c);
+            if let Some(reason) = self.unneeded_because(&f, &nf, k, cv_gain)? {
+                failing.push((k, f.effect_z(k), reason, nf.clone()));
             }
-            self.steps.push(Step::Removed { effect: removed, rms_sigma: [f.rms(), nf.rms()], reason });
-            self.fit = Some(nf);
-            self.rescore()?;
-            removed_any = true;
+            without_each.push(nf);
         }
+        if let Some((k, _, reason, nf)) = failing.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)) {
+            self.remove_added(&f, k, nf, reason)?;
+            return Ok(true);
+        }
+        self.exchange(&f, without_each)
+    }
+
+    /// Take effect `k` of fit `f` out of the model (`without`: refitted without it), never to be
+    /// proposed again.
+    fn remove_added(&mut self, f: &Fit, k: usize, without: Fit, reason: String) -> Result<(), DiagnoseError> {
+        let (cand, estimate) = f.state.effects[k].clone();
+        let Some(i) = self.added.iter().position(|e| e.name == cand.name) else {
+            return Err(DiagnoseError::Model(format!("{} fitted but not among the added", cand.name)));
+        };
+        let mut removed = self.added.remove(i);
+        removed.estimate = estimate;
+        removed.sigma = f.effect_sigma[k];
+        if let Some(c) = self.candidates.iter().position(|c| c.name == cand.name) {
+            self.excluded.push(c);
+        }
+        self.steps.push(Step::Removed { effect: removed, rms_sigma: [f.rms(), without.rms()], reason });
+        self.fit = Some(without);
+        self.rescore()
+    }
+
+    /// For each added effect, the candidates scored against the model refitted without it
+    /// (`without[k]`, the other effects in): when another scores higher than it there and,
+    /// refitted in its place, lowers χ² by more than [`EXCHANGE_MARGIN`], the two are exchanged
+    /// (the best such exchange, one at a time). A drift acceleration named against a baseline
+    /// that carried a drift rate and four more effects gives way to the rate.
+    fn exchange(&mut self, f: &Fit, without: Vec<Fit>) -> Result<bool, DiagnoseError> {
+        let obs = self.fit_set();
+        let mut best: Option<(usize, usize, Fit, f64, scoring::CandidateScore, Vec<String>)> = None;
+        for (k, nf) in without.into_iter().enumerate() {
+            let own = &f.state.effects[k].0;
+            let signatures = scoring::signatures(&self.predictor, &nf.state, &self.candidates, &obs)?;
+            let (scores, projected) = scoring::score(&self.candidates, &signatures, &nf.jacobian, &nf.residuals);
+            let own_score = scores.iter().find(|s| s.name == own.name).map_or(0.0, |s| s.score);
+            let open = |c: usize| {
+                scores[c].significant
+                    && scores[c].score > own_score
+                    && !self.excluded.contains(&c)
+                    && self.candidates[c].name != own.name
+                    && !nf.state.effects.iter().any(|(e, _)| e.name == self.candidates[c].name)
+            };
+            let Some(c) =
+                (0..scores.len()).filter(|&c| open(c)).max_by(|&a, &b| scores[a].score.total_cmp(&scores[b].score))
+            else {
+                continue;
+            };
+            let mut start = nf.state.clone();
+            start.effects.insert(k, (self.candidates[c].clone(), scores[c].estimate));
+            let sf = self.refit(&start)?;
+            let gain = f.chi2() - sf.chi2();
+            if gain > EXCHANGE_MARGIN
+                && sf.effect_z(k) >= REMOVE_BELOW_SIGMA
+                && best.as_ref().is_none_or(|b| gain > b.3)
+            {
+                let ambiguous = scoring::ambiguity_set(c, &projected)
+                    .into_iter()
+                    .map(|o| self.candidates[o].name.clone())
+                    .collect();
+                best = Some((k, c, sf, gain, scores[c].clone(), ambiguous));
+            }
+        }
+        let Some((k, c, sf, gain, sc, ambiguous)) = best else { return Ok(false) };
+        let new = self.candidates[c].name.clone();
+        let reason =
+            format!("{new} explains what it took up better, the other effects in the model (χ² lower by {gain:.1})");
+        self.remove_added(f, k, sf.clone(), reason)?;
+        let k_new = sf.state.effects.iter().position(|(e, _)| e.name == new).unwrap_or(k);
+        let effect = NamedEffect {
+            name: new,
+            estimate: sf.state.effects[k_new].1,
+            unit: sc.unit.clone(),
+            sigma: sf.effect_sigma[k_new],
+            score: sc.score,
+            delta_bic: sc.delta_bic,
+            absorbed_share: sc.absorbed_share,
+            ambiguous_with: ambiguous,
+            held_out_chi2_gain: None,
+        };
+        self.steps.push(Step::Added {
+            effect: effect.clone(),
+            rms_sigma: [f.rms(), sf.rms()],
+            held_out_rms_sigma: [self.held_rms(&f.state)?, self.held_rms(&sf.state)?],
+            confirmed: true,
+        });
+        self.added.push(effect);
+        self.refresh_added_estimates();
+        Ok(true)
     }
 
     /// Why effect `k` of fit `with` is not needed (`without`: the same data refitted without
     /// it), or `None` when the data need it.
-    fn unneeded_because(&self, with: &Fit, without: &Fit, k: usize) -> Result<Option<String>, DiagnoseError> {
+    fn unneeded_because(
+        &self,
+        with: &Fit,
+        without: &Fit,
+        k: usize,
+        cv_gain: f64,
+    ) -> Result<Option<String>, DiagnoseError> {
         let z = with.effect_z(k);
         if z < REMOVE_BELOW_SIGMA {
             return Ok(Some(format!("its estimate is {z:.1}σ from none (needs {REMOVE_BELOW_SIGMA}σ)")));
@@ -247,6 +342,12 @@ impl Diagnosis {
         let margin = (self.fit_set().len() as f64).ln();
         if delta_chi2 < margin {
             return Ok(Some(format!("χ² is only {delta_chi2:.1} lower with it (the BIC margin is {margin:.1})")));
+        }
+        if cv_gain <= 0.0 {
+            return Ok(Some(format!(
+                "the recorded traces, each predicted from the others, are predicted no better with it (χ² {:+.1})",
+                -cv_gain
+            )));
         }
         let held = [self.held_rms(&without.state)?, self.held_rms(&with.state)?];
         if !self.held_out_allows(held) {

@@ -18,7 +18,7 @@ fn obs(family: Family, label: &str) -> Observation {
             to[3] = 1.0;
             ObservationKind::GapChange { from_display: q, to_display: to, dl_nm: 0.0 }
         }
-        Family::AbsoluteGaps => ObservationKind::AbsoluteGap { at_display: q, gap_um: 0.0 },
+        Family::AbsoluteGaps => ObservationKind::AbsoluteGap { at_display: q, gap_um: 0.0, sweep_nm_per_s: 0.0 },
         Family::FringeAmplitudes => {
             ObservationKind::FringeAmplitude { at_display: q, amplitude_mw: 0.0, group: 0, neighbours: None }
         }
