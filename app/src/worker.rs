@@ -541,33 +541,7 @@ impl Thread {
                     self.send(Event::Busy(None));
                 }
                 Command::Diagnose { traces, extrinsics, run_motions } => {
-                    self.send(Event::Busy(Some("diagnosing".into())));
-                    let outcome = self.diagnose(&traces, extrinsics, run_motions);
-                    self.send(Event::Position(self.bench.position_display()));
-                    match outcome {
-                        Ok((result, effects, proposed)) => {
-                            let with = result.extrinsics;
-                            self.send(Event::Diagnosed(Ok(Box::new(result))));
-                            if !run_motions {
-                                self.send(Event::DiagnosisPlan(proposed));
-                            }
-                            // As `photorobot diagnose` does: the validation motions planned with
-                            // the calibrated model and with the extended one, on this bench.
-                            let validation = if effects.is_empty() {
-                                EffectValidation::NoEffect
-                            } else if self.cancel.load(Ordering::Relaxed) {
-                                EffectValidation::Failed(STOPPED.into())
-                            } else {
-                                self.send(Event::Busy(Some(BUSY_EFFECT_VALIDATION.into())));
-                                let v = self.validate_with_effects(&extrinsics, &with, &effects);
-                                self.send(Event::Position(self.bench.position_display()));
-                                v
-                            };
-                            self.send(Event::EffectsValidated { effects, validation });
-                        }
-                        Err(e) => self.send(Event::Diagnosed(Err(e))),
-                    }
-                    self.send(Event::Busy(None));
+                    self.serve_diagnose(&traces, extrinsics, run_motions)
                 }
                 Command::Move { placement, target, keep_gap, references } => {
                     self.send(Event::Busy(Some(BUSY_MOVING.into())));
@@ -619,6 +593,38 @@ impl Thread {
             Ok(rows) => EffectValidation::Ran { bench: self.bench.name(), rows },
             Err(e) => EffectValidation::Failed(format!("extended model: {e}")),
         }
+    }
+
+    /// A diagnosis of `traces` from `extrinsics`, then the validation motions with and without
+    /// the named effects.
+    fn serve_diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics, run_motions: bool) {
+        self.send(Event::Busy(Some("diagnosing".into())));
+        let outcome = self.diagnose(traces, extrinsics, run_motions);
+        self.send(Event::Position(self.bench.position_display()));
+        match outcome {
+            Ok((result, effects, proposed)) => {
+                let with = result.extrinsics;
+                self.send(Event::Diagnosed(Ok(Box::new(result))));
+                if !run_motions {
+                    self.send(Event::DiagnosisPlan(proposed));
+                }
+                // As `photorobot diagnose` does: the validation motions planned with
+                // the calibrated model and with the extended one, on this bench.
+                let validation = if effects.is_empty() {
+                    EffectValidation::NoEffect
+                } else if self.cancel.load(Ordering::Relaxed) {
+                    EffectValidation::Failed(STOPPED.into())
+                } else {
+                    self.send(Event::Busy(Some(BUSY_EFFECT_VALIDATION.into())));
+                    let v = self.validate_with_effects(&extrinsics, &with, &effects);
+                    self.send(Event::Position(self.bench.position_display()));
+                    v
+                };
+                self.send(Event::EffectsValidated { effects, validation });
+            }
+            Err(e) => self.send(Event::Diagnosed(Err(e))),
+        }
+        self.send(Event::Busy(None));
     }
 
     /// The diagnosis, step by step (each step reported), discriminating motions on this bench

@@ -6,13 +6,29 @@ use crate::diagnose::crossval;
 use crate::diagnose::fit::Fit;
 use crate::diagnose::motions::MotionRunner;
 use crate::diagnose::result::{DiagnoseError, NamedEffect};
-use crate::diagnose::scoring;
+use crate::diagnose::scoring::{self, CandidateScore};
 use crate::diagnose::settings::{
     DISCRIMINATING_PREFIX, EXCHANGE_MARGIN, MAX_EFFECTS, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA,
 };
 use crate::diagnose::step::Step;
 use crate::diagnose::validation;
 use crate::identify::{Observation, ObservationKind};
+
+/// The effect `name` as named from its score `sc`, with the estimate and σ of effect `k` of
+/// the fit `f` (not yet cross-validated).
+fn named(name: String, sc: &CandidateScore, f: &Fit, k: usize, ambiguous_with: Vec<String>) -> NamedEffect {
+    NamedEffect {
+        name,
+        estimate: f.state.effects[k].1,
+        unit: sc.unit.clone(),
+        sigma: f.effect_sigma[k],
+        score: sc.score,
+        delta_bic: sc.delta_bic,
+        absorbed_share: sc.absorbed_share,
+        ambiguous_with,
+        held_out_chi2_gain: None,
+    }
+}
 
 impl Diagnosis {
     /// Stage 4: add the best significant candidate. With a bench, motions that separate it from
@@ -50,17 +66,7 @@ impl Diagnosis {
         // extrinsics refitted with it took the rest).
         let kept = nf.effect_z(k) >= REMOVE_BELOW_SIGMA;
         let confirmed = kept && self.held_out_allows(held);
-        let effect = NamedEffect {
-            name: sc.name.clone(),
-            estimate: nf.state.effects[k].1,
-            unit: sc.unit.clone(),
-            sigma: nf.effect_sigma[k],
-            score: sc.score,
-            delta_bic: sc.delta_bic,
-            absorbed_share: sc.absorbed_share,
-            ambiguous_with: ambiguous,
-            held_out_chi2_gain: None,
-        };
+        let effect = named(sc.name.clone(), &sc, &nf, k, ambiguous);
         self.steps.push(Step::Added {
             effect: effect.clone(),
             rms_sigma: [f.rms(), nf.rms()],
@@ -303,17 +309,7 @@ impl Diagnosis {
             format!("{new} explains what it took up better, the other effects in the model (χ² lower by {gain:.1})");
         self.remove_added(f, k, sf.clone(), reason)?;
         let k_new = sf.state.effects.iter().position(|(e, _)| e.name == new).unwrap_or(k);
-        let effect = NamedEffect {
-            name: new,
-            estimate: sf.state.effects[k_new].1,
-            unit: sc.unit.clone(),
-            sigma: sf.effect_sigma[k_new],
-            score: sc.score,
-            delta_bic: sc.delta_bic,
-            absorbed_share: sc.absorbed_share,
-            ambiguous_with: ambiguous,
-            held_out_chi2_gain: None,
-        };
+        let effect = named(new, &sc, &sf, k_new, ambiguous);
         self.steps.push(Step::Added {
             effect: effect.clone(),
             rms_sigma: [f.rms(), sf.rms()],
