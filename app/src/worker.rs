@@ -544,30 +544,7 @@ impl Thread {
                     self.serve_diagnose(&traces, extrinsics, run_motions)
                 }
                 Command::Move { placement, target, keep_gap, references } => {
-                    self.send(Event::Busy(Some(BUSY_MOVING.into())));
-                    // Paced as the plans are: a virtual bench's move takes the time a real one does.
-                    let (pace, wall0, bench_t0) = (self.pace, Instant::now(), self.bench.clock_s());
-                    let mut on_samples = |tr: &Trace, _: usize| {
-                        if let (Pace::Speed(f), Some(t)) = (pace, tr.t_s.last()) {
-                            let due = Duration::from_secs_f64(((t - bench_t0) / f.max(1e-6)).max(0.0));
-                            if let Some(wait) = due.checked_sub(wall0.elapsed()) {
-                                std::thread::sleep(wait.min(Duration::from_millis(500)));
-                            }
-                        }
-                    };
-                    let mut control =
-                        RunControl { cancel: &self.cancel, on_samples: &mut on_samples, on_progress: &mut |_| {} };
-                    let started = photorobot_core::session::now_utc_rfc3339();
-                    let record =
-                        move_to(self.bench.as_mut(), &placement, &target, keep_gap, &references, true, &mut control)
-                            .map(|mut r| {
-                                r.started_utc = Some(started);
-                                Box::new(r)
-                            })
-                            .map_err(|e| e.to_string());
-                    self.send(Event::Position(self.bench.position_display()));
-                    self.send(Event::Moved(record));
-                    self.send(Event::Busy(None));
+                    self.serve_move(&placement, &target, keep_gap, &references)
                 }
                 Command::Analyse { index, trace, extrinsics } => {
                     let model = PhaseModel { extrinsics, ..self.nominal.clone() };
@@ -593,6 +570,32 @@ impl Thread {
             Ok(rows) => EffectValidation::Ran { bench: self.bench.name(), rows },
             Err(e) => EffectValidation::Failed(format!("extended model: {e}")),
         }
+    }
+
+    /// Move the lamella to `target` with the calibrated `placement`, paced as the plans are.
+    fn serve_move(&mut self, placement: &Placement, target: &Target, keep_gap: bool, references: &[Reference]) {
+        self.send(Event::Busy(Some(BUSY_MOVING.into())));
+        // Paced as the plans are: a virtual bench's move takes the time a real one does.
+        let (pace, wall0, bench_t0) = (self.pace, Instant::now(), self.bench.clock_s());
+        let mut on_samples = |tr: &Trace, _: usize| {
+            if let (Pace::Speed(f), Some(t)) = (pace, tr.t_s.last()) {
+                let due = Duration::from_secs_f64(((t - bench_t0) / f.max(1e-6)).max(0.0));
+                if let Some(wait) = due.checked_sub(wall0.elapsed()) {
+                    std::thread::sleep(wait.min(Duration::from_millis(500)));
+                }
+            }
+        };
+        let mut control = RunControl { cancel: &self.cancel, on_samples: &mut on_samples, on_progress: &mut |_| {} };
+        let started = photorobot_core::session::now_utc_rfc3339();
+        let record = move_to(self.bench.as_mut(), placement, target, keep_gap, references, true, &mut control)
+            .map(|mut r| {
+                r.started_utc = Some(started);
+                Box::new(r)
+            })
+            .map_err(|e| e.to_string());
+        self.send(Event::Position(self.bench.position_display()));
+        self.send(Event::Moved(record));
+        self.send(Event::Busy(None));
     }
 
     /// A diagnosis of `traces` from `extrinsics`, then the validation motions with and without
