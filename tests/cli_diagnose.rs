@@ -201,6 +201,37 @@ fn diagnose_names_a_hidden_path_scale_from_virtual_bench_traces() {
     assert!(v["residual_rms_after_sigma"].as_f64().unwrap() <= 0.3, "{v}");
 }
 
+/// The beam's Gouy phase hidden wrong (the bench has none, the model has it): the calibration
+/// without it picks the mirrored lamella (θ_et +0.595° for −0.595°, χ² 245 against 301 for the
+/// branch at the truth) and refuses the fit. The diagnosis names the Gouy phase from the
+/// session's traces, tries the calibration's other branch again with it, analysing the traces
+/// with that branch's motion hint, and takes it: the extrinsics end at the truth. From the
+/// mirrored branch the discriminating q6 turns missed by 200σ and the diagnosis ended
+/// "unexplained".
+#[test]
+fn diagnose_names_the_gouy_phase_and_leaves_the_mirrored_branch_the_calibration_chose() {
+    use photorobot_core::model::effects::Effect;
+    let v = diagnose_hidden("hidden-gouy", vec![Effect::GouyPhase { scale_error: -1.0 }], "DIAGNOSE_DUMP_GOUY");
+    assert_eq!(v["verdict"], "named", "{v}");
+    let effects = v["effects"].as_array().unwrap();
+    assert_eq!(effects.len(), 1, "{v}");
+    assert_eq!(effects[0]["name"], "Gouy phase scale error", "{v}");
+    // Measured (seed 5): −0.9991 ± 0.0235; residual 2.50σ → 0.06σ.
+    let (est, sigma) = (effects[0]["estimate"].as_f64().unwrap(), effects[0]["sigma"].as_f64().unwrap());
+    assert!((est + 1.0).abs() < 3.0 * sigma && (0.5..=2.0).contains(&(sigma / 0.0235)), "{est} ± {sigma}");
+    let after = v["residual_rms_after_sigma"].as_f64().unwrap();
+    assert!(after <= 0.12, "residual {after}σ after, measured 0.06σ");
+    let branch = v["steps"].as_array().unwrap().iter().find(|s| s.get("Branch").is_some());
+    let to = &branch.unwrap_or_else(|| panic!("no branch step: {v}"))["Branch"]["to"];
+    let theta_et = to["theta_et_deg"].as_f64().unwrap();
+    assert!((theta_et + 0.595).abs() < 0.01, "θ_et {theta_et}° after the branch step, truth −0.595°");
+    let e = &v["extrinsics"];
+    for (field, truth) in [("theta_et_deg", -0.595), ("theta_wf_deg", -0.520), ("beta_et_deg", 0.744)] {
+        let got = e[field].as_f64().unwrap();
+        assert!((got - truth).abs() < 0.01, "{field} {got}, truth {truth}");
+    }
+}
+
 /// Hidden effects the traces cannot show are reported as such, not named and not called
 /// unexplained: a 0.6 mrad tilt of the q4 goniometer's axis toward its link x (it turns the
 /// lamella about the beam: no motion of the session or the pool sees it at that size) and a

@@ -594,7 +594,13 @@ impl AppState {
         self.clear_diagnosis();
         self.diagnosis.propose_only = propose_only;
         self.diagnosis.from_calibration = self.extrinsics != self.worker.nominal.extrinsics;
-        self.worker.send(Command::Diagnose { traces, extrinsics: self.extrinsics, run_motions: !propose_only });
+        let branches = self.results.report.as_ref().map(|r| r.branch_extrinsics()).unwrap_or_default();
+        self.worker.send(Command::Diagnose {
+            traces,
+            extrinsics: self.extrinsics,
+            branches,
+            run_motions: !propose_only,
+        });
     }
 
     /// Add traces recorded after the session (a proposed plan recorded on the bench) as imported

@@ -90,6 +90,8 @@ pub enum Command {
         traces: Vec<Trace>,
         /// The calibrated extrinsics.
         extrinsics: Extrinsics,
+        /// The other branches the calibration tried ([`Diagnosis::set_branches`]).
+        branches: Vec<Extrinsics>,
         /// Run the discriminating motions on the bench; otherwise propose them
         /// ([`Event::DiagnosisPlan`]) to be recorded and added later.
         run_motions: bool,
@@ -540,8 +542,8 @@ impl Thread {
                     self.send(Event::Checked(checked));
                     self.send(Event::Busy(None));
                 }
-                Command::Diagnose { traces, extrinsics, run_motions } => {
-                    self.serve_diagnose(&traces, extrinsics, run_motions)
+                Command::Diagnose { traces, extrinsics, branches, run_motions } => {
+                    self.serve_diagnose(&traces, extrinsics, &branches, run_motions)
                 }
                 Command::Move { placement, target, keep_gap, references } => {
                     self.serve_move(&placement, &target, keep_gap, &references)
@@ -600,9 +602,9 @@ impl Thread {
 
     /// A diagnosis of `traces` from `extrinsics`, then the validation motions with and without
     /// the named effects.
-    fn serve_diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics, run_motions: bool) {
+    fn serve_diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics, branches: &[Extrinsics], run_motions: bool) {
         self.send(Event::Busy(Some("diagnosing".into())));
-        let outcome = self.diagnose(traces, extrinsics, run_motions);
+        let outcome = self.diagnose(traces, extrinsics, branches, run_motions);
         self.send(Event::Position(self.bench.position_display()));
         match outcome {
             Ok((result, effects, proposed)) => {
@@ -637,6 +639,7 @@ impl Thread {
         &mut self,
         traces: &[Trace],
         extrinsics: Extrinsics,
+        branches: &[Extrinsics],
         run_motions: bool,
     ) -> Result<(DiagnosisResult, Vec<Effect>, Option<Plan>), String> {
         // The stop ends the computing too: the traces' analysis within one trace, the steps
@@ -648,6 +651,7 @@ impl Thread {
             Err(_) if self.cancel.load(Ordering::Relaxed) => return Err(STOPPED.into()),
             Err(e) => return Err(e.to_string()),
         };
+        d.set_branches(branches);
         if !skipped.is_empty() {
             let _ = self.tx.send(Event::DiagnosisStep(
                 "0. traces".into(),

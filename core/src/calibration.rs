@@ -190,6 +190,12 @@ pub struct CalibrationReport {
 }
 
 impl CalibrationReport {
+    /// The extrinsics of every branch the fit tried, the chosen one first (none without a fit):
+    /// the diagnosis refits them once it names an effect the calibration's model lacked.
+    pub fn branch_extrinsics(&self) -> Vec<Extrinsics> {
+        self.fit.as_ref().map(|f| f.branches.iter().map(|b| b.extrinsics).collect()).unwrap_or_default()
+    }
+
     /// Why the validation does not prove this calibration, one sentence per motion that is not
     /// confirmed within its target; empty when every motion is (or when the validation was not
     /// run, or predicted: the report says so instead).

@@ -13,7 +13,9 @@
 //! and in how many every hidden effect was named within 3σ of its value. `--at-most-named K`
 //! asserts that a tally's seeds with anything named are at most K (the null figure the docs
 //! give; 0 by default where nothing is hidden), `--at-least-found K` that every hidden effect
-//! was named in at least K of them.
+//! was named in at least K of them. `DIAGNOSE_SCAN_DUMP=<prefix>` writes each diagnosis' JSON
+//! to `<prefix>-<index>.json`; `DIAGNOSE_SCAN_KEEP=1` keeps each bench file, plan and session
+//! folder (their path is printed).
 
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::files::save_ron;
@@ -106,7 +108,11 @@ fn diagnose(all: &[(&'static str, f64, Vec<Effect>)], pick: &[usize], seed: u64)
     let mut preset = BenchPreset::resolve("table2-ideal").expect("embedded preset");
     preset.name = format!("hidden {}", pick.iter().map(|k| all[*k].0).collect::<Vec<_>>().join(" + "));
     preset.effects = pick.iter().flat_map(|k| all[*k].2.clone()).collect();
-    let dir = tempfile::tempdir().expect("temporary folder");
+    let mut dir = tempfile::tempdir().expect("temporary folder");
+    if std::env::var("DIAGNOSE_SCAN_KEEP").is_ok() {
+        dir.disable_cleanup(true);
+        println!("kept in {}", dir.path().display());
+    }
     let bench_file = dir.path().join("bench.ron");
     save_ron(&bench_file, &preset).expect("bench file");
     let plan = dir.path().join("session-plan.ron");

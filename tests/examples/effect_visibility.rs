@@ -44,7 +44,7 @@ fn observe(preset: &BenchPreset, model: &PhaseModel, seed: u64, tag: &str, track
     run.outcome.expect("session runs");
     let mut obs = observations_from_traces(&run.traces, model, &EXTRACT_OPTIONS).observations;
     let mut runner = BenchRunner::new(&mut bench, 0.0);
-    obs.extend(runner.run(&pool(), model).expect("pool runs"));
+    obs.extend(runner.run(&pool(), model, false).expect("pool runs"));
     for t in runner.traces.iter().filter(|_| tracks) {
         let Ok(Measurement::Motion(m)) = measure::analyse(t, model) else { continue };
         let truth = model.hint_nm(t, m.wavelength_nm).expect("hint");

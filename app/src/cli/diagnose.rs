@@ -90,6 +90,9 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let (mut d, skipped) =
         timed("analyse_traces", || Diagnosis::from_traces(&base, &traces, extrinsics, StopCheck::default()))
             .map_err(|e| invalid(&a.session, "traces", e.to_string()))?;
+    if let Some(c) = read.session.as_ref().and_then(|s| s.calibration.as_ref()) {
+        d.set_branches(&c.branch_extrinsics());
+    }
     let mut bench = preset.as_ref().map(|p| resumed_bench(p, a.seed, &d)).transpose()?;
     let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, 0.0));
     if !a.json {

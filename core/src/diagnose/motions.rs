@@ -225,8 +225,14 @@ pub trait MotionRunner {
     /// Name for the user.
     fn name(&self) -> String;
     /// Run the motions and return their observations; `analysis` is the current model (the
-    /// fringe analysis needs its motion hint).
-    fn run(&mut self, motions: &[DesignedMotion], analysis: &PhaseModel) -> Result<Vec<Observation>, String>;
+    /// fringe analysis needs its motion hint), `shaped` tracks their fringes with its fringe
+    /// shape, as [`MotionRunner::reanalyse`] does (once the diagnosis analyses its traces that way).
+    fn run(
+        &mut self,
+        motions: &[DesignedMotion],
+        analysis: &PhaseModel,
+        shaped: bool,
+    ) -> Result<Vec<Observation>, String>;
     /// The observations of everything run so far, analysed again with a better model (the
     /// fringe analysis follows the model's motion hint); `None` when the runner keeps no traces.
     fn reanalyse(&self, _analysis: &PhaseModel) -> Option<Vec<Observation>> {
@@ -382,7 +388,7 @@ impl MotionRunner for SimulatedBench {
         "simulated observations".into()
     }
 
-    fn run(&mut self, motions: &[DesignedMotion], _analysis: &PhaseModel) -> Result<Vec<Observation>, String> {
+    fn run(&mut self, motions: &[DesignedMotion], _: &PhaseModel, _: bool) -> Result<Vec<Observation>, String> {
         let t = templates(motions, self.clock_s);
         self.simulate(&t)
     }
@@ -578,7 +584,12 @@ impl MotionRunner for BenchRunner<'_> {
         self.bench.name()
     }
 
-    fn run(&mut self, motions: &[DesignedMotion], analysis: &PhaseModel) -> Result<Vec<Observation>, String> {
+    fn run(
+        &mut self,
+        motions: &[DesignedMotion],
+        analysis: &PhaseModel,
+        shaped: bool,
+    ) -> Result<Vec<Observation>, String> {
         let cancel = AtomicBool::new(false);
         let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
         let run = run_plan(self.bench, &plan_of(motions), &mut control);
@@ -586,7 +597,7 @@ impl MotionRunner for BenchRunner<'_> {
         self.free_start.extend(motions.iter().filter(|m| m.free_start).map(|m| m.label.clone()));
         let from = self.traces.len();
         self.traces.extend(run.traces);
-        Ok(self.extract(from, analysis, &self.options))
+        Ok(self.extract(from, analysis, &ExtractOptions { shaped, ..self.options }))
     }
 
     fn reanalyse(&self, analysis: &PhaseModel) -> Option<Vec<Observation>> {
@@ -621,7 +632,7 @@ mod tests {
             preset.effects = vec![Effect::ThermalDrift { nm_per_s: rate, nm_per_s2: 0.0 }];
             let mut bench = VirtualBench::new(&preset, Some(2)).unwrap();
             let mut runner = BenchRunner::new(&mut bench, 0.0);
-            let obs = runner.run(&motions, &model).unwrap();
+            let obs = runner.run(&motions, &model, false).unwrap();
             // Arrival, pause and departure traces: the arrival's four points, then the pause and the
             // departure's four points, both under the dwell's label.
             assert_eq!(runner.traces.len(), 4, "two recorded moves per dwell");
@@ -736,7 +747,7 @@ mod tests {
         preset.effects = vec![pivot];
         let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
         let mut runner = BenchRunner::new(&mut bench, 0.0);
-        runner.run(&[motion], &model).unwrap();
+        runner.run(&[motion], &model, false).unwrap();
         let t = runner.traces.iter().find(|t| t.meta.label == label).unwrap();
         let Measurement::Motion(m) = analyse(t, &model).unwrap() else { panic!("a motion") };
         let truth = model.hint_nm(t, m.wavelength_nm).unwrap();

@@ -51,3 +51,6 @@ pub const EXCHANGE_MARGIN: f64 = 4.0;
 /// An effect added earlier is removed again when, refitted with those added after it, its
 /// estimate is within this many σ of neutral: a later one explains what it took up.
 pub const REMOVE_BELOW_SIGMA: f64 = 3.0;
+/// Another branch of the calibration replaces the current extrinsics when its refit lowers χ²
+/// by more than this (3σ for one parameter): the two are otherwise a tie the data do not settle.
+pub const BRANCH_MARGIN_CHI2: f64 = 9.0;

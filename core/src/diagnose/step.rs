@@ -3,6 +3,7 @@
 use crate::diagnose::replay::ResidualGroup;
 use crate::diagnose::result::{NamedEffect, Verdict};
 use crate::diagnose::scoring::CandidateScore;
+use crate::model::extrinsics::Extrinsics;
 use serde::{Deserialize, Serialize};
 
 /// One step of the workflow, for display.
@@ -78,6 +79,17 @@ pub enum Step {
         #[serde(default)]
         reason: String,
     },
+    /// Another branch of the calibration fits better and replaces the extrinsics.
+    Branch {
+        /// The extrinsics left.
+        from: Extrinsics,
+        /// The extrinsics of the branch taken, refitted with the named effects.
+        to: Extrinsics,
+        /// χ² before and after.
+        chi2: [f64; 2],
+        /// Whitened rms before and after.
+        rms_sigma: [f64; 2],
+    },
     /// The verdict.
     Finished {
         /// The verdict.
@@ -91,9 +103,10 @@ impl Step {
         match self {
             Step::Baseline { .. } => "1. replay: baseline fit of the extrinsics",
             Step::Scored { .. } => "2. candidates scored",
-            Step::Designed { .. } => "3. discriminating motions",
-            Step::Added { .. } => "4. effect added, refitted, checked on held-out motions",
-            Step::Removed { .. } => "4. effect removed: the final model does not need it",
+            Step::Added { .. } => "3. effect added, refitted, checked on held-out motions",
+            Step::Removed { .. } => "3. effect removed: the final model does not need it",
+            Step::Branch { .. } => "3. another branch of the calibration fits better",
+            Step::Designed { .. } => "4. discriminating motions",
             Step::Finished { .. } => "5. verdict",
         }
     }
@@ -193,6 +206,25 @@ impl Step {
                 rms_sigma[0],
                 rms_sigma[1],
             ),
+            Step::Branch { from, to, chi2, rms_sigma } => {
+                let angles = |e: &Extrinsics| {
+                    format!(
+                        "β_wf {:+.3}°, θ_wf {:+.3}°, β_et {:+.3}°, θ_et {:+.3}°",
+                        e.beta_wf_deg, e.theta_wf_deg, e.beta_et_deg, e.theta_et_deg
+                    )
+                };
+                format!(
+                    "from {}
+to   {}
+χ² {:.1} → {:.1}; rms {:.2}σ → {:.2}σ",
+                    angles(from),
+                    angles(to),
+                    chi2[0],
+                    chi2[1],
+                    rms_sigma[0],
+                    rms_sigma[1]
+                )
+            }
             Step::Finished { verdict } => match verdict {
                 Verdict::Named => "named: the effects above bring the residual to the noise floor".into(),
                 Verdict::None => "no significant missing effect".into(),

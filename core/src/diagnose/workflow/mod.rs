@@ -1,6 +1,8 @@
 //! [`Diagnosis`]: the workflow's state and its stages. The discriminating motions are in
-//! [`discriminate`], naming and removing effects in [`naming`].
+//! [`discriminate`], naming and removing effects in [`naming`], the calibration's other
+//! branches in [`branches`].
 
+mod branches;
 mod discriminate;
 mod naming;
 
@@ -36,6 +38,8 @@ pub struct Diagnosis {
     candidates: Vec<Candidate>,
     excluded: Vec<usize>,
     start: Extrinsics,
+    /// The calibration's other branches ([`Diagnosis::set_branches`]).
+    branches: Vec<Extrinsics>,
     fit: Option<Fit>,
     scores: Vec<CandidateScore>,
     projected: Vec<DVector<f64>>,
@@ -50,6 +54,8 @@ pub struct Diagnosis {
     separated: Vec<String>,
     /// Rounds of discriminating motions run on a bench so far.
     design_rounds: usize,
+    /// The discriminating motions were designed (they are designed once the evident effects are named).
+    design_done: bool,
     /// No motion of the pool not yet recorded would show a candidate the data cannot.
     settled: bool,
     session_traces: Vec<crate::trace::Trace>,
@@ -119,6 +125,7 @@ impl Diagnosis {
             candidates: candidates::library(base.chain.description()),
             excluded: Vec::new(),
             start: extrinsics,
+            branches: Vec::new(),
             fit: None,
             scores: Vec::new(),
             projected: Vec::new(),
@@ -130,6 +137,7 @@ impl Diagnosis {
             not_seen: Vec::new(),
             separated: Vec::new(),
             design_rounds: 0,
+            design_done: false,
             settled: false,
             session_traces: Vec::new(),
             stage: Stage::Baseline,
@@ -269,7 +277,10 @@ impl Diagnosis {
                 let mut sorted = self.scores.clone();
                 sorted.sort_by(|a, b| b.score.total_cmp(&a.score));
                 self.steps.push(Step::Scored { scores: sorted });
-                self.stage = Stage::Design;
+                // What the data show already is named first: the motions designed after it are
+                // then analysed with it, and designed against what it leaves.
+                let evident = self.scores.iter().any(|s| s.significant);
+                self.stage = if evident { Stage::Name } else { Stage::Design };
             }
             Stage::Design => self.design_discriminating_motions(runner)?,
             Stage::Name => self.add_best_candidate(runner)?,

@@ -31,7 +31,7 @@ fn named(name: String, sc: &CandidateScore, f: &Fit, k: usize, ambiguous_with: V
 }
 
 impl Diagnosis {
-    /// Stage 4: add the best significant candidate. With a bench, motions that separate it from
+    /// Stage 3: add the best significant candidate. With a bench, motions that separate it from
     /// the candidates it cannot be told apart from run first; then the model is refitted with
     /// it, and it is kept when the refit keeps it and the held-out motions confirm it, after
     /// which every added effect is tested again. Without a candidate left, the verdict.
@@ -43,6 +43,11 @@ impl Diagnosis {
             .filter(|&k| self.scores[k].significant)
             .max_by(|&a, &b| self.scores[a].score.total_cmp(&self.scores[b].score));
         let Some(best) = best.filter(|_| self.added.len() < MAX_EFFECTS) else {
+            // Nothing left to name: the discriminating motions, once, for what the data cannot see.
+            if !self.design_done {
+                self.stage = Stage::Design;
+                return Ok(());
+            }
             self.stage = Stage::Finish;
             return self.conclude();
         };
@@ -144,6 +149,7 @@ impl Diagnosis {
         self.added.push(effect);
         self.fit = Some(refitted);
         self.rescore()?;
+        self.try_other_branches(runner.as_deref_mut())?;
         self.reanalyse(runner.as_deref_mut())?;
         for _ in 0..2 * MAX_EFFECTS {
             if !self.recheck_added()? {
@@ -168,40 +174,57 @@ impl Diagnosis {
 
     /// Analyse the traces again with the current model (effects included in the motion hint of
     /// the fringe analysis), then refit and rescore. Nothing to do without traces.
-    fn reanalyse<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
+    pub(super) fn reanalyse<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
         let Some(f) = self.fit.clone() else { return Ok(()) };
-        let effects = f.state.library_effects();
+        let Some(obs) = self.analysed_with(runner, &f.state)? else { return Ok(()) };
+        self.held_out = held_out_mask(&obs);
+        self.observations = obs;
+        let nf = self.refit(&f.state)?;
+        self.fit = Some(nf);
+        self.rescore()
+    }
+
+    /// The observations, their traces analysed again with the model of `state` (its extrinsics
+    /// and effects); `None` without traces.
+    pub(super) fn analysed_with<'r>(
+        &mut self,
+        runner: Option<&mut (dyn MotionRunner + 'r)>,
+        state: &crate::diagnose::fit::ModelState,
+    ) -> Result<Option<Vec<Observation>>, DiagnoseError> {
+        let effects = state.library_effects();
         // The fringe's shape follows the optical effects too (a back face, the Gouy phase).
-        let analysis = validation::extended_model(self.predictor.base(), f.state.extrinsics, &effects)
+        let analysis = validation::extended_model(self.predictor.base(), state.extrinsics, &effects)
             .map_err(|e| DiagnoseError::Model(e.to_string()))?;
         let again = runner.and_then(|r| r.reanalyse(&analysis));
         if self.session_traces.is_empty() && again.is_none() {
-            return Ok(());
+            return Ok(None);
         }
         // Absolute gaps keep their first extraction (the sweeps are not analysed again): the
         // full-model refinement of a sweep takes the tilt from the model, and the fiber's
         // direction is poorly determined by gap changes (it enters them at second order near
         // alignment): re-extracted with the fitted extrinsics the sweeps moved by 0.2 µm (10σ)
         // and a joint scale error absorbed it.
-        let (first_gaps, moves): (Vec<Observation>, Vec<Observation>) =
-            self.observations.drain(..).partition(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. }));
-        let (recorded, designed): (Vec<Observation>, Vec<Observation>) =
-            moves.into_iter().partition(|o| !o.label.starts_with(DISCRIMINATING_PREFIX));
+        let (first_gaps, moves): (Vec<&Observation>, Vec<&Observation>) =
+            self.observations.iter().partition(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. }));
+        let designed = moves.into_iter().filter(|o| o.label.starts_with(DISCRIMINATING_PREFIX));
         let mut obs = if self.session_traces.is_empty() {
-            recorded
+            self.observations
+                .iter()
+                .filter(|o| {
+                    !matches!(o.kind, ObservationKind::AbsoluteGap { .. })
+                        && !o.label.starts_with(DISCRIMINATING_PREFIX)
+                })
+                .cloned()
+                .collect()
         } else {
             use crate::identify::measurements::observations_from_traces;
             observations_from_traces(&self.session_traces, &analysis, &REANALYSE_OPTIONS).observations
         };
-        obs.extend(again.unwrap_or(designed));
+        obs.extend(again.unwrap_or_else(|| designed.cloned().collect()));
         obs.retain(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0);
-        obs.extend(first_gaps);
+        obs.extend(first_gaps.into_iter().cloned());
         self.predictor.extend(&obs).map_err(DiagnoseError::Model)?;
-        self.held_out = held_out_mask(&obs);
-        self.observations = obs;
-        let nf = self.refit(&f.state)?;
-        self.fit = Some(nf);
-        self.rescore()
+        Ok(Some(obs))
     }
 
     /// Every added effect tested again on the final analysis of the data, each against all the
