@@ -45,7 +45,7 @@ fn main() {
     let (mut kills, mut late, mut nothing, mut worst) = (0, 0, 0, 0.0f64);
     for chain_seed in 1..=chains {
         let mut m = moments(1000 + chain_seed, 9);
-        m.push(late_moment(1000 + chain_seed, chain_seed % 2 == 0));
+        m.push(late_moment(1000 + chain_seed, chain_seed % 2 == 0, &reference));
         let chain = kill_chain(&calibrate, &tmp.path().join(format!("chain-{chain_seed}")), &m, &reference);
         println!("chain {chain_seed}: {chain:?}");
         kills += chain.kills;

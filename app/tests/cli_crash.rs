@@ -35,7 +35,7 @@ fn calibrate_killed_at_seeded_moments_keeps_every_reported_segment_and_resumes_t
         // Nine kills within the measurement, then one in the identification or the validation,
         // or one while the session is written.
         let mut moments = moments(chain_seed, 9);
-        moments.extend((chain_seed < 3).then(|| late_moment(chain_seed, chain_seed == 2)));
+        moments.extend((chain_seed < 3).then(|| late_moment(chain_seed, chain_seed == 2, &reference)));
         let dir = tmp.path().join(format!("chain-{chain_seed}"));
         let chain = kill_chain(&calibrate, &dir, &moments, &reference);
         eprintln!("chain {chain_seed}: {chain:?}");

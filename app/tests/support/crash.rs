@@ -131,14 +131,16 @@ pub fn moments(seed: u64, count: usize) -> Vec<Moment> {
 }
 
 /// A kill moment after the measurement drawn from `seed`: within the identification and the
-/// validation (up to 4 s after the measurement), or within the writing of the session (up to
-/// 60 ms after the validation).
-pub fn late_moment(seed: u64, writing: bool) -> Moment {
+/// validation, or within the writing of the session (after the validation), at 5-80 % of the
+/// time the uninterrupted run `reference` took for it. A fixed window (up to 4 s) let the run
+/// end first on a fast machine, and no kill fell after the measurement.
+pub fn late_moment(seed: u64, writing: bool, reference: &Reference) -> Moment {
     let mut rng = StdRng::seed_from_u64(seed);
-    match writing {
-        false => Moment { after: After::MeasurementDone, delay: Duration::from_millis(rng.random_range(0..4000)) },
-        true => Moment { after: After::ValidationDone, delay: Duration::from_millis(rng.random_range(0..60)) },
-    }
+    let (after, window) = match writing {
+        false => (After::MeasurementDone, reference.identify_and_validate),
+        true => (After::ValidationDone, reference.writing),
+    };
+    Moment { after, delay: window.mul_f64(rng.random_range(0.05..0.8)) }
 }
 
 fn read_from(path: &Path, offset: usize) -> String {
@@ -190,11 +192,41 @@ pub struct Reference {
     pub traces: Vec<Trace>,
     /// Standard deviation of the bench's white detector noise (mW).
     pub white_sigma_mw: f64,
+    /// From the end of the measurement to the end of the validation (its log's lines, polled).
+    pub identify_and_validate: Duration,
+    /// From the end of the validation to the end of the run (the session written).
+    pub writing: Duration,
+}
+
+/// Run `calibrate` into `dir` to its end (it must succeed); the times of its log's "measurement
+/// done" and "validation done" lines, and of its end, from its start.
+fn timed_run(calibrate: &Calibrate, dir: &Path) -> [Duration; 3] {
+    let start = Instant::now();
+    let mut child = calibrate.command(dir, false).spawn().expect("start photorobot");
+    let (mut measured, mut validated) = (None, None);
+    loop {
+        if let Some(status) = child.try_wait().expect("try_wait") {
+            let mut err = String::new();
+            std::io::Read::read_to_string(child.stderr.as_mut().expect("stderr"), &mut err).ok();
+            assert!(status.success(), "calibrate into {}: {status}\n{err}", dir.display());
+            let end = start.elapsed();
+            return [measured.unwrap_or(end), validated.unwrap_or(end), end];
+        }
+        let log = std::fs::read_to_string(log_path(dir)).unwrap_or_default();
+        if measured.is_none() && log.contains("measurement done") {
+            measured = Some(start.elapsed());
+        }
+        if validated.is_none() && log.contains("validation done") {
+            validated = Some(start.elapsed());
+        }
+        assert!(start.elapsed() < Duration::from_secs(300), "the reference run took over five minutes");
+        std::thread::sleep(Duration::from_millis(2));
+    }
 }
 
 impl Reference {
     pub fn run(calibrate: &Calibrate, dir: &Path, preset: &str, seed: u64) -> Self {
-        calibrate.finish(dir, false);
+        let [measured, validated, end] = timed_run(calibrate, dir);
         let session = Session::load(dir).expect("reference session");
         let bytes = session
             .traces
@@ -203,7 +235,14 @@ impl Reference {
             .collect();
         let traces = session.load_traces(dir).expect("reference traces");
         let white_sigma_mw = VirtualBench::from_preset_name(preset, Some(seed)).expect("bench").white_noise_sigma_mw();
-        Self { session, bytes, traces, white_sigma_mw }
+        Self {
+            session,
+            bytes,
+            traces,
+            white_sigma_mw,
+            identify_and_validate: validated.saturating_sub(measured),
+            writing: end.saturating_sub(validated),
+        }
     }
 
     fn calibration(&self) -> &CalibrationReport {

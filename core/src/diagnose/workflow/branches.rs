@@ -10,21 +10,21 @@ use crate::diagnose::motions::MotionRunner;
 use crate::diagnose::result::DiagnoseError;
 use crate::diagnose::settings::BRANCH_MARGIN_CHI2;
 use crate::diagnose::step::Step;
+use crate::identify::start::same_branch;
 use crate::identify::{Observation, N_EXTRINSICS};
 use crate::model::extrinsics::Extrinsics;
 
-/// Two extrinsics closer than this in every parameter (µm or °) are the same branch.
-const SAME_BRANCH: f64 = 1e-6;
-
-fn same(a: &Extrinsics, b: &Extrinsics) -> bool {
-    a.to_array().iter().zip(b.to_array()).all(|(x, y)| (x - y).abs() < SAME_BRANCH)
-}
-
 impl Diagnosis {
     /// Extrinsics of the calibration's other branches, tried again whenever the model or the
-    /// data change; those equal to the start are ignored.
+    /// data change: one of each branch ([`same_branch`]; several starts of a calibration end in
+    /// the same one), not the start's.
     pub fn set_branches(&mut self, branches: &[Extrinsics]) {
-        self.branches = branches.iter().copied().filter(|b| !same(b, &self.start)).collect();
+        self.branches.clear();
+        for b in branches {
+            if !same_branch(b, &self.start) && !self.branches.iter().any(|o| same_branch(o, b)) {
+                self.branches.push(*b);
+            }
+        }
     }
 
     /// Try every other branch with the current effects: the traces analysed with its model, the
