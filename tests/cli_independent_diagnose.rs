@@ -5,37 +5,11 @@
 //! on the same bench, later on the same clock, the traces join the session's, and the diagnosis
 //! runs again (`diagnose --add`).
 
-use photorobot_app::cli::diagnose::PROPOSED_PLAN_FILE;
-use photorobot_core::plan::Plan;
-use photorobot_e2e::independent::{lab_records, records_of, Hidden, Recorder};
-use photorobot_e2e::recordings::{assert_named, cli, diagnose_adding, diagnose_without_bench as diagnose};
+use photorobot_e2e::independent::Hidden;
+use photorobot_e2e::recordings::assert_named;
 use serde_json::Value;
 
-/// The lab motions recorded with `hidden`, calibrated, diagnosed without a bench; then, if
-/// motions were proposed, those recorded and the diagnosis run again. (first, second)
-fn from_recordings(hidden: Hidden, seed: u64) -> (Value, Option<Value>) {
-    let dir = tempfile::tempdir().unwrap();
-    let mut recorder = Recorder::new(seed);
-    recorder.hidden = hidden;
-    let traces = dir.path().join("recorded");
-    let (_, end_s) = recorder.write_folder(&lab_records(), &traces).unwrap();
-    let session = dir.path().join("session");
-    let (t, s) = (traces.to_str().unwrap(), session.to_str().unwrap());
-    // The calibration may refuse the fit: its session and best extrinsics are written anyway.
-    let (_, text) = cli(&["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", t, "--out", s, "--json"]);
-    assert!(session.join("extrinsics.ron").exists(), "calibrate wrote no extrinsics: {text}");
-    let first = diagnose(&session);
-    let second = first["proposed_plan_file"].is_string().then(|| {
-        let plan = Plan::load(&session.join(PROPOSED_PLAN_FILE)).unwrap();
-        let mut later = Recorder::new(seed + 100);
-        later.hidden = hidden;
-        later.start_clock_s = end_s + 60.0;
-        let added = dir.path().join("proposed");
-        later.write_folder(&records_of(&plan), &added).unwrap();
-        diagnose_adding(&session, Some(&added))
-    });
-    (first, second)
-}
+use photorobot_e2e::recordings::independent_calibrate_and_diagnose as from_recordings;
 
 /// What the recordings alone name is the hidden effect, or lists it among those it cannot be
 /// told apart from: never a different effect claimed as the only explanation.

@@ -57,3 +57,33 @@ pub fn assert_named(v: &Value, names: &[&str], value: f64, abs: bool) {
     }
     assert!((est - value).abs() <= 3.0 * sigma, "{name} = {est} ± {sigma}, hidden {value}");
 }
+
+/// Another simulator's recordings ([`crate::independent`]) of the lab motions with `hidden`,
+/// calibrated (`calibrate --bench table2-ideal --traces`; a refused fit still writes its best
+/// extrinsics) and diagnosed without a bench; then, if motions were proposed, those recorded by
+/// the same simulator later on the same clock, added, and the diagnosis run again.
+/// (first, second)
+pub fn independent_calibrate_and_diagnose(hidden: crate::independent::Hidden, seed: u64) -> (Value, Option<Value>) {
+    use crate::independent::{lab_records, records_of, Recorder};
+    use photorobot_app::cli::diagnose::PROPOSED_PLAN_FILE;
+    let dir = tempfile::tempdir().unwrap();
+    let mut recorder = Recorder::new(seed);
+    recorder.hidden = hidden;
+    let traces = dir.path().join("recorded");
+    let (_, end_s) = recorder.write_folder(&lab_records(), &traces).unwrap();
+    let session = dir.path().join("session");
+    let (t, s) = (traces.to_str().unwrap(), session.to_str().unwrap());
+    let (_, text) = cli(&["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", t, "--out", s, "--json"]);
+    assert!(session.join("extrinsics.ron").exists(), "calibrate wrote no extrinsics: {text}");
+    let first = diagnose_without_bench(&session);
+    let second = first["proposed_plan_file"].is_string().then(|| {
+        let plan = photorobot_core::plan::Plan::load(&session.join(PROPOSED_PLAN_FILE)).unwrap();
+        let mut later = Recorder::new(seed + 100);
+        later.hidden = hidden;
+        later.start_clock_s = end_s + 60.0;
+        let added = dir.path().join("proposed");
+        later.write_folder(&records_of(&plan), &added).unwrap();
+        diagnose_adding(&session, Some(&added))
+    });
+    (first, second)
+}
