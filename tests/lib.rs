@@ -79,6 +79,13 @@ pub fn library_effects_at_typical_size() -> Vec<(&'static str, f64, Vec<Effect>)
     ]
 }
 
+/// The range `A..B` given after `flag` in an example's arguments, or `default` without it.
+pub fn range_arg(args: &[String], flag: &str, default: std::ops::Range<u64>) -> std::ops::Range<u64> {
+    let Some(k) = args.iter().position(|a| a == flag) else { return default };
+    let (a, b) = args.get(k + 1).and_then(|r| r.split_once("..")).unwrap_or_else(|| panic!("{flag} A..B"));
+    a.parse().unwrap_or_else(|_| panic!("{flag} A..B"))..b.parse().unwrap_or_else(|_| panic!("{flag} A..B"))
+}
+
 pub mod independent;
 pub mod lab_files;
 pub mod lab_recordings;

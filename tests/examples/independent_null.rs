@@ -22,11 +22,7 @@ fn named(v: &Value) -> Vec<String> {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let mut seeds = 1u64..21;
-    if let Some(k) = args.iter().position(|a| a == "--seeds") {
-        let (a, b) = args.get(k + 1).and_then(|r| r.split_once("..")).expect("--seeds A..B");
-        seeds = a.parse().expect("--seeds A..B")..b.parse().expect("--seeds A..B");
-    }
+    let seeds = photorobot_e2e::range_arg(&args, "--seeds", 1..21);
     let (mut runs, mut alarms) = (0usize, 0usize);
     for seed in seeds {
         let t0 = std::time::Instant::now();

@@ -13,11 +13,7 @@ use photorobot_e2e::multi_effect::{calibrate_then_diagnose, random_effects, scor
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let mut benches = 0u64..20;
-    if let Some(k) = args.iter().position(|a| a == "--benches") {
-        let (a, b) = args.get(k + 1).and_then(|r| r.split_once("..")).expect("--benches A..B");
-        benches = a.parse().expect("--benches A..B")..b.parse().expect("--benches A..B");
-    }
+    let benches = photorobot_e2e::range_arg(&args, "--benches", 0..20);
     let (mut hidden, mut named, mut wrong, mut failed) = (0, 0, 0, 0);
     for b in benches.clone() {
         let t0 = std::time::Instant::now();

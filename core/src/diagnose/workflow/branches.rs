@@ -4,7 +4,7 @@
 //! Once an effect is named, or motions that tell the branches apart have run, every branch is
 //! tried again with the current effects, its traces analysed with its own motion hint.
 
-use super::{held_out_mask, Diagnosis};
+use super::{held_out_mask, not_held_out, Diagnosis};
 use crate::diagnose::fit::{self, Fit, ModelState};
 use crate::diagnose::motions::MotionRunner;
 use crate::diagnose::result::DiagnoseError;
@@ -42,9 +42,7 @@ impl Diagnosis {
         for k in 0..self.branches.len() {
             let state = ModelState { extrinsics: self.branches[k], ..f.state.clone() };
             let obs = self.analysed_with(runner.as_deref_mut(), &state)?.unwrap_or_else(|| self.observations.clone());
-            let mask = held_out_mask(&obs);
-            let fitted: Vec<Observation> =
-                obs.iter().zip(&mask).filter(|(_, h)| !**h).map(|(o, _)| o.clone()).collect();
+            let fitted = not_held_out(&obs, &held_out_mask(&obs));
             let Ok(nf) = fit::fit(&self.predictor, &fitted, &state, &[true; N_EXTRINSICS]) else { continue };
             let chi2 = nf.chi2() * n_now / fitted.len().max(1) as f64;
             let lowest = best.as_ref().map_or(f.chi2() - BRANCH_MARGIN_CHI2, |b| b.3);

@@ -184,8 +184,8 @@ impl Diagnosis {
     }
 
     /// Stage 4, once what the data show is named: for candidates the data cannot see at their
-    /// typical size, pool motions whose
-    /// projected signature is large, run when a bench is given (otherwise proposed).
+    /// typical size, pool motions whose projected signature is large, run when a bench is given
+    /// (otherwise proposed).
     pub(super) fn design_discriminating_motions<'r>(
         &mut self,
         runner: Option<&mut (dyn MotionRunner + 'r)>,
@@ -197,11 +197,11 @@ impl Diagnosis {
         let targets: Vec<(usize, Vec<usize>)> = (0..self.candidates.len()).map(|c| (c, vec![])).collect();
         let (pool, mut per_motion, absorbed) = self.pool_contributions(&targets)?;
         let left_out = self.leave_out(&pool, &mut per_motion, runner.as_deref().is_none_or(|r| r.tracks_fringes()))?;
-        let f_effects: Vec<String> =
-            self.fit.iter().flat_map(|f| f.state.effects.iter().map(|(c, _)| c.name.clone())).collect();
         // An effect the model holds is named, not equivalent: on the branch its naming led to,
         // the Gouy phase's signature is absorbed by the extrinsics on the data and the pool.
-        let in_model = |c: usize| f_effects.contains(&self.candidates[c].name);
+        let in_model = |c: usize| {
+            self.fit.as_ref().is_some_and(|f| f.state.effects.iter().any(|(e, _)| e.name == self.candidates[c].name))
+        };
         self.equivalent = (0..self.candidates.len())
             .filter(|&c| absorbed[c] >= EQUIVALENT_SHARE && !in_model(c))
             .map(|c| self.candidates[c].name.clone())

@@ -80,6 +80,11 @@ fn obs_rms_nm(obs: &[Observation], r: &DVector<f64>) -> f64 {
     }
 }
 
+/// The observations `held` does not hold out: the ones every fit uses.
+fn not_held_out(obs: &[Observation], held: &[bool]) -> Vec<Observation> {
+    obs.iter().zip(held).filter(|(_, h)| !**h).map(|(o, _)| o.clone()).collect()
+}
+
 /// Which observations are held out of every fit, to confirm what the fits find.
 fn held_out_mask(obs: &[Observation]) -> Vec<bool> {
     // Every fifth recorded gap-change motion (by label, in order of appearance) is held out;
@@ -233,7 +238,7 @@ impl Diagnosis {
     }
 
     fn fit_set(&self) -> Vec<Observation> {
-        self.observations.iter().zip(&self.held_out).filter(|(_, h)| !**h).map(|(o, _)| o.clone()).collect()
+        not_held_out(&self.observations, &self.held_out)
     }
 
     fn held_set(&self) -> Vec<Observation> {

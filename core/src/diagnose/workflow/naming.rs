@@ -206,21 +206,15 @@ impl Diagnosis {
         // and a joint scale error absorbed it.
         let (first_gaps, moves): (Vec<&Observation>, Vec<&Observation>) =
             self.observations.iter().partition(|o| matches!(o.kind, ObservationKind::AbsoluteGap { .. }));
-        let designed = moves.into_iter().filter(|o| o.label.starts_with(DISCRIMINATING_PREFIX));
-        let mut obs = if self.session_traces.is_empty() {
-            self.observations
-                .iter()
-                .filter(|o| {
-                    !matches!(o.kind, ObservationKind::AbsoluteGap { .. })
-                        && !o.label.starts_with(DISCRIMINATING_PREFIX)
-                })
-                .cloned()
-                .collect()
+        let (recorded, designed): (Vec<&Observation>, Vec<&Observation>) =
+            moves.into_iter().partition(|o| !o.label.starts_with(DISCRIMINATING_PREFIX));
+        let mut obs: Vec<Observation> = if self.session_traces.is_empty() {
+            recorded.into_iter().cloned().collect()
         } else {
             use crate::identify::measurements::observations_from_traces;
             observations_from_traces(&self.session_traces, &analysis, &REANALYSE_OPTIONS).observations
         };
-        obs.extend(again.unwrap_or_else(|| designed.cloned().collect()));
+        obs.extend(again.unwrap_or_else(|| designed.into_iter().cloned().collect()));
         obs.retain(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0);
         obs.extend(first_gaps.into_iter().cloned());
         self.predictor.extend(&obs).map_err(DiagnoseError::Model)?;
