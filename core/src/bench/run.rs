@@ -92,6 +92,7 @@ pub fn run_plan_with(
             bench: bench.name(),
             irradiance_unit: "mW".into(),
             notes: format!("plan {}, segment {} of {}", plan.name, i + 1, count),
+            wavelength_scale_sigma_ppm: 0.0,
         };
         match bench.run_segment(seg, meta, control) {
             Ok(trace) => {

@@ -247,6 +247,14 @@ pub struct SweepSeed {
     peak_fsr: Option<GapEstimate>,
 }
 
+/// `estimate` (a gap from sweep `trace`) with the sweep's scale uncertainty added to its σ: a
+/// sweep timed by a wavelength monitor knows its speed only to the monitor line's slope, and the
+/// gap is off by the same fraction (30 ppm, 27 nm at 900 µm, on the E-712's 16-bit input).
+pub fn with_scale_sigma(trace: &Trace, estimate: GapEstimate) -> GapEstimate {
+    let scale_um = estimate.gap_um.abs() * trace.meta.wavelength_scale_sigma_ppm * 1e-6;
+    GapEstimate { sigma_um: estimate.sigma_um.hypot(scale_um), ..estimate }
+}
+
 /// The sweep fit's configuration for a model: its air index and the fiber's mode field (Gouy).
 fn sweep_config(model: &PhaseModel) -> SweepConfig {
     SweepConfig { n_air: model.n_air, gouy_waist_nm: Some(model.optics.mode_field_radius_um * 1e3) }
@@ -259,8 +267,9 @@ pub fn sweep_seed(trace: &Trace, model: &PhaseModel) -> Result<SweepSeed, Measur
         return Err(MeasureError::Trace { label: label(), problem: "no samples".into() });
     }
     let cfg = sweep_config(model);
-    let fit = sweep::fit_gap(&trace.wavelength_nm, &trace.irradiance, &cfg)
+    let mut fit = sweep::fit_gap(&trace.wavelength_nm, &trace.irradiance, &cfg)
         .map_err(|source| MeasureError::Sweep { label: label(), source })?;
+    fit.estimate = with_scale_sigma(trace, fit.estimate);
     let peak_fsr = sweep::peak_fsr_gap(&trace.wavelength_nm, &trace.irradiance, model.n_air).ok();
     Ok(SweepSeed { cfg, fit, peak_fsr })
 }
@@ -278,6 +287,7 @@ pub fn analyse_sweep(trace: &Trace, model: &PhaseModel, seed: Option<&SweepSeed>
         }
     };
     let gap = refine_gap_full_model(&trace.wavelength_nm, &trace.irradiance, trace.joints_display(0), model, &seed.fit)
+        .map(|g| with_scale_sigma(trace, g))
         .map_err(|problem| MeasureError::Trace { label: trace.meta.label.clone(), problem })?;
     Ok(Measurement::Sweep(SweepMeasurement { gap, fit: seed.fit.clone(), peak_fsr: seed.peak_fsr }))
 }
@@ -290,6 +300,7 @@ pub fn sweep_gap_along_beam(trace: &Trace, model: &PhaseModel, tilt_rad: f64) ->
     let seed = sweep_seed(trace, model)?;
     let perpendicular =
         sweep::full_model::refine_gap_at_tilt(&trace.wavelength_nm, &trace.irradiance, tilt_rad, model, &seed.fit)
+            .map(|g| with_scale_sigma(trace, g))
             .map_err(|problem| MeasureError::Trace { label: trace.meta.label.clone(), problem })?;
     // The fit pins g·(1 − θ²/2); the gap along the beam is g.
     let along = 1.0 - tilt_rad * tilt_rad / 2.0;

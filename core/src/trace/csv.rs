@@ -150,6 +150,9 @@ impl Trace {
         ] {
             let _ = writeln!(lines, "# {key}: {}", escape_meta(value));
         }
+        if m.wavelength_scale_sigma_ppm > 0.0 {
+            let _ = writeln!(lines, "# wavelength_scale_sigma_ppm: {}", m.wavelength_scale_sigma_ppm);
+        }
         lines
     }
 

@@ -11,6 +11,7 @@
 //! # bench: table2-ideal
 //! # irradiance_unit: normalised
 //! # notes: free text; newlines are written as \n, backslashes as \\
+//! # wavelength_scale_sigma_ppm: 31.5   (sweeps timed by a wavelength monitor; absent when 0)
 //! t_s,q1_um,q2_um,q3_um,q4_deg,q5_deg,q6_deg,wavelength_nm,irradiance,temperature_C
 //! 0.0,-150.0,0.0,-150.0,0.0,0.0,0.0,1560.0,0.4132,21.5
 //! ```
@@ -110,6 +111,11 @@ pub struct TraceMeta {
     pub irradiance_unit: String,
     /// Free text. Default "".
     pub notes: String,
+    /// A sweep's wavelength scale uncertainty (ppm, 1σ): how well its time base (a wavelength
+    /// monitor fitted with a line) knows the sweep's speed. Every gap the sweep gives carries this
+    /// fraction of itself on top of its fit's σ. 0 (the default, not written) when the
+    /// wavelengths are exact or the source does not say.
+    pub wavelength_scale_sigma_ppm: f64,
 }
 
 impl Default for TraceMeta {
@@ -120,6 +126,7 @@ impl Default for TraceMeta {
             bench: String::new(),
             irradiance_unit: "normalised".into(),
             notes: String::new(),
+            wavelength_scale_sigma_ppm: 0.0,
         }
     }
 }

@@ -202,6 +202,18 @@ pub(super) fn read_meta<R: BufRead>(
             "bench" => meta.bench = value,
             "irradiance_unit" => meta.irradiance_unit = value,
             "notes" => meta.notes = value,
+            "wavelength_scale_sigma_ppm" => {
+                meta.wavelength_scale_sigma_ppm =
+                    value.trim().parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0).ok_or_else(|| {
+                        TraceError::BadMeta {
+                            file: file.to_path_buf(),
+                            line: lines,
+                            key: "wavelength_scale_sigma_ppm".into(),
+                            expected: "a finite non-negative number (ppm)".into(),
+                            found: value.clone(),
+                        }
+                    })?
+            }
             "kind" => {
                 meta.kind = TraceKind::parse(&value).ok_or_else(|| TraceError::BadMeta {
                     file: file.to_path_buf(),

@@ -18,6 +18,7 @@ fn awkward_trace() -> Trace {
         bench: "femto-lab (virtual)".into(),
         irradiance_unit: "V".into(),
         notes: "line one\nline two with C:\\path\\n and a trailing space ".into(),
+        wavelength_scale_sigma_ppm: 31.25,
     };
     let mut t = Trace::with_capacity(meta, 8);
     t.extra = vec![
@@ -246,6 +247,11 @@ fn bad_metadata_and_empty_traces_name_file_line_and_expectation() {
             "bad kind",
             format!("# kind: Wobble\n{valid}"),
             vec!["bad.csv:1: metadata `kind`: expected Motion, WavelengthSweep or Static, found `Wobble`"],
+        ),
+        (
+            "negative wavelength scale σ",
+            format!("# wavelength_scale_sigma_ppm: -3\n{valid}"),
+            vec!["bad.csv:1: metadata `wavelength_scale_sigma_ppm`: expected a finite non-negative number (ppm), found `-3`"],
         ),
         (
             "future version",

@@ -20,7 +20,8 @@ use crate::measure::model_free::{
     count_fringes, dither_envelope, dither_envelope_where, gap_bounds, unwrap_gap_nm, Envelope, FringeCount, GapBounds,
     PathForm, PathShape,
 };
-use crate::measure::sweep::{fit_gap, SweepConfig};
+use crate::measure::sweep::{fit_gap, SweepConfig, SweepFit};
+use crate::measure::with_scale_sigma;
 use crate::model::optics::FabryPerot;
 use crate::model::phase::PhaseModel;
 use crate::trace::Trace;
@@ -617,10 +618,10 @@ fn sweep_gaps(inp: &Inputs<'_>, tracked: &[f64], s: usize) -> Vec<SweepGap> {
         .filter_map(|(k, p)| {
             let sweep = p.sweep.as_ref()?;
             let tracked_change_nm = tracked.get(p.sample.saturating_sub(s)).copied().unwrap_or(0.0);
-            let fit = sweep
-                .as_ref()
-                .map_err(Clone::clone)
-                .and_then(|t| fit_gap(&t.wavelength_nm, &t.irradiance, &cfg).map_err(|e| e.to_string()));
+            let fit = sweep.as_ref().map_err(Clone::clone).and_then(|t| {
+                let fit = fit_gap(&t.wavelength_nm, &t.irradiance, &cfg).map_err(|e| e.to_string())?;
+                Ok(SweepFit { estimate: with_scale_sigma(t, fit.estimate), ..fit })
+            });
             let pose = match fit {
                 Ok(f) => PoseGap {
                     pose: k,

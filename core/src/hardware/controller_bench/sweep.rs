@@ -97,6 +97,7 @@ impl ControllerBench {
         let timed = timed.map_err(|problem| HwError::Usage { controller: self.laser.name(), problem })?;
         keep_range(&mut a.trace, timed.first, timed.wavelengths_nm.len());
         a.trace.wavelength_nm = timed.wavelengths_nm;
+        a.trace.meta.wavelength_scale_sigma_ppm = timed.scale_sigma_ppm;
         Ok(())
     }
 }

@@ -13,6 +13,10 @@ pub struct SweepSamples {
     pub first: usize,
     /// The wavelength of samples `first..first + wavelengths_nm.len()` (nm), strictly monotonic.
     pub wavelengths_nm: Vec<f64>,
+    /// The relative uncertainty (ppm, 1σ) of the sweep's scale these wavelengths carry: the
+    /// speed a monitor's line gives is known to its slope's σ, and a gap from the sweep is off by
+    /// the same fraction (0 from the laser's own log).
+    pub scale_sigma_ppm: f64,
 }
 
 /// Fewest samples the monitor must see in the middle of the sweep.
@@ -20,8 +24,9 @@ const MIN_CENTRAL_SAMPLES: usize = 16;
 /// How far the monitor's speed may differ from the speed the laser reads back (fraction).
 const SPEED_TOLERANCE: f64 = 0.05;
 
-/// Least-squares line `p = a + b·t` through `(t, p)`, centred for conditioning: (a, b).
-fn fit_line(t: &[f64], p: &[f64]) -> (f64, f64) {
+/// Least-squares line `p = a + b·t` through `(t, p)`, centred for conditioning: (a, b), and
+/// Σ(t - t̄)² (the slope's σ is the residual's over its root).
+fn fit_line(t: &[f64], p: &[f64]) -> ((f64, f64), f64) {
     let n = t.len() as f64;
     let (tm, pm) = (t.iter().sum::<f64>() / n, p.iter().sum::<f64>() / n);
     let (mut stt, mut stp) = (0.0, 0.0);
@@ -30,7 +35,7 @@ fn fit_line(t: &[f64], p: &[f64]) -> (f64, f64) {
         stp += (ti - tm) * (pi - pm);
     }
     let b = if stt > 0.0 { stp / stt } else { 0.0 };
-    (pm - b * tm, b)
+    ((pm - b * tm, b), stt)
 }
 
 /// The wavelengths from the monitor readings `monitor_nm` taken at `t_s`: in the middle of the
@@ -39,7 +44,9 @@ fn fit_line(t: &[f64], p: &[f64]) -> (f64, f64) {
 /// quantisation; the line is followed outward while the readings stay on it (within 6σ of its
 /// residual), which leaves out the run-up, the run-out and the rest before and after. Each kept
 /// sample gets the line's wavelength, or, with the laser's log, the logged wavelength at the
-/// line's position along the sweep (the log's points are evenly spaced in the sweep). A recording
+/// line's position along the sweep (the log's points are evenly spaced in the sweep). The line's
+/// slope is known only to its σ from the readings' scatter: that fraction of the sweep's scale is
+/// returned, as every gap measured from the sweep is off by it. A recording
 /// that ends while the readings are still on the line, short of the stop, lost the sweep's end:
 /// refused, not taken for a shorter sweep.
 pub fn from_monitor(
@@ -71,15 +78,19 @@ pub fn from_monitor(
         (idx.iter().map(|&k| (progress[k] - a - b * t_s[k]).powi(2)).sum::<f64>() / idx.len() as f64).sqrt()
     };
     // One pass dropping outliers (a glitch of the input), then the line of the rest.
-    let first = line_of(&central);
+    let (first, _) = line_of(&central);
     let sigma = rms(&central, first);
     let kept: Vec<usize> = central
         .iter()
         .copied()
         .filter(|&k| (progress[k] - first.0 - first.1 * t_s[k]).abs() <= 5.0 * sigma.max(1e-9))
         .collect();
-    let (a, b) = line_of(if kept.len() >= MIN_CENTRAL_SAMPLES { &kept } else { &central });
-    let sigma = rms(&kept, (a, b));
+    let used = if kept.len() >= MIN_CENTRAL_SAMPLES { &kept } else { &central };
+    let ((a, b), stt) = line_of(used);
+    let sigma = rms(used, (a, b));
+    // The slope's σ from the readings' scatter about the line (two parameters fitted).
+    let dof = (used.len() as f64 - 2.0).max(1.0);
+    let slope_sigma = sigma * (used.len() as f64 / dof).sqrt() / stt.max(f64::MIN_POSITIVE).sqrt();
     if (b - setup.rate_nm_per_s).abs() > SPEED_TOLERANCE * setup.rate_nm_per_s {
         return Err(format!(
             "the wavelength monitor sees the sweep run at {b:.4} nm/s, the laser reads back {:.4} nm/s: check the monitor's scale (nm per input unit)",
@@ -116,7 +127,7 @@ pub fn from_monitor(
             }
         })
         .collect();
-    Ok(SweepSamples { first: lo, wavelengths_nm })
+    Ok(SweepSamples { first: lo, wavelengths_nm, scale_sigma_ppm: 1e6 * slope_sigma / b.abs() })
 }
 
 /// The wavelengths of a recording the laser's trigger output started at its first logged point:
@@ -129,7 +140,7 @@ pub fn from_trigger(samples: usize, dt_s: f64, log: &LambdaLog) -> Result<SweepS
     let end_s = log.duration_s();
     let n = ((end_s / dt_s).floor() as usize + 1).min(samples);
     let wavelengths_nm = (0..n).map(|k| log.wavelength_at(k as f64 * dt_s).unwrap_or(log.from_nm)).collect();
-    Ok(SweepSamples { first: 0, wavelengths_nm })
+    Ok(SweepSamples { first: 0, wavelengths_nm, scale_sigma_ppm: 0.0 })
 }
 
 #[cfg(test)]
@@ -195,6 +206,27 @@ mod tests {
         assert!(e.contains("before the sweep's stop"), "{e}");
         // A monitor that sees nothing is refused.
         assert!(from_monitor(&t, &vec![1550.0; t.len()], &setup(), None).unwrap_err().contains("is it wired"));
+    }
+
+    /// The scale σ the monitor's line reports is the scatter of the speed it times, over many
+    /// monitors' noise (the oracle: the truth's 10 nm/s).
+    #[test]
+    fn the_scale_sigma_is_the_scatter_of_the_timed_speed() {
+        let dt = 5e-4;
+        let t: Vec<f64> = (0..600).map(|k| k as f64 * dt).collect();
+        let (mut errs, mut sigmas) = (Vec::new(), Vec::new());
+        for seed in 0..200 {
+            let mut rng = StdRng::seed_from_u64(100 + seed);
+            let m: Vec<f64> = t.iter().map(|&t| truth(t) + rng.random_range(-0.01..0.01)).collect();
+            let got = from_monitor(&t, &m, &setup(), None).unwrap();
+            let (w, n) = (&got.wavelengths_nm, got.wavelengths_nm.len());
+            let speed = (w[n - 1] - w[0]) / (t[got.first + n - 1] - t[got.first]);
+            errs.push(1e6 * (speed / 10.0 - 1.0));
+            sigmas.push(got.scale_sigma_ppm);
+        }
+        let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+        let sigma = sigmas.iter().sum::<f64>() / sigmas.len() as f64;
+        assert!(rms > 0.8 * sigma && rms < 1.25 * sigma, "speed scatter {rms:.1} ppm, reported {sigma:.1} ppm");
     }
 
     #[test]

@@ -109,7 +109,12 @@ pub struct LocalEmulators {
     nominal_nm: f64,
     pi_name: String,
     mcs_name: String,
+    tap: JointTap,
 }
+
+/// The true joints (display units) the photodiode saw at each emulated time it was sampled, while
+/// a test or an example asks for them: the reference a recording's joints are checked against.
+pub type JointTap = Arc<Mutex<Option<Vec<(f64, [f64; 6])>>>>;
 
 impl LocalEmulators {
     /// [`LocalEmulators::start_with`], realistic.
@@ -175,6 +180,8 @@ impl LocalEmulators {
         let sigma = optics.white_noise_sigma_mw();
         let (pi_axes, mcs_axes, l) = (pi.axes(), mcs.axes(), laser.clone());
         let rng = Mutex::new(StdRng::seed_from_u64(seed));
+        let tap: JointTap = Arc::new(Mutex::new(None));
+        let seen = tap.clone();
         pi.set_photodiode(Arc::new(move |t| {
             let p: Vec<f64> = pi_axes.lock().map(|a| a.iter().map(|a| a.position_at(t)).collect()).unwrap_or_default();
             let m: Vec<f64> = mcs_axes
@@ -186,6 +193,9 @@ impl LocalEmulators {
                 let at = if w.on_pi { p.get(w.index) } else { m.get(w.index) };
                 at.map_or(f64::NAN, |v| (v - w.zero) * w.sign)
             });
+            if let Some(log) = seen.lock().unwrap_or_else(|e| e.into_inner()).as_mut() {
+                log.push((t, q));
+            }
             let noise: f64 = StandardNormal.sample(&mut *rng.lock().unwrap_or_else(|e| e.into_inner()));
             let mw = optics.reflected_power_mw(t, &q, l.wavelength_at(t)).unwrap_or(f64::NAN) + sigma * noise;
             mw * PHOTODIODE_V_PER_MW
@@ -198,12 +208,19 @@ impl LocalEmulators {
             let l = laser.clone();
             pi.set_digital_input(line, Arc::new(move |t| l.trigger_edge_after(t)));
         }
-        Ok(LocalEmulators { pi, mcs, laser, clock, nominal_nm, pi_name, mcs_name })
+        Ok(LocalEmulators { pi, mcs, laser, clock, nominal_nm, pi_name, mcs_name, tap })
     }
 
     /// (controller name, host:port) of both emulators.
     pub fn addresses(&self) -> Vec<(String, String)> {
         vec![(self.pi_name.clone(), self.pi.addr().to_string()), (self.mcs_name.clone(), self.mcs.addr().to_string())]
+    }
+
+    /// Start keeping the true joints at each photodiode sample ([`JointTap`]), or stop and take
+    /// what was kept.
+    pub fn tap_joints(&self, on: bool) -> Vec<(f64, [f64; 6])> {
+        let mut tap = self.tap.lock().unwrap_or_else(|e| e.into_inner());
+        std::mem::replace(&mut *tap, on.then(Vec::new)).unwrap_or_default()
     }
 
     /// The emulated laser, for a [`crate::hardware::ControllerBench`] on these emulators.

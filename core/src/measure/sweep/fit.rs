@@ -266,9 +266,22 @@ fn fit_outcome(
 }
 
 /// Pseudo-inverse of a symmetric positive semi-definite matrix by eigen-decomposition
-/// (stays defined when the Jacobian is rank-deficient).
+/// (stays defined when the Jacobian is rank-deficient), on the matrix scaled to unit diagonal:
+/// the parameters' units differ by orders of magnitude (the gap's column is the amplitude times
+/// 2nk, 10⁻⁵ at a tilted pose's contrast, against 1 for the offset), and a threshold on the
+/// unscaled eigenvalues dropped the gap's direction once decorrelated from the phase, which
+/// made its σ zero.
 fn pseudo_inverse_sym(m: &SMatrix<f64, 6, 6>) -> SMatrix<f64, 6, 6> {
-    let eig = m.symmetric_eigen();
+    let d = SVector::<f64, 6>::from_fn(|i, _| {
+        let v = m[(i, i)];
+        if v > 0.0 && v.is_finite() {
+            1.0 / v.sqrt()
+        } else {
+            0.0
+        }
+    });
+    let scaled = SMatrix::<f64, 6, 6>::from_fn(|r, c| m[(r, c)] * d[r] * d[c]);
+    let eig = scaled.symmetric_eigen();
     let emax = eig.eigenvalues.iter().fold(0f64, |a, &e| a.max(e.abs()));
     let mut inv = SMatrix::<f64, 6, 6>::zeros();
     for i in 0..6 {
@@ -278,5 +291,5 @@ fn pseudo_inverse_sym(m: &SMatrix<f64, 6, 6>) -> SMatrix<f64, 6, 6> {
             inv += v * v.transpose() / e;
         }
     }
-    inv
+    SMatrix::<f64, 6, 6>::from_fn(|r, c| inv[(r, c)] * d[r] * d[c])
 }

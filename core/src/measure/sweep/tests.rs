@@ -88,6 +88,37 @@ fn reported_sigma_is_of_the_order_of_the_crlb_and_of_the_scatter() {
     assert!(rms > 0.5 * mean_sigma && rms < 1.6 * mean_sigma, "rms {rms} vs σ {mean_sigma}");
 }
 
+/// A weak fringe on a strong offset (a tilted lamella: amplitude 0.4 % of the offset, as at the
+/// start of a validation rotation): the gap's σ is still the scatter's, not zero. The gap's
+/// column is the amplitude times 2nk, ten thousand times smaller than the offset's, and once
+/// decorrelated from the phase its eigenvalue fell under a threshold set on the unscaled JᵀJ.
+#[test]
+fn a_weak_fringe_on_a_strong_offset_keeps_an_honest_sigma() {
+    let wl: Vec<f64> = (0..2000).map(|i| CENTER - 10.0 + 20.0 * i as f64 / 1999.0).collect();
+    let (mut errs, mut sigmas) = (Vec::new(), Vec::new());
+    for seed in 0..24u64 {
+        let sig = TwoBeamSweep {
+            gap_nm: 897.4e3,
+            n_air: N_AIR,
+            offset: 1.0,
+            offset_slope_per_nm: 0.0,
+            center_nm: CENTER,
+            amplitude: 0.004,
+            phase_rad: 0.3 * seed as f64,
+            gouy_waist_nm: Some(W0),
+            noise_sigma: 1.7e-5,
+        };
+        let y = sig.render(&wl, &mut StdRng::seed_from_u64(2000 + seed)).unwrap();
+        let fit = fit_gap(&wl, &y, &cfg()).unwrap();
+        errs.push((fit.estimate.gap_um - 897.4) * 1e3);
+        sigmas.push(fit.estimate.sigma_um * 1e3);
+    }
+    let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+    let mean_sigma = sigmas.iter().sum::<f64>() / sigmas.len() as f64;
+    eprintln!("amplitude 0.4 %: mean σ {mean_sigma:.2} nm, rms error {rms:.2} nm");
+    assert!(rms > 0.5 * mean_sigma && rms < 1.6 * mean_sigma, "rms {rms} nm vs σ {mean_sigma} nm");
+}
+
 #[test]
 fn fft_seed_is_biased_with_few_fringes_and_the_fit_removes_the_bias() {
     let (wl, y) = sweep(50e3, 1e-3, 1.0, 7);
