@@ -263,6 +263,46 @@ fn diagnose_reports_hidden_effects_the_traces_cannot_show() {
     }
 }
 
+/// Two effects whose signatures cancel on the designed plan's motions: a q5 pivot of -17.2 µm
+/// along X_w and a q5 zero offset of -0.060° (a random bench of the multi-effect report). The
+/// residual stays at the floor and nothing can be named; the result must not read as "nothing
+/// there" for both: the pair is listed as one these data cannot tell apart, and the text says
+/// the pair is left open.
+#[test]
+fn two_effects_that_cancel_are_listed_as_a_pair_the_data_cannot_tell_apart() {
+    use photorobot_core::model::effects::Effect;
+    let dir = tempfile::tempdir().unwrap();
+    let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
+    preset.name = "q5 pivot and zero offset that cancel".into();
+    preset.effects = vec![
+        Effect::PivotOffset { joint: "q5".into(), offset_world_um: [-17.155, 0.0, 0.0] },
+        Effect::JointZeroOffset { joint: "q5".into(), offset: -0.05987 },
+    ];
+    let file = dir.path().join("bench.ron");
+    save_ron(&file, &preset).unwrap();
+    let run =
+        photorobot_e2e::multi_effect::calibrate_then_diagnose(&file, 20, &["--plan", "optimised"], dir.path()).unwrap();
+    let v = &run.diagnosis;
+    assert_eq!(v["verdict"], "none", "{v}");
+    let pair = v["cancelling_pairs"].as_array().unwrap().iter().find(|p| {
+        let names: Vec<&str> = p.as_array().unwrap().iter().filter_map(|n| n.as_str()).collect();
+        names.contains(&"pivot offset q5 along X_w") && names.contains(&"joint zero offset q5")
+    });
+    assert!(pair.is_some(), "the cancelling pair is not listed: {}", v["cancelling_pairs"]);
+    let session = dir.path().join("session");
+    let text = photorobot_e2e::multi_effect::cli(&[
+        "photorobot",
+        "diagnose",
+        session.to_str().unwrap(),
+        "--bench",
+        file.to_str().unwrap(),
+        "--seed",
+        "120",
+    ])
+    .unwrap();
+    assert!(text.contains("joint zero offset q5 ↔ pivot offset q5 along X_w"), "{text}");
+}
+
 #[test]
 fn diagnose_on_a_folder_without_traces_says_what_it_expected() {
     let dir = tempfile::tempdir().unwrap();

@@ -24,9 +24,11 @@ fn wrong_extrinsics_are_caught_on_emulated_controllers() {
     let (code, doc) = run_validate(&bench, &preset.truth, 17, &[], dir.path());
     assert_eq!(check_against_truth("truth over TCP", &preset.truth, &doc, false), Vec::<String>::new());
     // The circle and the rotation about the beam confirmed within target. The rotations about
-    // X_f and Z_f read 7-16 nm over TCP along a curve that leaves 7-15 nm about a smooth path in
-    // the angle, and say so (contradicted): what moves the gap between their waypoints on the
-    // controllers is not found yet.
+    // X_f and Z_f track within 1-9 nm over TCP, their curve 0.7-1.0 nm about a smooth path in the
+    // angle now that the wrist's polled joints are fitted ramps (interpolated between late polls
+    // they left 3-5 nm and were contradicted in most runs). Their model-free reading sits at its
+    // floor (77-80 nm under the tracked gap on the virtual bench, floor 84 nm), a few nm above it
+    // in some runs over TCP: then contradicted, so they are not asserted here.
     let rows = motions(&doc);
     for m in [ValidationMotion::Circle, ValidationMotion::RotationOpticalAxis] {
         let row = rows.iter().find(|r| r.0 == m.name()).unwrap();

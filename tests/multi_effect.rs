@@ -170,10 +170,20 @@ fn reported_as(v: &Value, scalars: &[HiddenScalar]) -> String {
         let partial =
             v["partial"].as_array().into_iter().flatten().any(|p| p["name"].as_str() == Some(h.name.as_str()));
         let wrong_size = named(v).iter().any(|n| n.name == h.name);
+        let paired = v["cancelling_pairs"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|p| p.as_array())
+            .find(|p| p.iter().any(|n| n.as_str() == Some(h.name.as_str())));
         let why = match lists.iter().find(|f| holds(f)) {
             Some(f) => (*f).to_string(),
             None if wrong_size => "named, beyond 3σ of its value".into(),
             None if partial => "tried (partial)".into(),
+            None if paired.is_some() => format!(
+                "cancelling pair ({})",
+                paired.into_iter().flatten().filter_map(|n| n.as_str()).collect::<Vec<_>>().join(" ↔ ")
+            ),
             None => "not reported".into(),
         };
         out.push(format!("{}: {why}", h.name));

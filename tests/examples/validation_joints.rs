@@ -72,6 +72,8 @@ fn main() {
             rows.push((t, g_true, g_rec, f.variation_nm[i - f.motion_start]));
         }
         let e = &f.evidence;
+        let (imin, imax) = tr.irradiance.iter().fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        println!("  irradiance {imin:.5} .. {imax:.5} {}", tr.meta.irradiance_unit);
         println!("  {}", e.summary());
         println!(
             "  model-free {:?} (gap {:?}, alt {:?}, floor {:?}), tilt from contrast {:?} ± {:?}, sweeps {:?} ± {:?}",

@@ -149,8 +149,14 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
             Some(file) => print_proposed_plan(file, &a.session, out)?,
             None if result.settled => writeln!(
                 out,
-                "settled: no discriminating motion that these data lack would tell more (the candidates are named, \
-                 ruled out at their typical size, equivalent to an extrinsic change, or too small for any motion)"
+                "settled: no discriminating motion that these data lack would tell more of a single candidate (each \
+                 is named, ruled out at its typical size, equivalent to an extrinsic change, or too small for any \
+                 motion){}",
+                if result.cancelling_pairs.is_empty() {
+                    ""
+                } else {
+                    "; the pairs above are left open: no motion is designed to separate them"
+                }
             )?,
             None => {}
         }
@@ -364,6 +370,14 @@ fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()>
             "not detectable at typical size on the data and motions available ({}): {}",
             r.not_detectable.len(),
             r.not_detectable.join(", ")
+        )?;
+    }
+    if !r.cancelling_pairs.is_empty() {
+        let pairs: Vec<String> = r.cancelling_pairs.iter().map(|[a, b]| format!("{a} ↔ {b}")).collect();
+        writeln!(
+            out,
+            "pairs these data cannot tell apart (sizes that cancel would show nothing): {}",
+            pairs.join("; ")
         )?;
     }
     if !r.not_seen.is_empty() {

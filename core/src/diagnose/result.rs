@@ -90,6 +90,12 @@ pub struct DiagnosisResult {
     /// candidates a named effect cannot be told from: those are in its `ambiguous_with`.
     #[serde(default)]
     pub not_detectable: Vec<String>,
+    /// Pairs of candidates each detectable alone whose signatures, once the extrinsics are
+    /// projected out, are nearly collinear on these data (|cos| above
+    /// [`crate::diagnose::scoring::AMBIGUITY_COSINE`]): sizes of the two that cancel leave the residual at
+    /// the floor, so "none" does not rule out both. Not a named effect's `ambiguous_with`.
+    #[serde(default)]
+    pub cancelling_pairs: Vec<[String; 2]>,
     /// Candidates that no observation can see at any size, never named: those no observation
     /// or pool motion depends on (dropped at the baseline), and, on observations from traces,
     /// the fringe nonlinearity, which the fringe analysis removes (it fits the fringe's

@@ -263,6 +263,22 @@ impl Trace {
         }
     }
 
+    /// Joint `j`'s column (0..6: q1..q6, display units), to write.
+    ///
+    /// # Panics
+    /// If `j >= 6`.
+    pub fn joint_column_mut(&mut self, j: usize) -> &mut Vec<f64> {
+        match j {
+            0 => &mut self.q1_um,
+            1 => &mut self.q2_um,
+            2 => &mut self.q3_um,
+            3 => &mut self.q4_deg,
+            4 => &mut self.q5_deg,
+            5 => &mut self.q6_deg,
+            _ => panic!("joint index {j} out of range: a trace has joints 0..6 (q1..q6)"),
+        }
+    }
+
     /// The required columns in header order (name, values).
     pub fn required_columns(&self) -> [(&'static str, &[f64]); 9] {
         [

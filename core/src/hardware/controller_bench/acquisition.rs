@@ -290,6 +290,7 @@ impl ControllerBench {
         // Rows read while the loop had not yet noticed the end belong to no segment.
         let keep = a.trace.t_s.partition_point(|&t| t <= end + 1e-9);
         keep_range(&mut a.trace, 0, keep);
+        refit_polled_ramps(a, seg);
         self.log_recording(a);
         self.check_recorded_end(a, seg)
     }
@@ -390,6 +391,75 @@ pub(super) fn keep_range(t: &mut Trace, first: usize, len: usize) {
     }
 }
 
+/// A polled joint's move as a ramp: `q = a + b·t` clamped between the move's ends (display
+/// units, bench time in s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Ramp {
+    a: f64,
+    b: f64,
+    lo: f64,
+    hi: f64,
+}
+
+impl Ramp {
+    fn at(&self, t: f64) -> f64 {
+        (self.a + self.b * t).clamp(self.lo, self.hi)
+    }
+}
+
+/// Fewest polls in the middle of a move for its ramp to replace the interpolation.
+const MIN_RAMP_POLLS: usize = 8;
+
+/// Joint `j`'s move from `from` to `to` as a ramp, fitted by least squares to the polls in the
+/// middle 90 % of its travel; `None` when it does not move or too few polls fall there. A wrist
+/// stage with its acceleration control off runs a move at its set speed (`:SCLA<ch>,0`, MCS
+/// manual), so each poll's position is the ramp at the time it was read; a poll stamped when its
+/// request was sent but read later (a busy host: up to the 2 ms a poll may take) is off by the
+/// speed times that delay, and between two such polls the interpolation follows the error (1-5
+/// mdeg on a goniometer at 2°/s, 3-8 nm of a rotation's gap correction). The fit averages it
+/// over every poll of the move.
+fn ramp_fit(polls: &[Poll], j: usize, from: f64, to: f64) -> Option<Ramp> {
+    let travel = to - from;
+    if travel.abs() < 1e-9 {
+        return None;
+    }
+    let inside = |q: f64| {
+        let u = (q - from) / travel;
+        (0.05..=0.95).contains(&u)
+    };
+    let pts: Vec<(f64, f64)> = polls.iter().filter(|p| inside(p.q[j])).map(|p| (p.t_s[j], p.q[j])).collect();
+    if pts.len() < MIN_RAMP_POLLS {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let (tm, qm) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+    let stt: f64 = pts.iter().map(|p| (p.0 - tm).powi(2)).sum();
+    let stq: f64 = pts.iter().map(|p| (p.0 - tm) * (p.1 - qm)).sum();
+    if stt <= 0.0 {
+        return None;
+    }
+    let b = stq / stt;
+    // It rests at the commanded ends: a closed-loop stage holds its target within its
+    // tolerance, which `check_arrival` holds it to.
+    Some(Ramp { a: qm - b * tm, b, lo: from.min(to), hi: from.max(to) })
+}
+
+/// A finished move's polled joints on their fitted ramps ([`ramp_fit`]) instead of the
+/// interpolation between polls; a joint that did not move, or moved with too few polls, keeps it.
+fn refit_polled_ramps(a: &mut Acquisition, seg: &TimedSegment) {
+    if !matches!(seg.motion, TimedMotion::Move { .. }) {
+        return;
+    }
+    for j in (0..6).filter(|j| !a.recorded_joints.contains(j)) {
+        if let Some(r) = ramp_fit(&a.polls, j, seg.from_display[j], seg.to_display[j]) {
+            let t = a.trace.t_s.clone();
+            for (q, t) in a.trace.joint_column_mut(j).iter_mut().zip(t) {
+                *q = r.at(t);
+            }
+        }
+    }
+}
+
 /// Joint `j` at bench time `t` (s): linear between the polls that bracket it, clamped at the ends;
 /// `None` without a poll.
 fn interpolate(polls: &[Poll], j: usize, t: f64) -> Option<f64> {
@@ -418,6 +488,35 @@ mod tests {
         assert_eq!(t.wavelength_nm, [1550.0, 1550.5, 1551.0, 1551.5, 1552.0]);
         assert_eq!(t.irradiance, [2.0, 3.0, 4.0, 5.0, 6.0]);
         assert_eq!(t.q6_deg, [2.0, 3.0, 4.0, 5.0, 6.0]);
+    }
+
+    /// A move's polls read late by random delays (a busy host): the fitted ramp is far closer to
+    /// the truth than the interpolation between them, and rests at the move's ends.
+    #[test]
+    fn a_polled_move_is_a_ramp_fitted_through_its_late_polls() {
+        use rand::{rngs::StdRng, Rng, SeedableRng};
+        let mut rng = StdRng::seed_from_u64(4);
+        // q5 from 0 to 0.5° at 2°/s, starting at 10 ms; polls every 2 ms, read 0-2 ms late.
+        let truth = |t: f64| (2.0 * (t - 0.010)).clamp(0.0, 0.5);
+        let polls: Vec<Poll> = (0..150)
+            .map(|k| {
+                let sent = k as f64 * 2e-3;
+                let read = sent + rng.random_range(0.0..2e-3);
+                Poll { t_s: [sent; 6], q: std::array::from_fn(|j| if j == 4 { truth(read) } else { 0.0 }) }
+            })
+            .collect();
+        let ramp = ramp_fit(&polls, 4, 0.0, 0.5).unwrap();
+        let (mut worst_ramp, mut worst_interp) = (0f64, 0f64);
+        for i in 0..3000 {
+            let t = i as f64 * 1e-4;
+            worst_ramp = worst_ramp.max((ramp.at(t) - truth(t + 1e-3)).abs());
+            worst_interp = worst_interp.max((interpolate(&polls, 4, t).unwrap() - truth(t + 1e-3)).abs());
+        }
+        // The mean delay (1 ms) stays, as with the interpolation; the jitter about it goes.
+        assert!(worst_ramp < 0.4e-3, "ramp off by {worst_ramp}° at worst: {ramp:?}");
+        assert!(worst_interp > 1.5e-3, "interpolation off by {worst_interp}° at worst");
+        assert_eq!((ramp.lo, ramp.hi), (0.0, 0.5));
+        assert_eq!(ramp_fit(&polls, 3, 0.0, 0.0), None, "a joint that does not move keeps its polls");
     }
 
     /// Each joint is interpolated on its own stamps: two joints moving at constant speed, read
