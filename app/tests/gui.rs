@@ -831,4 +831,23 @@ fn diagnosis_view_proposes_saves_and_adds_the_discriminating_motions() {
     }
     h.run_steps(2);
     screenshot(&mut h, "diagnosis-added");
+    // The pairs these data cannot tell apart, folded under a header that counts them; opened,
+    // one line each. The designed plan's few motions leave several open.
+    let pairs = again.cancelling_pairs.clone();
+    assert!(!pairs.is_empty(), "the designed plan's motions leave pairs open");
+    if again.settled {
+        h.get_by_label(photorobot_app::views::diagnosis::PAIRS_LEFT_OPEN);
+    }
+    let header = format!("{} pairs these data cannot tell apart (sizes that cancel would show nothing)", pairs.len());
+    h.get_by_label(&header).scroll_to_me();
+    h.run_steps(2);
+    h.get_by_label(&header).click_accesskit();
+    h.run_steps(6);
+    let line = |[a, b]: &[String; 2]| photorobot_app::views::diagnosis::drawable(&format!("{a} ↔ {b}"));
+    for p in &pairs {
+        h.get_by_label(&line(p));
+    }
+    h.get_by_label(&line(&pairs[0])).scroll_to_me();
+    h.run_steps(2);
+    screenshot(&mut h, "diagnosis-pairs");
 }

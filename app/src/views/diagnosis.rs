@@ -195,6 +195,7 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
                     d.not_detectable.join(", ")
                 )));
             }
+            cancelling_pairs(ui, &d.cancelling_pairs);
             if !d.discriminating_motions.is_empty() {
                 ui.label(drawable(&format!(
                     "discriminating motions {}: {}",
@@ -210,14 +211,39 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
             }
             if d.settled {
                 ui.label(RichText::new(SETTLED).strong());
+                if !d.cancelling_pairs.is_empty() {
+                    ui.label(PAIRS_LEFT_OPEN);
+                }
             }
         }
     }
 }
 
+/// Pairs of candidates these data cannot tell apart, folded: the header says how many.
+fn cancelling_pairs(ui: &mut egui::Ui, pairs: &[[String; 2]]) {
+    if pairs.is_empty() {
+        return;
+    }
+    egui::CollapsingHeader::new(format!(
+        "{} pairs these data cannot tell apart (sizes that cancel would show nothing)",
+        pairs.len()
+    ))
+    .id_salt("cancelling pairs")
+    .show(ui, |ui| {
+        for [a, b] in pairs {
+            ui.label(drawable(&format!("{a} ↔ {b}")));
+        }
+    });
+}
+
+/// What a settled diagnosis adds when it leaves pairs open.
+pub const PAIRS_LEFT_OPEN: &str =
+    "The pairs these data cannot tell apart are left open: no motion is designed to separate them.";
+
 /// What a settled diagnosis says.
-pub const SETTLED: &str = "Settled: no discriminating motion that these data lack would tell more (the candidates are \
-     named, ruled out at their typical size, equivalent to an extrinsic change, or too small for any motion).";
+pub const SETTLED: &str =
+    "Settled: no discriminating motion that these data lack would tell more of a single candidate \
+     (each is named, ruled out at its typical size, equivalent to an extrinsic change, or too small for any motion).";
 
 /// A warning when the calibration the diagnosis starts from was refused or is ambiguous.
 fn refused_calibration(ui: &mut egui::Ui, s: &AppState) {
