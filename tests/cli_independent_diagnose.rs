@@ -47,3 +47,23 @@ fn another_simulators_hidden_stage_axis_tilt_is_named() {
     assert_not_misnamed(&first, "axis tilt q3 toward link y");
     assert_named(second.as_ref().unwrap_or(&first), &["axis tilt q3 toward link y"], 1.0, false);
 }
+
+/// A q1 scale of 500 ppm, 0.6 of the candidate's typical size: after the proposed motions the
+/// diagnosis names nothing (it stays under the naming threshold), and must not read as "absent":
+/// the size it rules out for that candidate lies above the hidden one.
+#[test]
+fn another_simulators_q1_scale_too_small_to_name_is_bounded_above_its_size() {
+    let hidden = Hidden { joint_scale_ppm: [500.0, 0.0, 0.0], ..Hidden::default() };
+    let (first, second) = from_recordings(hidden, 24);
+    let v = second.as_ref().unwrap_or(&first);
+    assert_eq!(v["verdict"], "none", "{v}");
+    let bound = v["ruled_out_above"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["name"] == "joint scale error q1")
+        .unwrap_or_else(|| panic!("no bound for the q1 scale: {}", v["ruled_out_above"]));
+    let below = bound["below"].as_f64().unwrap();
+    assert!(below > 500.0, "the q1 scale ruled out above {below} ppm, under the hidden 500 ppm: {bound}");
+    assert_eq!(bound["unit"], "ppm");
+}

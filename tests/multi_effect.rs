@@ -161,6 +161,12 @@ pub fn score(v: &Value, hidden: &[Effect]) -> Score {
     s
 }
 
+/// The bound `ruled_out_above` gives candidate `name` (below, unit).
+fn bound(v: &Value, name: &str) -> Option<(f64, String)> {
+    let b = v["ruled_out_above"].as_array()?.iter().find(|b| b["name"].as_str() == Some(name))?;
+    Some((b["below"].as_f64()?, b["unit"].as_str().unwrap_or("").to_string()))
+}
+
 /// How the result reports hidden scalars it did not name: the lists that hold them.
 fn reported_as(v: &Value, scalars: &[HiddenScalar]) -> String {
     let lists = ["need_motions", "not_detectable", "not_seen", "equivalent_to_extrinsics"];
@@ -180,6 +186,11 @@ fn reported_as(v: &Value, scalars: &[HiddenScalar]) -> String {
             Some(f) => (*f).to_string(),
             None if wrong_size => "named, beyond 3σ of its value".into(),
             None if partial => "tried (partial)".into(),
+            None if bound(v, &h.name).is_some() => {
+                let (below, unit) = bound(v, &h.name).unwrap_or_default();
+                let side = if h.value.abs() < below { "cannot tell" } else { "WRONG: the hidden size is above it" };
+                format!("bounded below {below:.4} {unit} ({side})")
+            }
             None if paired.is_some() => format!(
                 "cancelling pair ({})",
                 paired.into_iter().flatten().filter_map(|n| n.as_str()).collect::<Vec<_>>().join(" ↔ ")

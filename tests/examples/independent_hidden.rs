@@ -6,7 +6,9 @@
 //! named before and after the proposed motions, and scores the last: named (the hidden effect, or
 //! an equivalent the result lists with it, within 3σ), listed (in a list of what the data could
 //! not tell: equivalent, need motions, not detectable, not seen, a cancelling pair, a named
-//! effect's ambiguity set), missed, and anything named that is not there.
+//! effect's ambiguity set), bounded (not named, its size under the bound the result gives: it
+//! cannot tell), wrong (a bound under the hidden size), missed, and anything named that is not
+//! there.
 //!
 //!     cargo run --release -p photorobot-e2e --example independent_hidden [-- --seeds 1..4] [--only TEXT]
 
@@ -144,8 +146,20 @@ fn score(v: &Value, c: &Case) -> (String, Vec<String>) {
             .flatten()
             .any(|p| p.as_array().is_some_and(|p| p.iter().any(|n| n.as_str() == Some(name))));
         let ambiguous = effects.iter().any(|e| e.3.iter().any(|a| a == name));
+        let bound = v["ruled_out_above"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .find(|b| b["name"].as_str() == Some(name))
+            .and_then(|b| b["below"].as_f64());
         match lists.iter().find(|f| holds(f)) {
             Some(f) => format!("listed ({f})"),
+            None if bound.is_some_and(|b| c.value.abs() < b) => {
+                format!("bounded (below {:.4}, above the hidden size: cannot tell)", bound.unwrap_or_default())
+            }
+            None if bound.is_some() => {
+                format!("WRONG (bounded below {:.4}, under the hidden size)", bound.unwrap_or_default())
+            }
             None if paired => "listed (cancelling pair)".into(),
             None if ambiguous => "listed (ambiguous with a named effect)".into(),
             None => "missed".into(),

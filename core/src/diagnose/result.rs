@@ -54,6 +54,21 @@ pub struct NamedEffect {
     pub held_out_chi2_gain: Option<f64>,
 }
 
+/// The size the data rule out for a candidate they did not name (its unit).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Bound {
+    /// Candidate name.
+    pub name: String,
+    /// Unit of the figures.
+    pub unit: String,
+    /// Its estimate on the last scoring.
+    pub estimate: f64,
+    /// Its σ.
+    pub sigma: f64,
+    /// |estimate| + 3σ: a larger effect would have been seen.
+    pub below: f64,
+}
+
 /// The diagnosis result, serialisable (for sessions and `--json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DiagnosisResult {
@@ -96,6 +111,10 @@ pub struct DiagnosisResult {
     /// the floor, so "none" does not rule out both. Not a named effect's `ambiguous_with`.
     #[serde(default)]
     pub cancelling_pairs: Vec<[String; 2]>,
+    /// Every other candidate (neither named nor in a list above) with the size its data rule out:
+    /// |estimate| + 3σ on the last scoring. "None" says only that each is below its bound.
+    #[serde(default)]
+    pub ruled_out_above: Vec<Bound>,
     /// Candidates that no observation can see at any size, never named: those no observation
     /// or pool motion depends on (dropped at the baseline), and, on observations from traces,
     /// the fringe nonlinearity, which the fringe analysis removes (it fits the fringe's

@@ -5,6 +5,7 @@
 mod branches;
 mod discriminate;
 mod naming;
+mod unnamed;
 
 use crate::diagnose::candidates::{self, Candidate};
 use crate::diagnose::fit::{self, Fit, ModelState, Predictor};
@@ -338,29 +339,6 @@ impl Diagnosis {
         Ok(())
     }
 
-    /// Pairs of candidates, each detectable alone and reported nowhere else, whose projected
-    /// signatures on the last scoring are nearly collinear: they can cancel each other.
-    fn cancelling_pairs(&self, not_detectable: &[String]) -> Vec<[String; 2]> {
-        let f = self.fit.as_ref();
-        let open = |k: usize| {
-            let name = &self.candidates[k].name;
-            !self.excluded.contains(&k)
-                && !self.equivalent.contains(name)
-                && !self.not_seen.contains(name)
-                && !not_detectable.contains(name)
-                && !f.is_some_and(|f| f.state.effects.iter().any(|(c, _)| &c.name == name))
-                && !self.added.iter().any(|e| e.ambiguous_with.contains(name))
-        };
-        let n = self.projected.len().min(self.candidates.len());
-        let mut pairs = Vec::new();
-        for a in (0..n).filter(|&a| open(a)) {
-            for b in scoring::ambiguity_set(a, &self.projected).into_iter().filter(|&b| b > a && b < n && open(b)) {
-                pairs.push([self.candidates[a].name.clone(), self.candidates[b].name.clone()]);
-            }
-        }
-        pairs
-    }
-
     /// Stage 5: the verdict and the result, with "before" refitted on the final analysis.
     fn conclude(&mut self) -> Result<(), DiagnoseError> {
         let f = self.fit.clone().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
@@ -390,6 +368,7 @@ impl Diagnosis {
             .map(|s| s.name.clone())
             .collect();
         let cancelling_pairs = self.cancelling_pairs(&not_detectable);
+        let ruled_out_above = self.bounds(&not_detectable, &cancelling_pairs);
         let verdict = match (self.added.is_empty(), at_floor) {
             (false, true) => Verdict::Named,
             (true, true) => Verdict::None,
@@ -413,6 +392,7 @@ impl Diagnosis {
             need_motions: self.need_motions.clone(),
             not_detectable,
             cancelling_pairs,
+            ruled_out_above,
             not_seen: self.not_seen.clone(),
             discriminating_motions: self.designed.iter().map(|m| m.label.clone()).collect(),
             discriminating_motions_ran: self.ran,
