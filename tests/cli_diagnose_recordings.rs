@@ -82,7 +82,7 @@ fn assert_analysable(plan: &Plan, preset: &BenchPreset) {
     let truth = PhaseModel::of_preset(preset, preset.truth).unwrap();
     let mut at = [0.0; 6];
     for seg in &plan.segments {
-        let Segment::Move { to, record, label } = seg else { continue };
+        let Segment::Move { to, record, label, through: false } = seg else { continue };
         let next = [to.q1_um, to.q2_um, to.q3_um, to.q4_deg, to.q5_deg, to.q6_deg];
         let next: [f64; 6] = std::array::from_fn(|j| next[j].unwrap_or(at[j]));
         if *record && !label.ends_with("(arrive)") {

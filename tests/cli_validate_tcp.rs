@@ -24,15 +24,20 @@ fn wrong_extrinsics_are_caught_on_emulated_controllers() {
     let (code, doc) = run_validate(&bench, &preset.truth, 17, &[], dir.path());
     assert_eq!(check_against_truth("truth over TCP", &preset.truth, &doc, false), Vec::<String>::new());
     // The circle and the rotation about the beam confirmed within target. The rotations about
-    // X_f and Z_f track within 1-9 nm over TCP, their curve 0.7-1.0 nm about a smooth path in the
-    // angle now that the wrist's polled joints are fitted ramps (interpolated between late polls
-    // they left 3-5 nm and were contradicted in most runs). Their model-free reading sits at its
-    // floor (77-80 nm under the tracked gap on the virtual bench, floor 84 nm), a few nm above it
-    // in some runs over TCP: then contradicted, so they are not asserted here.
+    // X_f and Z_f track within 1-9 nm over TCP, and their model-free reading stays within 10 nm
+    // of the tracked gap (the envelope pinned to the fringe's own extrema; carried by the contrast
+    // alone it read 77-93 nm under, at its floor, and contradicted the truth in about one run in
+    // three). Their tracked curve leaves 0.7-1.0 nm about a smooth path in the angle in most runs,
+    // 4-6 nm against 3.1-3.6 allowed in about one in three at twice real time: then contradicted,
+    // so their verdict is not asserted here.
     let rows = motions(&doc);
     for m in [ValidationMotion::Circle, ValidationMotion::RotationOpticalAxis] {
         let row = rows.iter().find(|r| r.0 == m.name()).unwrap();
         assert!(row.3, "{} confirmed within target over TCP with the true extrinsics: {row:?}", m.name());
+    }
+    for m in doc["validation"].as_array().unwrap() {
+        let (mf, tracked) = (m["model_free_gap_nm"].as_f64().unwrap(), m["tracked_gap_nm"].as_f64().unwrap());
+        assert!((mf - tracked).abs() < 20.0, "{}: model-free {mf:.1} nm, tracked {tracked:.1} nm", m["motion"]);
     }
     eprintln!("true extrinsics over TCP: exit {code}");
 

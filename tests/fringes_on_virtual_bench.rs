@@ -100,16 +100,23 @@ fn a_move_that_reverses_mid_way_is_tracked() {
         name: "reversal".into(),
         description: String::new(),
         segments: vec![
-            Segment::Move { to: JointTarget::default().with(2, -100.0), record: false, label: "start".into() },
+            Segment::Move {
+                to: JointTarget::default().with(2, -100.0),
+                record: false,
+                label: "start".into(),
+                through: false,
+            },
             Segment::Move {
                 to: JointTarget::default().with(2, 100.0).with(1, 15.0),
                 record: true,
                 label: "out".into(),
+                through: false,
             },
             Segment::Move {
                 to: JointTarget::default().with(2, -50.0).with(1, -10.0),
                 record: true,
                 label: "back".into(),
+                through: false,
             },
         ],
     };
@@ -193,7 +200,7 @@ fn fringe_visibility_and_tilt_follow_the_model() {
 /// approached from below.
 fn reversal_plan(again: f64, last: f64) -> Plan {
     let at = |q3: f64| JointTarget::default().with(2, q3).with(0, 100.0);
-    let rec = |q3: f64, label: &str| Segment::Move { to: at(q3), record: true, label: label.into() };
+    let rec = |q3: f64, label: &str| Segment::Move { to: at(q3), record: true, label: label.into(), through: false };
     Plan {
         name: "reversals".into(),
         description: String::new(),
@@ -203,7 +210,7 @@ fn reversal_plan(again: f64, last: f64) -> Plan {
             rec(-120.0, "to start"),
             rec(120.0, "X + after -"),
             rec(-120.0, "X - after +"),
-            Segment::Move { to: at(-140.0), record: false, label: "further -".into() },
+            Segment::Move { to: at(-140.0), record: false, label: "further -".into(), through: false },
             rec(again, "X + after -, again"),
             rec(last, "X + after +"),
         ],
@@ -346,9 +353,9 @@ fn a_cyclic_phase_error_does_not_reach_the_tracked_gap_changes() {
     cyclic.effects = vec![effect.clone()];
     let mut s = Vec::new();
     for (k, to) in [20.1, 40.3, 60.2, 80.45].iter().enumerate() {
-        s.push(Segment::Move { to: JointTarget::all([0.0; 6]), record: false, label: "setup".into() });
+        s.push(Segment::Move { to: JointTarget::all([0.0; 6]), record: false, label: "setup".into(), through: false });
         let to = JointTarget::all([0.0, *to, 0.0, 0.0, 0.0, 0.0]);
-        s.push(Segment::Move { to, record: true, label: format!("Y {k}") });
+        s.push(Segment::Move { to, record: true, label: format!("Y {k}"), through: false });
     }
     let plan = Plan { name: "cyclic".into(), description: String::new(), segments: s };
     let truth = model(&base, base.truth);

@@ -272,7 +272,7 @@ pub fn records_of(plan: &photorobot_core::plan::Plan) -> Vec<Record> {
     let (mut at, mut out) = ([0.0; 6], Vec::new());
     for seg in &plan.segments {
         match seg {
-            Segment::Move { to, record, label } => {
+            Segment::Move { to, record, label, .. } => {
                 let t = to;
                 let targets = [t.q1_um, t.q2_um, t.q3_um, t.q4_deg, t.q5_deg, t.q6_deg];
                 let next: [f64; 6] = std::array::from_fn(|j| targets[j].unwrap_or(at[j]));

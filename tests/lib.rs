@@ -5,7 +5,7 @@ use photorobot_core::model::optics::BackFace;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
 
 fn mv(to: [f64; 6], record: bool, label: &str) -> Segment {
-    Segment::Move { to: JointTarget::all(to), record, label: label.into() }
+    Segment::Move { to: JointTarget::all(to), record, label: label.into(), through: false }
 }
 
 /// A short calibration-like session: absolute gaps at three poses, X and Z translations, q4 and

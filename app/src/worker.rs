@@ -501,7 +501,12 @@ impl Thread {
                     let plan = Plan {
                         name: "jog".into(),
                         description: String::new(),
-                        segments: vec![Segment::Move { to: JointTarget::all(to), record: false, label: "jog".into() }],
+                        segments: vec![Segment::Move {
+                            to: JointTarget::all(to),
+                            record: false,
+                            label: "jog".into(),
+                            through: false,
+                        }],
                     };
                     if let Err(e) = self.run(&plan, Pace::Unpaced, Run::Motion).outcome {
                         self.send(Event::Busy(Some(format!("jog refused: {e}"))));
@@ -701,7 +706,7 @@ impl Thread {
             .map(|k| {
                 let mut to = q;
                 to[1] = q[1] + step * k as f64;
-                Segment::Move { to: JointTarget::all(to), record: true, label: "live dither".into() }
+                Segment::Move { to: JointTarget::all(to), record: true, label: "live dither".into(), through: false }
             })
             .collect();
         let plan = Plan { name: "live dither".into(), description: String::new(), segments };

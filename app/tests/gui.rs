@@ -850,4 +850,19 @@ fn diagnosis_view_proposes_saves_and_adds_the_discriminating_motions() {
     h.get_by_label(&line(&pairs[0])).scroll_to_me();
     h.run_steps(2);
     screenshot(&mut h, "diagnosis-pairs");
+    // Every candidate named nowhere, folded with the size its data rule out.
+    use photorobot_app::views::diagnosis::{bound_line, bounds_header};
+    let bounds = again.ruled_out_above.clone();
+    assert!(!bounds.is_empty(), "a clean bench leaves candidates not named");
+    h.get_by_label(&bounds_header(bounds.len())).scroll_to_me();
+    h.run_steps(2);
+    h.get_by_label(&bounds_header(bounds.len())).click_accesskit();
+    h.run_steps(6);
+    for b in &bounds {
+        assert!(b.below >= b.estimate.abs() + 3.0 * b.sigma - 1e-12, "{b:?}");
+        h.get_by_label(&bound_line(b));
+    }
+    h.get_by_label(&bound_line(&bounds[0])).scroll_to_me();
+    h.run_steps(2);
+    screenshot(&mut h, "diagnosis-bounds");
 }

@@ -38,6 +38,7 @@ fn jog_log(level: tracing::Level) -> String {
                 to: JointTarget::all([10.0, 0.0, 0.0, 0.0, 0.0, 0.5]),
                 record: true,
                 label: "jog".into(),
+                through: false,
             }],
         };
         let cancel = AtomicBool::new(false);

@@ -17,6 +17,7 @@ fn simulate(c: &mut Criterion) {
             to: JointTarget::all([100.0, 20.0, 100.0, 3.0, -3.0, 10.0]),
             record: true,
             label: "move".into(),
+            through: false,
         }],
     };
     let mut group = c.benchmark_group("virtual bench");

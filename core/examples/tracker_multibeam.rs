@@ -18,8 +18,18 @@ fn simulate_sweep(preset: &BenchPreset, q2: f64) -> Trace {
         name: "t".into(),
         description: String::new(),
         segments: vec![
-            Segment::Move { to: JointTarget::all([-150.0, q2, 0.0, 0.0, 0.0, 0.0]), record: false, label: "s".into() },
-            Segment::Move { to: JointTarget::all([150.0, q2, 0.0, 0.0, 0.0, 0.0]), record: true, label: "Z".into() },
+            Segment::Move {
+                to: JointTarget::all([-150.0, q2, 0.0, 0.0, 0.0, 0.0]),
+                record: false,
+                label: "s".into(),
+                through: false,
+            },
+            Segment::Move {
+                to: JointTarget::all([150.0, q2, 0.0, 0.0, 0.0, 0.0]),
+                record: true,
+                label: "Z".into(),
+                through: false,
+            },
         ],
     };
     let cancel = AtomicBool::new(false);

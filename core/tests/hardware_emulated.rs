@@ -229,12 +229,23 @@ fn fault_plan() -> Plan {
         name: "faults".into(),
         description: String::new(),
         segments: vec![
-            Segment::Move { to: JointTarget::default().with(1, -10.0), record: false, label: "setup".into() },
-            Segment::Move { to: JointTarget::default().with(1, 10.0), record: true, label: "Y move".into() },
+            Segment::Move {
+                to: JointTarget::default().with(1, -10.0),
+                record: false,
+                label: "setup".into(),
+                through: false,
+            },
+            Segment::Move {
+                to: JointTarget::default().with(1, 10.0),
+                record: true,
+                label: "Y move".into(),
+                through: false,
+            },
             Segment::Move {
                 to: JointTarget::default().with(1, 10.0).with(3, 2.0),
                 record: true,
                 label: "q4 rotation".into(),
+                through: false,
             },
         ],
     }
@@ -613,6 +624,7 @@ fn a_joint_that_moves_by_a_hair_gets_a_velocity_the_controller_accepts() {
             to: JointTarget::default().with(0, 20.0).with(1, 1e-9),
             record: true,
             label: "X move, Y by a hair".into(),
+            through: false,
         }],
     };
     let outcome = run(&mut bench, &plan).outcome;
@@ -633,12 +645,18 @@ fn each_segment_on_the_controllers_says_where_its_time_went() {
         name: "timed".into(),
         description: String::new(),
         segments: vec![
-            Segment::Move { to: JointTarget::default().with(0, 10.0), record: false, label: "approach".into() },
-            Segment::Move { to: JointTarget::default().with(0, 12.0), record: true, label: "X".into() },
+            Segment::Move {
+                to: JointTarget::default().with(0, 10.0),
+                record: false,
+                label: "approach".into(),
+                through: false,
+            },
+            Segment::Move { to: JointTarget::default().with(0, 12.0), record: true, label: "X".into(), through: false },
             Segment::Move {
                 to: JointTarget::default().with(0, 12.0).with(3, 0.2),
                 record: true,
                 label: "wrist".into(),
+                through: false,
             },
         ],
     };

@@ -125,7 +125,7 @@ fn on_a_fast_clock_every_sweep_reaches_its_stop_and_every_move_its_target() {
     for k in 0..4 {
         segments.push(Segment::Sweep { from_nm: 1550.0, to_nm: 1551.0, rate_nm_per_s: 10.0, label: format!("s{k}") });
         let to = JointTarget::default().with(2, if k % 2 == 0 { 10.0 } else { 0.0 });
-        segments.push(Segment::Move { to, record: true, label: format!("m{k}") });
+        segments.push(Segment::Move { to, record: true, label: format!("m{k}"), through: false });
     }
     // A host as busy as a live view makes it: 3 ms of real time (0.3 s of bench time) spent on
     // the samples in every turn of the loop, between its clock reading and its questions.
@@ -333,8 +333,10 @@ fn a_bench_on_an_mcs2_moves_its_wrist() {
         bench.identification()
     );
     let to = [0.0, 0.0, 0.0, 1.0, -1.0, 2.0];
-    let got =
-        run(&mut bench, &plan(vec![Segment::Move { to: JointTarget::all(to), record: true, label: "wrist".into() }]));
+    let got = run(
+        &mut bench,
+        &plan(vec![Segment::Move { to: JointTarget::all(to), record: true, label: "wrist".into(), through: false }]),
+    );
     got.outcome.unwrap();
     let q = bench.position_display();
     assert!((3..6).all(|j| (q[j] - to[j]).abs() < 1e-6), "{q:?}");

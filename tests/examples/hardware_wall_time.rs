@@ -2,9 +2,9 @@
 //! `photorobot emulate all` serves the PI E-712, the SmarAct MCS and the Keysight laser on
 //! loopback (realistic timing), and `photorobot calibrate --bench <its hardware file> --plan
 //! optimised` measures the experiment design's plan on them, identifies and validates. Prints
-//! the command's wall time, each stage's (`timing.stages` of its report), and each plan run's
-//! planned and bench time with what the controllers and the recorder added; asserts the wall
-//! time stays under `--max-s`.
+//! the command's wall time, each stage's (`timing.stages` of its report), each validation
+//! motion's figure and verdict, and each plan run's planned and bench time with what the
+//! controllers and the recorder added; asserts the wall time stays under `--max-s`.
 //!
 //!     cargo build --release -p photorobot
 //!     cargo run --release -p photorobot-e2e --example hardware_wall_time -- \
@@ -94,6 +94,17 @@ fn print(wall_s: f64, stages: &[(String, f64)], r: &CalibrationReport) {
     println!("calibrate {wall_s:>8.2} s wall");
     for (stage, s) in stages {
         println!("  {stage:<12} {s:>8.2} s");
+    }
+    for v in &r.validation {
+        let Some(e) = &v.after_evidence else { continue };
+        println!(
+            "  after: {:<52} {:>8.2} nm {:<12} tracked gap {:>7.1} nm, model-free {:>7.1} nm",
+            v.motion,
+            e.measured_nm,
+            e.verdict.word(),
+            e.tracked_gap_nm,
+            e.model_free_gap_nm.unwrap_or(f64::NAN)
+        );
     }
     let Some(t) = &r.timing else { return println!("  (no segment timing in the report)") };
     println!("  {:<60} {:>5} {:>8} {:>8} {:>8} {:>8}", "run", "segs", "planned", "bench", "waiting", "recorder");

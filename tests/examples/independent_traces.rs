@@ -56,6 +56,7 @@ fn write_plan(file: &str) {
         to: JointTarget::all(to),
         record,
         label: label.into(),
+        through: false,
     };
     let mut segments = Vec::new();
     for r in lab_records() {

@@ -24,7 +24,8 @@ fn sweeps(
     cfg: &SweepConfig,
     truth: Truth,
 ) -> Vec<(f64, f64)> {
-    let mut segments = vec![Segment::Move { to: JointTarget::all(pose), record: false, label: "to".into() }];
+    let mut segments =
+        vec![Segment::Move { to: JointTarget::all(pose), record: false, label: "to".into(), through: false }];
     for k in 0..n {
         segments.push(Segment::Sweep {
             from_nm: centre - SWEEP_HALF_SPAN_NM,

@@ -196,6 +196,7 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
                 )));
             }
             cancelling_pairs(ui, &d.cancelling_pairs);
+            ruled_out_above(ui, &d.ruled_out_above);
             if !d.discriminating_motions.is_empty() {
                 ui.label(drawable(&format!(
                     "discriminating motions {}: {}",
@@ -232,6 +233,29 @@ fn cancelling_pairs(ui: &mut egui::Ui, pairs: &[[String; 2]]) {
     .show(ui, |ui| {
         for [a, b] in pairs {
             ui.label(drawable(&format!("{a} ↔ {b}")));
+        }
+    });
+}
+
+/// The header over the candidates named nowhere, each with the size its data rule out.
+pub fn bounds_header(count: usize) -> String {
+    format!("{count} candidates not named, each smaller than the data would show (|estimate| + 3σ)")
+}
+
+/// One bound's line: the candidate, its estimate ± σ and the size a larger effect would exceed.
+pub fn bound_line(b: &photorobot_core::diagnose::Bound) -> String {
+    drawable(&format!("{}: {:.4} ± {:.4} {u}, below {:.4} {u}", b.name, b.estimate, b.sigma, b.below, u = b.unit))
+}
+
+/// Candidates named nowhere, folded: each with the size above which the data would have shown it,
+/// so that "not named" is not read as "absent".
+fn ruled_out_above(ui: &mut egui::Ui, bounds: &[photorobot_core::diagnose::Bound]) {
+    if bounds.is_empty() {
+        return;
+    }
+    egui::CollapsingHeader::new(bounds_header(bounds.len())).id_salt("ruled out above").show(ui, |ui| {
+        for b in bounds {
+            ui.label(bound_line(b));
         }
     });
 }

@@ -159,6 +159,7 @@ pub fn resume_plan_with(
         to: crate::plan::JointTarget::all(first.from_display),
         record: false,
         label: format!("resume: back to the start of segment {from_segment} ({})", first.label),
+        through: false,
     }];
     rest.extend(plan.segments[from_segment..].iter().cloned());
     let remainder = Plan {

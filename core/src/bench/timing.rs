@@ -282,7 +282,7 @@ mod tests {
             .map(|k| {
                 let mut q = [0.0; 6];
                 q[0] = 5.0 * (k + 1) as f64;
-                Segment::Move { to: JointTarget::all(q), record: true, label: label.into() }
+                Segment::Move { to: JointTarget::all(q), record: true, label: label.into(), through: false }
             })
             .collect();
         Plan { name: name.into(), description: String::new(), segments }

@@ -32,7 +32,7 @@ pub mod step;
 pub mod validation;
 mod workflow;
 
-pub use result::{DiagnoseError, DiagnosisResult, NamedEffect, Verdict};
+pub use result::{Bound, DiagnoseError, DiagnosisResult, NamedEffect, Verdict};
 pub use settings::{
     DETECTABLE_SCORE, DISCRIMINATING_PREFIX, EQUIVALENT_SHARE, EXCHANGE_MARGIN, EXTRACT_OPTIONS, MAX_EFFECTS,
     MAX_MOTIONS, NOISE_FLOOR_FACTOR, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA,

@@ -550,22 +550,32 @@ pub fn plan_of(motions: &[DesignedMotion]) -> Plan {
             MotionKind::Dwell { at_display, .. } => shifted(at_display, -DWELL_APPROACH_UM),
             MotionKind::Sweep { at_display } => *at_display,
         };
-        segments.push(Segment::Move { to: JointTarget::all(start), record: false, label: "D setup".into() });
+        segments.push(Segment::Move {
+            to: JointTarget::all(start),
+            record: false,
+            label: "D setup".into(),
+            through: false,
+        });
         match &m.kind {
-            MotionKind::Move { to_display, .. } => {
-                segments.push(Segment::Move { to: JointTarget::all(*to_display), record: true, label: m.label.clone() })
-            }
+            MotionKind::Move { to_display, .. } => segments.push(Segment::Move {
+                to: JointTarget::all(*to_display),
+                record: true,
+                label: m.label.clone(),
+                through: false,
+            }),
             MotionKind::Dwell { at_display, duration_s } => segments.extend([
                 Segment::Move {
                     to: JointTarget::all(*at_display),
                     record: true,
                     label: format!("{} (arrive)", m.label),
+                    through: false,
                 },
                 Segment::Dwell { duration_s: *duration_s, record: false, label: m.label.clone() },
                 Segment::Move {
                     to: JointTarget::all(shifted(at_display, DWELL_APPROACH_UM)),
                     record: true,
                     label: m.label.clone(),
+                    through: false,
                 },
             ]),
             MotionKind::Sweep { .. } => segments.push(Segment::Sweep {

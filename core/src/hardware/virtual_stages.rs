@@ -54,7 +54,12 @@ impl VirtualStages {
         let plan = Plan {
             name: "virtual stages".into(),
             description: String::new(),
-            segments: vec![Segment::Move { to: JointTarget::all(target), record, label: "move".into() }],
+            segments: vec![Segment::Move {
+                to: JointTarget::all(target),
+                record,
+                label: "move".into(),
+                through: false,
+            }],
         };
         let segments = plan
             .expand(self.bench.robot(), self.bench.position_display(), self.bench.motion_limits())

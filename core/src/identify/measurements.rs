@@ -566,6 +566,7 @@ mod tests {
                 to: JointTarget::all(to),
                 record,
                 label: if record { label.clone() } else { "setup".into() },
+                through: false,
             }
         };
         let plan = Plan {
@@ -623,8 +624,12 @@ mod tests {
         use std::sync::atomic::{AtomicUsize, Ordering};
         let preset = crate::bench::BenchPreset::resolve("table2-ideal").unwrap();
         let mut bench = VirtualBench::new(&preset, Some(4)).unwrap();
-        let to =
-            |q: [f64; 6], label: &str| Segment::Move { to: JointTarget::all(q), record: true, label: label.into() };
+        let to = |q: [f64; 6], label: &str| Segment::Move {
+            to: JointTarget::all(q),
+            record: true,
+            label: label.into(),
+            through: false,
+        };
         let segments = vec![
             to([5.0, 0.0, 0.0, 0.0, 0.0, 0.0], "q1 +5 µm"),
             to([5.0, 4.0, 0.0, 0.0, 0.0, 0.0], "q2 +4 µm"),

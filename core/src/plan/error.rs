@@ -52,6 +52,14 @@ pub enum PlanError {
         /// The laser's range (nm).
         laser: LaserLimits,
     },
+    /// A move passes through its target (`through`) but what follows is not a move: a sweep, a
+    /// dwell or the plan's end needs the stages settled.
+    ThroughNotToMove {
+        /// Segment index.
+        segment: usize,
+        /// Segment label.
+        label: String,
+    },
     /// A move ends outside the joint limits.
     OutOfLimits {
         /// Segment index.
@@ -104,6 +112,7 @@ impl PlanError {
             | PlanError::NotPositive { segment, .. }
             | PlanError::EmptySweep { segment, .. }
             | PlanError::SweepOutOfRange { segment, .. }
+            | PlanError::ThroughNotToMove { segment, .. }
             | PlanError::OutOfLimits { segment, .. } => Some(*segment),
             _ => None,
         }
@@ -116,6 +125,7 @@ impl PlanError {
             | PlanError::NotPositive { segment, field, .. }
             | PlanError::SweepOutOfRange { segment, field, .. } => Some(format!("segments[{segment}].{field}")),
             PlanError::EmptySweep { segment, .. } => Some(format!("segments[{segment}].to_nm")),
+            PlanError::ThroughNotToMove { segment, .. } => Some(format!("segments[{segment}].through")),
             PlanError::OutOfLimits { segment, violation, .. } => {
                 let field = violation_field(violation);
                 Some(format!("segments[{segment}].to{}", field.map(|f| format!(".{f}")).unwrap_or_default()))
@@ -132,6 +142,7 @@ impl PlanError {
             | PlanError::NotPositive { label, .. }
             | PlanError::EmptySweep { label, .. }
             | PlanError::SweepOutOfRange { label, .. }
+            | PlanError::ThroughNotToMove { label, .. }
             | PlanError::OutOfLimits { label, .. } => Some(label.as_str()).filter(|l| !l.is_empty()),
             _ => None,
         }
@@ -153,6 +164,9 @@ impl PlanError {
                 "expected a wavelength inside the laser's range {}-{} nm, found {value_nm} nm",
                 laser.min_nm, laser.max_nm
             ),
+            PlanError::ThroughNotToMove { .. } => {
+                "expected another move after a move with `through: true` (a sweep, a dwell or the plan's end needs the stages settled)".into()
+            }
             PlanError::OutOfLimits { violation, .. } => {
                 format!("the move ends out of the joint limits: {violation}")
             }

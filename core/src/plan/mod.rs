@@ -155,6 +155,11 @@ fn record_by_default() -> bool {
     true
 }
 
+/// `through` is written only when set, so plans without it read and write as before.
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
 /// One step of a plan.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -169,6 +174,10 @@ pub enum Segment {
         /// Free label, copied into the trace (default "").
         #[serde(default)]
         label: String,
+        /// Go on to the next move without settling at `to` (default false): the waypoints of one
+        /// recorded path, which the stages run through as one motion and settle once at its end.
+        #[serde(default, skip_serializing_if = "is_false")]
+        through: bool,
     },
     /// Joints fixed, the laser wavelength swept linearly from `from_nm` to `to_nm`; always recorded.
     Sweep {
@@ -302,11 +311,14 @@ impl Plan {
                 }
             };
             match segment {
-                Segment::Move { to, .. } => {
+                Segment::Move { to, through, .. } => {
                     for (name, v) in JOINT_FIELDS.iter().zip(to.values()) {
                         if let Some(v) = v {
                             finite(&format!("to.{name}"), v)?;
                         }
+                    }
+                    if *through && !self.segments.get(index + 1).is_some_and(Segment::is_move) {
+                        return Err(PlanError::ThroughNotToMove { segment: index, label: label() });
                     }
                 }
                 Segment::Sweep { from_nm, to_nm, rate_nm_per_s, .. } => {

@@ -92,13 +92,18 @@ impl Builder {
     }
 
     fn setup(&mut self, to: [f64; 6]) {
-        self.segments.push(Segment::Move { to: JointTarget::all(to), record: false, label: "setup".into() });
+        self.segments.push(Segment::Move {
+            to: JointTarget::all(to),
+            record: false,
+            label: "setup".into(),
+            through: false,
+        });
     }
 
     fn record(&mut self, to: JointTarget) {
         self.moves += 1;
         let label = format!("motion {}", self.moves);
-        self.segments.push(Segment::Move { to, record: true, label });
+        self.segments.push(Segment::Move { to, record: true, label, through: false });
     }
 
     fn sweep(&mut self, rng: &mut StdRng) {

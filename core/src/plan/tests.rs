@@ -15,7 +15,7 @@ fn no_settle() -> MotionLimits {
 }
 
 fn move_to(to: JointTarget, label: &str) -> Segment {
-    Segment::Move { to, record: true, label: label.into() }
+    Segment::Move { to, record: true, label: label.into(), through: false }
 }
 
 fn plan(segments: Vec<Segment>) -> Plan {
@@ -270,7 +270,8 @@ fn plan_files_parse_partial_targets_and_defaults() {
         Segment::Move {
             to: JointTarget { q3_um: Some(150.0), q5_deg: Some(-2.5), ..Default::default() },
             record: true,
-            label: String::new()
+            label: String::new(),
+            through: false,
         }
     );
     assert!(!p.segments[1].is_recorded() && p.segments[2].is_recorded());
@@ -280,7 +281,35 @@ fn plan_files_parse_partial_targets_and_defaults() {
     p.save(&path).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.contains("q3_um: 150.0") && !text.contains("q1_um"), "{text}");
+    assert!(!text.contains("through"), "written only when set: {text}");
     assert_eq!(Plan::load(&path).unwrap(), p);
+}
+
+/// A move `through` its target does not settle there (the next move follows at once), is
+/// written and read back, and is refused with its field when a sweep or the plan's end follows.
+#[test]
+fn a_move_through_its_target_skips_the_settling_and_needs_a_move_after_it() {
+    let text = |first: &str| {
+        format!("Plan(name: \"p\", segments: [\n  Move(to: (q3_um: 10), through: {first}),\n  Move(to: (q3_um: 20)),\n  Sweep(from_nm: 1550.0, to_nm: 1570.0, rate_nm_per_s: 20.0),\n])")
+    };
+    let limits = MotionLimits::default();
+    let bench_s = |p: &Plan| p.duration_s(&robot(), [0.0; 6], &limits).unwrap();
+    let (settled, through) = (parse(&text("false")).unwrap(), parse(&text("true")).unwrap());
+    assert!((bench_s(&settled) - bench_s(&through) - limits.settle_s).abs() < 1e-12);
+    let timed = through.expand(&robot(), [0.0; 6], &limits).unwrap();
+    assert!(matches!(timed[0].motion, TimedMotion::Move { settle_s, .. } if settle_s == 0.0));
+    assert!(matches!(timed[1].motion, TimedMotion::Move { settle_s, .. } if settle_s == limits.settle_s));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("p.ron");
+    through.save(&path).unwrap();
+    assert!(std::fs::read_to_string(&path).unwrap().contains("through: true"));
+    assert_eq!(Plan::load(&path).unwrap(), through);
+    // Before a sweep: refused, with the field.
+    let mut bad = through.clone();
+    bad.segments.remove(1);
+    let err = bad.validate().unwrap_err();
+    assert_eq!(err.field_path().as_deref(), Some("segments[0].through"), "{err}");
+    assert!(err.to_string().contains("expected another move"), "{err}");
 }
 
 #[test]

@@ -100,6 +100,9 @@ pub enum TimedMotion {
         profile: TrapezoidProfile,
         /// Settling time after the motion (s).
         settle_s: f64,
+        /// The stages go on to the next move without settling ([`Segment::Move`]'s `through`):
+        /// they may still be closing in on the target when the segment ends.
+        through: bool,
     },
     /// A linear wavelength sweep, joints fixed.
     Sweep {
@@ -234,14 +237,15 @@ impl Plan {
             let label = segment.label().to_string();
             let (target, motion, duration_s) =
                 match segment {
-                    Segment::Move { to, .. } => {
+                    Segment::Move { to, through, .. } => {
                         let target = to.resolve(current);
                         chain.check_limits(&robot.q_from_display(&target)).map_err(|violation| {
                             PlanError::OutOfLimits { segment: index, label: label.clone(), violation }
                         })?;
                         let (profile, settle_s) = move_profile(&kinds, current, target, limits);
+                        let settle_s = if *through { 0.0 } else { settle_s };
                         let duration_s = profile.duration_s + settle_s;
-                        (target, TimedMotion::Move { profile, settle_s }, duration_s)
+                        (target, TimedMotion::Move { profile, settle_s, through: *through }, duration_s)
                     }
                     Segment::Sweep { from_nm, to_nm, rate_nm_per_s, .. } => {
                         check_sweep_in_range(index, &label, *from_nm, *to_nm, laser)?;

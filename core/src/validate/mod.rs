@@ -408,8 +408,13 @@ pub fn record_validation(
     let stop_at = stops::stop_waypoints(motion, count, stops.stops);
     let sweep_nm = (stops.sweeps && bench.tunable_laser()).then(|| bench.wavelength_nm());
     let mut w = waypoints(planning, planned_with, motion, start, count)?;
-    let mut p =
-        stops::plan_reaching(&format!("validation: {}", motion.name()), motion.name(), &w, play, &stop_at, sweep_nm);
+    let plan = |w: &[[f64; 6]]| {
+        let mut p =
+            stops::plan_reaching(&format!("validation: {}", motion.name()), motion.name(), w, play, &stop_at, sweep_nm);
+        stops::run_through(&mut p.plan.segments, motion.name());
+        p
+    };
+    let mut p = plan(&w);
     if !compensation.drift.is_empty() {
         let run_error = |e: String| ValidationError::Run { motion: motion.name(), problem: e };
         let timed = p
@@ -422,14 +427,7 @@ pub fn record_validation(
         let start_nm = compensation.drift_nm(at(1));
         let axial_um: Vec<f64> = (0..=count).map(|k| -(compensation.drift_nm(at(k + 1)) - start_nm) * 1e-3).collect();
         w = waypoints_shifted(planning, planned_with, motion, start, count, &axial_um)?;
-        p = stops::plan_reaching(
-            &format!("validation: {}", motion.name()),
-            motion.name(),
-            &w,
-            play,
-            &stop_at,
-            sweep_nm,
-        );
+        p = plan(&w);
     }
     let (traces, refused) = run_pieces(bench, &p.plan, motion)?;
     // Stages with play: their real joints follow every recorded command in order, the stops'

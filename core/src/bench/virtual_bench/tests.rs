@@ -18,7 +18,7 @@ fn plan(segments: Vec<Segment>) -> Plan {
 }
 
 fn mv(target: JointTarget, record: bool) -> Segment {
-    Segment::Move { to: target, record, label: "move".into() }
+    Segment::Move { to: target, record, label: "move".into(), through: false }
 }
 
 fn dwell(s: f64) -> Segment {
@@ -259,7 +259,12 @@ fn fast_vs_exact_with(preset_name: &str, plan: &Plan, modify: impl Fn(&mut Bench
 #[test]
 fn fast_path_matches_the_exact_path() {
     let at = |q: [f64; 6]| JointTarget::all(q);
-    let labelled = |target: JointTarget, label: &str| Segment::Move { to: target, record: true, label: label.into() };
+    let labelled = |target: JointTarget, label: &str| Segment::Move {
+        to: target,
+        record: true,
+        label: label.into(),
+        through: false,
+    };
     let p = plan(vec![
         mv(at([150.0, 0.0, -150.0, 0.0, 0.0, 0.0]), false),
         labelled(JointTarget::default().with(2, 150.0), "S1 X_w 300 µm at q1 = 150"),

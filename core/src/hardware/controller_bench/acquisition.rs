@@ -296,14 +296,14 @@ impl ControllerBench {
     }
 
     /// A move's recording ends with its recorded joints on their targets (within the tolerance
-    /// `check_arrival` uses at rest): one that ends short of them lost the end of the motion.
+    /// `check_arrival` uses, at rest or going through): one that ends short lost the motion's end.
     fn check_recorded_end(&self, a: &Acquisition, seg: &TimedSegment) -> Result<(), HwError> {
         if !matches!(seg.motion, TimedMotion::Move { .. }) {
             return Ok(());
         }
         for &j in &a.recorded_joints {
             let Some(&last) = a.trace.joint_column(j).last() else { continue };
-            let (tol, unit) = self.arrival_tolerance(j);
+            let (tol, unit) = self.end_tolerance(j, seg);
             if (last - seg.to_display[j]).abs() > tol {
                 return Err(HwError::Usage {
                     controller: self.config.photodiode.controller.clone(),

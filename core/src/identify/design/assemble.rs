@@ -10,7 +10,7 @@ fn move_s(robot: &RobotDescription, limits: &MotionLimits, from: [f64; 6], to: [
     let p = Plan {
         name: "m".into(),
         description: String::new(),
-        segments: vec![Segment::Move { to: JointTarget::all(to), record: false, label: String::new() }],
+        segments: vec![Segment::Move { to: JointTarget::all(to), record: false, label: String::new(), through: false }],
     };
     p.duration_s(robot, from, limits).unwrap_or(f64::INFINITY)
 }
@@ -33,6 +33,7 @@ pub fn assemble(chosen: &[&Candidate], robot: &RobotDescription, limits: &Motion
             to: JointTarget::all(c.start_display),
             record: false,
             label: format!("setup: {}", c.label),
+            through: false,
         });
         segments.push(c.segment.clone());
         let end = match &c.segment {
@@ -41,7 +42,12 @@ pub fn assemble(chosen: &[&Candidate], robot: &RobotDescription, limits: &Motion
         };
         at = end;
     }
-    segments.push(Segment::Move { to: JointTarget::all([0.0; 6]), record: false, label: "return to 0".into() });
+    segments.push(Segment::Move {
+        to: JointTarget::all([0.0; 6]),
+        record: false,
+        label: "return to 0".into(),
+        through: false,
+    });
     let plan = Plan {
         name: "optimised".into(),
         description: format!(

@@ -117,10 +117,16 @@ pub fn pilot(
             to: JointTarget::all(c.start_display),
             record: false,
             label: format!("setup: {}", c.label),
+            through: false,
         });
         segments.push(c.segment.clone());
     }
-    segments.push(Segment::Move { to: JointTarget::all([0.0; 6]), record: false, label: "return to 0".into() });
+    segments.push(Segment::Move {
+        to: JointTarget::all([0.0; 6]),
+        record: false,
+        label: "return to 0".into(),
+        through: false,
+    });
     let plan = Plan { name: "design pilot".into(), description: "every candidate once".into(), segments };
     let traces = run_pilot(&mut bench, &[plan])?;
     if traces.len() != candidates.len() {

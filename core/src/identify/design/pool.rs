@@ -67,7 +67,7 @@ fn pose_text(q: &[f64; 6]) -> String {
 
 /// A recorded move to `to`, labelled.
 fn recorded_move(to: JointTarget, label: &str) -> Segment {
-    Segment::Move { to, record: true, label: label.to_string() }
+    Segment::Move { to, record: true, label: label.to_string(), through: false }
 }
 
 /// The candidate pool (see the module documentation), timed with `limits` and checked against
@@ -200,7 +200,12 @@ fn timed(
         name: "candidate".into(),
         description: String::new(),
         segments: vec![
-            Segment::Move { to: JointTarget::all(start), record: false, label: format!("setup: {label}") },
+            Segment::Move {
+                to: JointTarget::all(start),
+                record: false,
+                label: format!("setup: {label}"),
+                through: false,
+            },
             segment.clone(),
         ],
     };

@@ -129,7 +129,12 @@ mod tests {
         let plan = Plan {
             name: "motion".into(),
             description: String::new(),
-            segments: vec![Segment::Move { to: JointTarget::all(to), record: true, label: "motion".into() }],
+            segments: vec![Segment::Move {
+                to: JointTarget::all(to),
+                record: true,
+                label: "motion".into(),
+                through: false,
+            }],
         };
         let cancel = std::sync::atomic::AtomicBool::new(false);
         let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };

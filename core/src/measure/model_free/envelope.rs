@@ -27,13 +27,13 @@ impl Envelope {
 
 /// Samples on each side of an extremum for its parabola: enough to average the noise, few enough
 /// that the parabola holds (a fringe near its top is a parabola over about a tenth of a fringe).
-fn half_window(samples_per_fringe: f64) -> usize {
+pub(super) fn half_window(samples_per_fringe: f64) -> usize {
     ((samples_per_fringe / 16.0).round() as usize).clamp(1, 50)
 }
 
 /// The vertex value of the parabola through `y[i - w ..= i + w]` and its variance for white noise
 /// of variance `var` (that of the intercept of a centred quadratic fit, 9/(4m) for m points).
-fn vertex(y: &[f64], i: usize, w: usize, var: f64) -> Option<(f64, f64)> {
+pub(super) fn vertex(y: &[f64], i: usize, w: usize, var: f64) -> Option<(f64, f64)> {
     let (a, b) = (i.checked_sub(w)?, i + w);
     if b >= y.len() {
         return None;

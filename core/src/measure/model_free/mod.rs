@@ -11,10 +11,12 @@
 
 mod count;
 mod envelope;
+mod pinned;
 mod unwrap;
 
 pub use count::{count_fringes, gap_bounds, ExtremumClass, FringeCount, GapBounds, PathShape};
 pub use envelope::{dither_envelope, dither_envelope_where, Envelope};
+pub use pinned::pinned_to_extrema;
 pub use unwrap::{unwrap_gap_nm, PathForm, Unwrapped};
 
 /// Hysteresis of the model-free extremum detector, in units of the signal's white-noise σ
