@@ -242,9 +242,11 @@ pub fn bounds_header(count: usize) -> String {
     format!("{count} candidates not named, each smaller than the data would show (|estimate| + 3σ)")
 }
 
-/// One bound's line: the candidate, its estimate ± σ and the size a larger effect would exceed.
+/// One bound's line: the candidate, its estimate ± σ and the size a larger effect would exceed,
+/// all to the decimals that give σ three significant digits.
 pub fn bound_line(b: &photorobot_core::diagnose::Bound) -> String {
-    drawable(&format!("{}: {:.4} ± {:.4} {u}, below {:.4} {u}", b.name, b.estimate, b.sigma, b.below, u = b.unit))
+    let d = if b.sigma > 0.0 && b.sigma.is_finite() { (2 - b.sigma.log10().floor() as i32).max(0) as usize } else { 4 };
+    drawable(&format!("{}: {:.d$} ± {:.d$} {u}, below {:.d$} {u}", b.name, b.estimate, b.sigma, b.below, u = b.unit))
 }
 
 /// Candidates named nowhere, folded: each with the size above which the data would have shown it,
@@ -516,4 +518,26 @@ fn bar_chart(ui: &mut egui::Ui, rows: &[EffectValidationRow], without_name: &str
 /// Text from the core with the arrows the UI font lacks written out.
 pub fn drawable(text: &str) -> String {
     text.replace('→', "->").replace('←', "<-").replace('↔', "<->")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photorobot_core::diagnose::Bound;
+
+    /// A bound prints σ to three significant digits, the estimate and the bound to the same
+    /// decimals, whatever the unit's scale.
+    #[test]
+    fn a_bound_is_printed_to_the_digits_its_sigma_has() {
+        let b = |estimate: f64, sigma: f64, unit: &str| Bound {
+            name: "c".into(),
+            unit: unit.into(),
+            estimate,
+            sigma,
+            below: estimate.abs() + 3.0 * sigma,
+        };
+        assert_eq!(bound_line(&b(-86.1632, 126.9992, "ppm")), "c: -86 ± 127 ppm, below 467 ppm");
+        assert_eq!(bound_line(&b(-0.0043, 0.0071, "°")), "c: -0.00430 ± 0.00710 °, below 0.02560 °");
+        assert_eq!(bound_line(&b(0.5, 0.0, "µm")), "c: 0.5000 ± 0.0000 µm, below 0.5000 µm");
+    }
 }
