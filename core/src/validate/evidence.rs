@@ -17,8 +17,8 @@ use super::contrast::{
 use super::forecast::target_nm;
 use super::ValidationMotion;
 use crate::measure::model_free::{
-    count_fringes, dither_envelope, dither_envelope_where, gap_bounds, pinned_to_extrema, unwrap_gap_nm, Envelope,
-    FringeCount, GapBounds, PathForm, PathShape,
+    count_fringes, dither_envelope, dither_envelope_where, gap_bounds, piecewise_linear, pinned_to_extrema,
+    unwrap_gap_nm, Envelope, FringeCount, GapBounds, PathForm, PathShape,
 };
 use crate::measure::sweep::{fit_gap, SweepConfig, SweepFit};
 use crate::measure::with_scale_sigma;
@@ -530,25 +530,9 @@ fn envelope_along<'a>(
     Box::new(move |k: usize| {
         let a = angles[k.min(angles.len().saturating_sub(1))];
         let amplitude = e0.amplitude * (-2.0 * sens.kappa_per_rad2 * t.change_nm(a) * 1e-3 / gap_um).exp();
-        let offset = interpolate(&offsets, a);
+        let offset = piecewise_linear(&offsets, a);
         Envelope { offset, amplitude, sigma_amplitude: e0.sigma_amplitude * amplitude / e0.amplitude, ..e0 }
     })
-}
-
-/// Piecewise-linear interpolation in sorted `(x, y)` points, held beyond the ends.
-fn interpolate(points: &[(f64, f64)], x: f64) -> f64 {
-    match points.iter().position(|p| p.0 >= x) {
-        Some(0) => points[0].1,
-        Some(i) => {
-            let (a, b) = (points[i - 1], points[i]);
-            if b.0 > a.0 {
-                a.1 + (b.1 - a.1) * (x - a.0) / (b.0 - a.0)
-            } else {
-                b.1
-            }
-        }
-        None => points.last().map_or(0.0, |p| p.1),
-    }
 }
 
 /// The tilt term of a rotation about a transverse axis from the fringe's amplitude at its poses,

@@ -16,7 +16,7 @@ mod unwrap;
 
 pub use count::{count_fringes, gap_bounds, ExtremumClass, FringeCount, GapBounds, PathShape};
 pub use envelope::{dither_envelope, dither_envelope_where, Envelope};
-pub use pinned::pinned_to_extrema;
+pub use pinned::{piecewise_linear, pinned_to_extrema};
 pub use unwrap::{unwrap_gap_nm, PathForm, Unwrapped};
 
 /// Hysteresis of the model-free extremum detector, in units of the signal's white-noise σ

@@ -45,7 +45,7 @@ pub fn pinned_to_extrema<'a>(
 
 /// Piecewise-linear interpolation in `(x, y)` points sorted by x, held beyond the ends; zero
 /// without points.
-fn piecewise_linear(points: &[(f64, f64)], x: f64) -> f64 {
+pub fn piecewise_linear(points: &[(f64, f64)], x: f64) -> f64 {
     let k = points.partition_point(|p| p.0 < x);
     match (k.checked_sub(1).map(|j| points[j]), points.get(k)) {
         (None, None) => 0.0,
