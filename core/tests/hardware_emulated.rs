@@ -80,13 +80,17 @@ fn rig(scale: f64, preset: &BenchPreset, seed: u64) -> Rig {
 }
 
 fn hardware_bench(r: &Rig, preset: &BenchPreset, timeout_s: f64) -> ControllerBench {
+    hardware_bench_of(r, preset, timeout_s, RobotDescription::femto_6dof())
+}
+
+fn hardware_bench_of(r: &Rig, preset: &BenchPreset, timeout_s: f64, robot: RobotDescription) -> ControllerBench {
     let mut config = HardwareConfig::femto()
         .with_addresses(&[("PI E-712", r.pi.addr().to_string()), ("SmarAct MCS", r.mcs.addr().to_string())]);
     for c in &mut config.controllers {
         c.timeout_s = timeout_s;
     }
     ControllerBench::connect(
-        RobotDescription::femto_6dof(),
+        robot,
         config,
         preset.motion,
         preset.ambient,
@@ -681,4 +685,41 @@ fn each_segment_on_the_controllers_says_where_its_time_went() {
         assert_eq!(b.recorder_s > 0.0, s.record, "{}: the recorder is read when the segment records", s.label);
         assert!(s.waiting_s() > 0.0 && s.waiting_s() < s.bench_s, "{}: {}", s.label, s.waiting_s());
     }
+}
+
+/// An axis whose robot file gives its own speed moves at it on the controllers: the goniometer q4
+/// at 8 °/s where the bench's revolute speed is 2 °/s.
+#[test]
+fn an_axis_moves_on_its_controller_at_the_speed_its_robot_file_gives() {
+    use photorobot_core::bench::TimedBench;
+    let _one = serial();
+    let preset = preset_2khz();
+    let r = rig(1.0, &preset, 6);
+    let mut robot = RobotDescription::femto_6dof();
+    robot.links[3].limits.speed_per_s = Some(8.0);
+    let mut bench = hardware_bench_of(&r, &preset, 2.0, robot);
+    assert_eq!(bench.motion_limits().revolute_speed_deg_per_s, 2.0);
+    let plan = Plan {
+        name: "fast wrist".into(),
+        description: String::new(),
+        segments: vec![Segment::Move {
+            to: JointTarget::default().with(3, 2.0),
+            record: true,
+            label: "q4".into(),
+            through: false,
+        }],
+    };
+    let mut timed = TimedBench::new(&mut bench, "measure");
+    let run = run(&mut timed, &plan);
+    assert!(run.outcome.is_ok(), "{:?}", run.outcome);
+    let timing = timed.finish();
+    let b = timing.segments[0].breakdown.unwrap();
+    // 2° at 8 °/s: a 0.25 s ramp; at the bench's 2 °/s it would take 1 s.
+    assert!(b.motion_s >= 0.95 * 0.25 && b.motion_s < 0.5, "the move took {} s", b.motion_s);
+    // The recorded joint crosses 10 % to 90 % of its travel at the axis's speed, not the bench's.
+    let t = &run.traces[0];
+    let q4 = t.joint_column(3);
+    let crossing = |fraction: f64| t.t_s[q4.iter().position(|&q| q >= 2.0 * fraction).unwrap()];
+    let speed = 1.6 / (crossing(0.9) - crossing(0.1));
+    assert!((speed - 8.0).abs() < 0.8, "q4 moved at {speed} °/s");
 }

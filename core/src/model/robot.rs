@@ -35,13 +35,21 @@ impl JointType {
     }
 }
 
-/// Joint limits, in the joint's display unit (µm or °).
+/// Joint limits, in the joint's display unit (µm or °), and how fast the axis may move.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Limits {
     /// Lower limit (µm or °).
     pub min: f64,
     /// Upper limit (µm or °).
     pub max: f64,
+    /// Largest speed of the axis in its display unit per second (µm/s or °/s); `None`: the
+    /// bench's speed for the joint type ([`crate::plan::MotionLimits`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed_per_s: Option<f64>,
+    /// Largest acceleration of the axis in its display unit per second squared (µm/s² or °/s²);
+    /// `None`: the bench's acceleration for the joint type.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accel_per_s2: Option<f64>,
 }
 
 /// Which controller and channel drives a joint (used by the hardware drivers).
@@ -197,6 +205,16 @@ impl RobotDescription {
                     format!("expected revolute limits within ±360°, found [{}, {}]°", l.limits.min, l.limits.max),
                 ));
             }
+            for (name, per, value) in
+                [("speed_per_s", "/s", l.limits.speed_per_s), ("accel_per_s2", "/s²", l.limits.accel_per_s2)]
+            {
+                if let Some(v) = value.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                    return Err(FieldError::new(
+                        f(&format!("limits.{name}")),
+                        format!("expected a finite positive number ({unit}{per}), found {v}"),
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -285,6 +303,16 @@ mod tests {
                 "limits: (min: -180.0, max: 180.0)",
                 "limits: (min: -720.0, max: 180.0)",
                 "field `links[5].limits`: expected revolute limits within ±360°",
+            ),
+            (
+                "limits: (min: -180.0, max: 180.0)",
+                "limits: (min: -180.0, max: 180.0, speed_per_s: Some(0.0))",
+                "bad.ron: field `links[5].limits.speed_per_s`: expected a finite positive number (°/s), found 0",
+            ),
+            (
+                "limits: (min: -150.0, max: 150.0)",
+                "limits: (min: -150.0, max: 150.0, accel_per_s2: Some(-5.0))",
+                "bad.ron: field `links[0].limits.accel_per_s2`: expected a finite positive number (µm/s²), found -5",
             ),
         ];
         for (from, to, want) in cases {

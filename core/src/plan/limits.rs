@@ -2,7 +2,7 @@
 //! stages' speeds, accelerations and settling time.
 
 use super::PlanError;
-use crate::model::robot::JointType;
+use crate::model::robot::{JointType, LinkDescription};
 use serde::{Deserialize, Serialize};
 
 /// The tunable laser's wavelength range: sweeps must stay inside it.
@@ -23,7 +23,9 @@ impl Default for LaserLimits {
     }
 }
 
-/// Speed and acceleration limits of the stages, used to time moves (display units).
+/// Speed and acceleration limits of the stages, used to time moves (display units): one pair per
+/// joint type, for the axes whose robot file gives none of their own
+/// ([`crate::model::robot::Limits`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MotionLimits {
@@ -84,5 +86,12 @@ impl MotionLimits {
             JointType::Prismatic => (self.prismatic_speed_um_per_s, self.prismatic_accel_um_per_s2),
             JointType::Revolute => (self.revolute_speed_deg_per_s, self.revolute_accel_deg_per_s2),
         }
+    }
+
+    /// Speed and acceleration limits of one axis (display units): the robot file's own where it
+    /// gives them, else its joint type's.
+    pub fn for_link(&self, link: &LinkDescription) -> (f64, f64) {
+        let (speed, accel) = self.for_joint(link.joint);
+        (link.limits.speed_per_s.unwrap_or(speed), link.limits.accel_per_s2.unwrap_or(accel))
     }
 }

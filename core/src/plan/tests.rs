@@ -500,3 +500,26 @@ fn a_plan_without_sweeps_keeps_every_motion_in_order() {
     assert_eq!(q.segments.iter().collect::<Vec<_>>(), motions);
     assert_eq!(q.recorded_moves(), p.recorded_moves());
 }
+
+#[test]
+fn an_axis_with_its_own_speed_in_the_robot_file_moves_at_it() {
+    // The rotary stage q6 at 10 °/s and 40 °/s², the other axes at the bench's per-type limits.
+    let mut fast = robot();
+    fast.links[5].limits.speed_per_s = Some(10.0);
+    fast.links[5].limits.accel_per_s2 = Some(40.0);
+    fast.validate().unwrap();
+    let limits = no_settle();
+    let rotate = plan(vec![move_to(JointTarget { q6_deg: Some(30.0), ..Default::default() }, "q6")]);
+    let t = rotate.duration_s(&fast, [0.0; 6], &limits).unwrap();
+    assert_relative_eq!(t, closed_form(30.0, 10.0, 40.0), epsilon = 1e-12);
+    let t_type = rotate.duration_s(&robot(), [0.0; 6], &limits).unwrap();
+    assert_relative_eq!(t_type, closed_form(30.0, limits.revolute_speed_deg_per_s, limits.revolute_accel_deg_per_s2));
+    // A goniometer keeps the per-type limits; moved with q6, the slower of the two sets the time.
+    let tilt = plan(vec![move_to(JointTarget { q4_deg: Some(4.0), q6_deg: Some(4.0), ..Default::default() }, "both")]);
+    let t_both = tilt.duration_s(&fast, [0.0; 6], &limits).unwrap();
+    assert_relative_eq!(t_both, closed_form(4.0, limits.revolute_speed_deg_per_s, limits.revolute_accel_deg_per_s2));
+    // Written out, the file keeps the axis's limits; a robot without them writes none.
+    let text = ron::ser::to_string(&fast).unwrap();
+    assert!(text.contains("speed_per_s:Some(10.0)"), "{text}");
+    assert!(!ron::ser::to_string(&robot()).unwrap().contains("speed_per_s"));
+}

@@ -3,7 +3,7 @@
 
 use super::{LaserLimits, MotionLimits, Plan, PlanError, Segment, JOINT_FIELDS};
 use crate::model::kinematics::Chain;
-use crate::model::robot::{JointType, RobotDescription};
+use crate::model::robot::{JointType, LinkDescription, RobotDescription};
 
 /// A trapezoidal velocity profile over a path of unit length (the fraction `s` of a move goes
 /// from 0 to 1): constant acceleration, cruise at the peak rate, constant deceleration; a
@@ -226,7 +226,7 @@ impl Plan {
             return Err(PlanError::BadLaserLimits { laser: *laser });
         }
         self.validate()?;
-        let kinds = plan_joint_kinds(robot)?;
+        check_joint_kinds(robot)?;
         let chain = Chain::new(robot.clone());
         check_start(&chain, robot, start_q_display)?;
 
@@ -242,7 +242,7 @@ impl Plan {
                         chain.check_limits(&robot.q_from_display(&target)).map_err(|violation| {
                             PlanError::OutOfLimits { segment: index, label: label.clone(), violation }
                         })?;
-                        let (profile, settle_s) = move_profile(&kinds, current, target, limits);
+                        let (profile, settle_s) = move_profile(&robot.links, current, target, limits);
                         let settle_s = if *through { 0.0 } else { settle_s };
                         let duration_s = profile.duration_s + settle_s;
                         (target, TimedMotion::Move { profile, settle_s, through: *through }, duration_s)
@@ -283,7 +283,7 @@ impl Plan {
 
 /// The joint types of a robot a plan can drive: plans give q1..q3 in µm and q4..q6 in degrees,
 /// so the robot must be three prismatic then three revolute joints.
-fn plan_joint_kinds(robot: &RobotDescription) -> Result<Vec<JointType>, PlanError> {
+fn check_joint_kinds(robot: &RobotDescription) -> Result<(), PlanError> {
     let kinds: Vec<JointType> = robot.links.iter().map(|l| l.joint).collect();
     if !robot.is_3p3r() {
         return Err(PlanError::IncompatibleRobot {
@@ -293,7 +293,7 @@ fn plan_joint_kinds(robot: &RobotDescription) -> Result<Vec<JointType>, PlanErro
             ),
         });
     }
-    Ok(kinds)
+    Ok(())
 }
 
 /// The start joint vector must be finite and inside the joint limits.
@@ -332,13 +332,19 @@ fn check_sweep_in_range(
 
 /// The synchronized profile of a straight-line move and its settling time. On the unit path,
 /// joint j moves `d_j·s`, so its speed and acceleration are `d_j` times the path's: the path's
-/// limits are the smallest `v_j/d_j` and `a_j/d_j` over the moving joints.
-fn move_profile(kinds: &[JointType], from: [f64; 6], to: [f64; 6], limits: &MotionLimits) -> (TrapezoidProfile, f64) {
+/// limits are the smallest `v_j/d_j` and `a_j/d_j` over the moving joints, each joint's limits
+/// its own ([`MotionLimits::for_link`]).
+fn move_profile(
+    links: &[LinkDescription],
+    from: [f64; 6],
+    to: [f64; 6],
+    limits: &MotionLimits,
+) -> (TrapezoidProfile, f64) {
     let (mut rate, mut accel) = (f64::INFINITY, f64::INFINITY);
     for j in 0..6 {
         let d = (to[j] - from[j]).abs();
         if d > 0.0 {
-            let (v, a) = limits.for_joint(kinds[j]);
+            let (v, a) = limits.for_link(&links[j]);
             rate = rate.min(v / d);
             accel = accel.min(a / d);
         }

@@ -272,13 +272,13 @@ impl ControllerBench {
     /// The time (s) of a move's straight ramp: every joint arrives with the slowest, which moves
     /// at its speed limit.
     pub(super) fn ramp_s(&self, seg: &TimedSegment) -> f64 {
-        let limit = |j: usize| self.motion.for_joint(self.robot.links[j].joint).0;
+        let limit = |j: usize| self.motion.for_link(&self.robot.links[j]).0;
         (0..6).map(|j| (seg.to_display[j] - seg.from_display[j]).abs() / limit(j)).fold(0.0, f64::max)
     }
 
     fn set_speeds(&mut self, seg: &TimedSegment) -> Result<(), HwError> {
         let d: [f64; 6] = std::array::from_fn(|j| (seg.to_display[j] - seg.from_display[j]).abs());
-        let limit = |j: usize| self.motion.for_joint(self.robot.links[j].joint).0;
+        let limit = |j: usize| self.motion.for_link(&self.robot.links[j]).0;
         // All joints arrive together: the slowest sets the time.
         let time = self.ramp_s(seg);
         for (j, &dj) in d.iter().enumerate() {
