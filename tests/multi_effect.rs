@@ -135,7 +135,9 @@ pub struct Score {
     pub named: Vec<String>,
     /// Hidden effects not named, each with how the result reports it.
     pub missed: Vec<(String, String)>,
-    /// Named effects that name no hidden one.
+    /// Named effects that name no hidden one but list one among those they cannot be told from.
+    pub equivalent: Vec<String>,
+    /// Named effects that name no hidden one and list none.
     pub wrong: Vec<String>,
 }
 
@@ -154,8 +156,13 @@ pub fn score(v: &Value, hidden: &[Effect]) -> Score {
     }
     let all: Vec<HiddenScalar> = hidden.iter().flat_map(scalars_of).collect();
     for n in &named {
-        if !all.iter().any(|h| names_it(n, h)) {
-            s.wrong.push(format!("{} = {:.4} ± {:.4} {}", n.name, n.estimate, n.sigma, n.unit));
+        if all.iter().any(|h| names_it(n, h)) {
+            continue;
+        }
+        let text = format!("{} = {:.4} ± {:.4} {}", n.name, n.estimate, n.sigma, n.unit);
+        match all.iter().find(|h| h.name != n.name && n.ambiguous_with.contains(&h.name)) {
+            Some(h) => s.equivalent.push(format!("{text} (or {}, hidden)", h.name)),
+            None => s.wrong.push(text),
         }
     }
     s
@@ -176,6 +183,12 @@ fn reported_as(v: &Value, scalars: &[HiddenScalar]) -> String {
         let partial =
             v["partial"].as_array().into_iter().flatten().any(|p| p["name"].as_str() == Some(h.name.as_str()));
         let wrong_size = named(v).iter().any(|n| n.name == h.name);
+        let beside = named(v).into_iter().find(|n| n.ambiguous_with.contains(&h.name));
+        let removed = v["steps"].as_array().into_iter().flatten().find_map(|s| {
+            let r = &s["Removed"];
+            (r["effect"]["name"].as_str() == Some(h.name.as_str()))
+                .then(|| r["reason"].as_str().unwrap_or("").to_string())
+        });
         let paired = v["cancelling_pairs"]
             .as_array()
             .into_iter()
@@ -186,6 +199,10 @@ fn reported_as(v: &Value, scalars: &[HiddenScalar]) -> String {
             Some(f) => (*f).to_string(),
             None if wrong_size => "named, beyond 3σ of its value".into(),
             None if partial => "tried (partial)".into(),
+            None if removed.is_some() => format!("tried and removed: {}", removed.unwrap_or_default()),
+            None if beside.is_some() => {
+                format!("listed as what the named {} cannot be told from", beside.map(|n| n.name).unwrap_or_default())
+            }
             None if bound(v, &h.name).is_some() => {
                 let (below, unit) = bound(v, &h.name).unwrap_or_default();
                 let side = if h.value.abs() < below { "cannot tell" } else { "WRONG: the hidden size is above it" };

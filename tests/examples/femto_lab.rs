@@ -81,6 +81,9 @@ fn main() {
         for (m, why) in &s.missed {
             println!("    missed {m}: {why}");
         }
+        for e in &s.equivalent {
+            println!("    named an equivalent {e}");
+        }
         for w in &s.wrong {
             println!("    WRONGLY named {w}");
         }

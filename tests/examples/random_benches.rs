@@ -14,7 +14,7 @@ use photorobot_e2e::multi_effect::{calibrate_then_diagnose, random_effects, scor
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let benches = photorobot_e2e::range_arg(&args, "--benches", 0..20);
-    let (mut hidden, mut named, mut wrong, mut failed) = (0, 0, 0, 0);
+    let (mut hidden, mut named, mut equivalent, mut wrong, mut failed) = (0, 0, 0, 0, 0);
     for b in benches.clone() {
         let t0 = std::time::Instant::now();
         let mut preset = BenchPreset::resolve("table2-ideal").expect("the embedded preset");
@@ -34,6 +34,7 @@ fn main() {
         let s = score(&run.diagnosis, &preset.effects);
         hidden += preset.effects.len();
         named += s.named.len();
+        equivalent += s.equivalent.len();
         wrong += s.wrong.len();
         println!(
             "bench {b}: calibration {}, diagnosis {} ({:.2}σ → {:.2}σ), {:.0} s: {} of {} named",
@@ -51,13 +52,17 @@ fn main() {
         for (m, why) in &s.missed {
             println!("    missed {m}: {why}");
         }
+        for e in &s.equivalent {
+            println!("    named an equivalent {e}");
+        }
         for w in &s.wrong {
             println!("    WRONGLY named {w}");
         }
     }
     let n = benches.end - benches.start;
     println!(
-        "{n} benches, {hidden} hidden effects: {named} named within 3σ, {} missed, {wrong} wrongly named; {failed} runs failed",
+        "{n} benches, {hidden} hidden effects: {named} named within 3σ, {} missed, {equivalent} equivalents named \
+         beside a hidden effect, {wrong} wrongly named; {failed} runs failed",
         hidden - named
     );
     assert_eq!(failed, 0, "every bench runs through calibrate and diagnose");
