@@ -265,12 +265,14 @@ fn diagnose_reports_hidden_effects_the_traces_cannot_show() {
 
 /// Two effects whose signatures cancel on the designed plan's motions: a q5 pivot of -17.2 µm
 /// along X_w and a q5 zero offset of -0.060° (a random bench of the multi-effect report). The
-/// residual stays at the floor and nothing can be named; the result must not read as "nothing
-/// there" for both: the pair is listed as one these data cannot tell apart, and the text says
-/// the pair is left open.
+/// residual stays at the floor and neither can be named from the session. With the bench,
+/// motions designed for the pair run and both are named within 3σ. From the recordings alone
+/// the result must not read as "nothing there" for both: they need the proposed motions, and
+/// the text says so.
 #[test]
-fn two_effects_that_cancel_are_listed_as_a_pair_the_data_cannot_tell_apart() {
+fn two_effects_that_cancel_are_told_apart_by_motions_designed_for_the_pair() {
     use photorobot_core::model::effects::Effect;
+    use photorobot_e2e::multi_effect::{named, names_it, scalars_of};
     let dir = tempfile::tempdir().unwrap();
     let mut preset = BenchPreset::resolve("table2-ideal").unwrap();
     preset.name = "q5 pivot and zero offset that cancel".into();
@@ -283,24 +285,28 @@ fn two_effects_that_cancel_are_listed_as_a_pair_the_data_cannot_tell_apart() {
     let run =
         photorobot_e2e::multi_effect::calibrate_then_diagnose(&file, 20, &["--plan", "optimised"], dir.path()).unwrap();
     let v = &run.diagnosis;
-    assert_eq!(v["verdict"], "none", "{v}");
-    let pair = v["cancelling_pairs"].as_array().unwrap().iter().find(|p| {
-        let names: Vec<&str> = p.as_array().unwrap().iter().filter_map(|n| n.as_str()).collect();
-        names.contains(&"pivot offset q5 along X_w") && names.contains(&"joint zero offset q5")
+    let pair = ["pivot offset q5 along X_w", "joint zero offset q5"];
+    let designed_for_the_pair = v["steps"].as_array().unwrap().iter().any(|s| {
+        let needy = s["Designed"]["needy"].as_array().into_iter().flatten().filter_map(|n| n.as_str());
+        needy.filter(|n| pair.contains(n)).count() == 2 && s["Designed"]["added_observations"].as_u64() > Some(0)
     });
-    assert!(pair.is_some(), "the cancelling pair is not listed: {}", v["cancelling_pairs"]);
+    assert!(designed_for_the_pair, "no motions ran for the pair: {}", v["steps"]);
+    assert_eq!(v["verdict"], "named", "{v}");
+    let found = named(v);
+    for hidden in preset.effects.iter().flat_map(scalars_of) {
+        assert!(found.iter().any(|n| names_it(n, &hidden)), "{} not named within 3σ: {found:?}", hidden.name);
+    }
+    // From the recordings alone: both need the proposed motions, in the JSON and in the text.
     let session = dir.path().join("session");
-    let text = photorobot_e2e::multi_effect::cli(&[
-        "photorobot",
-        "diagnose",
-        session.to_str().unwrap(),
-        "--bench",
-        file.to_str().unwrap(),
-        "--seed",
-        "120",
-    ])
-    .unwrap();
-    assert!(text.contains("joint zero offset q5 ↔ pivot offset q5 along X_w"), "{text}");
+    let args = ["photorobot", "diagnose", session.to_str().unwrap(), "--bench", "none"];
+    let v: serde_json::Value =
+        serde_json::from_str(&photorobot_e2e::multi_effect::cli(&[&args[..], &["--json"]].concat()).unwrap()).unwrap();
+    assert_eq!(v["verdict"], "none", "{v}");
+    let needs = |n: &str| v["need_motions"].as_array().unwrap().iter().any(|m| m.as_str() == Some(n));
+    assert!(pair.iter().all(|n| needs(n)), "not left to the proposed motions: {}", v["need_motions"]);
+    let text = photorobot_e2e::multi_effect::cli(&args).unwrap();
+    let line = text.lines().find(|l| l.starts_with("the recorded data cannot tell these")).unwrap_or_default();
+    assert!(pair.iter().all(|n| line.contains(n)), "{text}");
 }
 
 #[test]

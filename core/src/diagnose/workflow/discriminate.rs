@@ -278,16 +278,7 @@ impl Diagnosis {
         self.separated.push(name.clone());
         let targets: Vec<(usize, Vec<usize>)> =
             ambiguous.iter().flat_map(|&o| [(best, vec![o]), (o, vec![best])]).collect();
-        let (pool, mut per_motion, _) = self.pool_contributions(&targets)?;
-        let tracked = runner.tracks_fringes();
-        let left_out = self.leave_out(&pool, &mut per_motion, tracked)?;
-        let have = vec![0.0; targets.len()];
-        let motions: Vec<DesignedMotion> =
-            Self::choose(&per_motion, &have, scoring::naming_threshold(self.candidates.len()))
-                .into_iter()
-                .map(|m| pool[m].clone())
-                .filter(|m| !self.designed.contains(m))
-                .collect();
+        let (motions, left_out) = self.separating_motions(&targets, runner.tracks_fringes())?;
         if motions.is_empty() {
             return Ok(false);
         }
@@ -304,5 +295,61 @@ impl Diagnosis {
             recorded: left_out.recorded,
         });
         Ok(true)
+    }
+
+    /// Pool motions not yet designed that tell apart the candidates of each target (a candidate
+    /// and those it must be told from), and the pool motions left out.
+    fn separating_motions(
+        &self,
+        targets: &[(usize, Vec<usize>)],
+        tracked: bool,
+    ) -> Result<(Vec<DesignedMotion>, LeftOut), DiagnoseError> {
+        let (pool, mut per_motion, _) = self.pool_contributions(targets)?;
+        let left_out = self.leave_out(&pool, &mut per_motion, tracked)?;
+        let have = vec![0.0; targets.len()];
+        let motions = Self::choose(&per_motion, &have, scoring::naming_threshold(self.candidates.len()))
+            .into_iter()
+            .map(|m| pool[m].clone())
+            .filter(|m| !self.designed.contains(m))
+            .collect();
+        Ok((motions, left_out))
+    }
+
+    /// Once nothing is left to name, on a bench: motions that tell apart each pair of candidates
+    /// whose signatures cancel on the data (two effects of opposite sign can leave the residual
+    /// at the floor), once per pair. True when they ran: the naming goes on. From recordings
+    /// alone the pairs stay listed: proposed, such motions left the pairs' signatures as
+    /// collinear over all the data on table2-ideal's designed plan.
+    pub(super) fn separate_pairs<'r>(&mut self, runner: &mut (dyn MotionRunner + 'r)) -> Result<bool, DiagnoseError> {
+        let state = self.fit.as_ref().map(|f| f.state.clone()).ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
+        let not_detectable = self.not_detectable(&state);
+        let pairs: Vec<[String; 2]> =
+            self.cancelling_pairs(&not_detectable).into_iter().filter(|p| !self.separated_pairs.contains(p)).collect();
+        if pairs.is_empty() {
+            return Ok(false);
+        }
+        self.separated_pairs.extend(pairs.iter().cloned());
+        let index = |n: &String| self.candidates.iter().position(|c| &c.name == n);
+        let targets: Vec<(usize, Vec<usize>)> = pairs
+            .iter()
+            .filter_map(|[a, b]| Some((index(a)?, index(b)?)))
+            .flat_map(|(a, b)| [(a, vec![b]), (b, vec![a])])
+            .collect();
+        let (motions, left_out) = self.separating_motions(&targets, runner.tracks_fringes())?;
+        if motions.is_empty() {
+            return Ok(false);
+        }
+        let added = self.run_motions(runner, &motions)?;
+        self.steps.push(Step::Designed {
+            needy: pairs.iter().flatten().cloned().collect(),
+            motions: motions.iter().map(|m| m.label.clone()).collect(),
+            ran_on: Some(runner.name()),
+            added_observations: added,
+            rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
+            avoided: left_out.turns,
+            short: left_out.short,
+            recorded: left_out.recorded,
+        });
+        Ok(added > 0)
     }
 }

@@ -13,7 +13,7 @@ use crate::diagnose::motions::{self, DesignedMotion, MotionRunner};
 use crate::diagnose::replay;
 use crate::diagnose::result::{DiagnoseError, DiagnosisResult, NamedEffect, Verdict};
 use crate::diagnose::scoring::{self, CandidateScore};
-use crate::diagnose::settings::{DETECTABLE_SCORE, DISCRIMINATING_PREFIX, EXTRACT_OPTIONS, NOISE_FLOOR_FACTOR};
+use crate::diagnose::settings::{DISCRIMINATING_PREFIX, EXTRACT_OPTIONS, NOISE_FLOOR_FACTOR};
 use crate::diagnose::step::Step;
 use crate::identify::{Observation, ObservationKind, N_EXTRINSICS};
 use crate::model::extrinsics::Extrinsics;
@@ -53,6 +53,8 @@ pub struct Diagnosis {
     /// nonlinearity), then by the baseline (with those no observation or pool motion depends on).
     not_seen: Vec<String>,
     separated: Vec<String>,
+    /// Pairs of candidates that cancel on the data, once motions to tell them apart were designed.
+    separated_pairs: Vec<[String; 2]>,
     /// Rounds of discriminating motions run on a bench so far.
     design_rounds: usize,
     /// The discriminating motions were designed (they are designed once the evident effects are named).
@@ -142,6 +144,7 @@ impl Diagnosis {
             equivalent: Vec::new(),
             not_seen: Vec::new(),
             separated: Vec::new(),
+            separated_pairs: Vec::new(),
             design_rounds: 0,
             design_done: false,
             settled: false,
@@ -352,21 +355,7 @@ impl Diagnosis {
         };
         let (rms0, nm0, held0) = (before.rms(), obs_rms_nm(&obs, &before.residuals), self.held_rms(&before.state)?);
         let at_floor = f.rms() <= NOISE_FLOOR_FACTOR;
-        let not_detectable: Vec<String> = self
-            .scores
-            .iter()
-            .filter(|s| {
-                s.detectability_at_typical < DETECTABLE_SCORE
-                    && !self.equivalent.contains(&s.name)
-                    && !self.need_motions.contains(&s.name)
-                    && !self.not_seen.contains(&s.name)
-                    && !f.state.effects.iter().any(|(c, _)| c.name == s.name)
-                    // What a named effect cannot be told from is listed with it: the named one
-                    // took its signature, it is not invisible.
-                    && !self.added.iter().any(|e| e.ambiguous_with.contains(&s.name))
-            })
-            .map(|s| s.name.clone())
-            .collect();
+        let not_detectable = self.not_detectable(&f.state);
         let cancelling_pairs = self.cancelling_pairs(&not_detectable);
         let ruled_out_above = self.bounds(&not_detectable, &cancelling_pairs);
         let verdict = match (self.added.is_empty(), at_floor) {

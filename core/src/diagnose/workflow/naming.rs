@@ -48,6 +48,12 @@ impl Diagnosis {
                 self.stage = Stage::Design;
                 return Ok(());
             }
+            // Then, on a bench, once for pairs that cancel on the data: run, they may show both.
+            if let Some(r) = runner.as_deref_mut() {
+                if self.separate_pairs(r)? {
+                    return Ok(());
+                }
+            }
             self.stage = Stage::Finish;
             return self.conclude();
         };

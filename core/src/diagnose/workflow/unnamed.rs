@@ -3,13 +3,34 @@
 //! "none" then says how large each unnamed effect could still be, not that it is absent.
 
 use super::Diagnosis;
+use crate::diagnose::fit::ModelState;
 use crate::diagnose::result::Bound;
 use crate::diagnose::scoring;
+use crate::diagnose::settings::DETECTABLE_SCORE;
 
 /// Multiples of σ above |estimate| that bound an unnamed candidate.
 const BOUND_SIGMAS: f64 = 3.0;
 
 impl Diagnosis {
+    /// The candidates the data cannot see at their typical size that no other list holds: not
+    /// equivalent to an extrinsic change, not needing the proposed motions, seen, not in the
+    /// model `state`, and not what a named effect cannot be told from (the named one took its
+    /// signature, it is not invisible).
+    pub(super) fn not_detectable(&self, state: &ModelState) -> Vec<String> {
+        self.scores
+            .iter()
+            .filter(|s| {
+                s.detectability_at_typical < DETECTABLE_SCORE
+                    && !self.equivalent.contains(&s.name)
+                    && !self.need_motions.contains(&s.name)
+                    && !self.not_seen.contains(&s.name)
+                    && !state.effects.iter().any(|(c, _)| c.name == s.name)
+                    && !self.added.iter().any(|e| e.ambiguous_with.contains(&s.name))
+            })
+            .map(|s| s.name.clone())
+            .collect()
+    }
+
     /// Whether candidate `k` is reported in no other list: not excluded from naming, not in the
     /// model, not equivalent to an extrinsic change, seen, detectable, and not in a named
     /// effect's ambiguity set.
