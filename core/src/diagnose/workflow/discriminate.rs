@@ -278,15 +278,35 @@ impl Diagnosis {
         self.separated.push(name.clone());
         let targets: Vec<(usize, Vec<usize>)> =
             ambiguous.iter().flat_map(|&o| [(best, vec![o]), (o, vec![best])]).collect();
-        let (motions, left_out) = self.separating_motions(&targets, runner.tracks_fringes())?;
+        let needy = std::iter::once(name).chain(ambiguous.iter().map(|&o| self.candidates[o].name.clone())).collect();
+        Ok(self.run_separating(needy, &targets, runner)?.is_some())
+    }
+
+    /// Run the pool motions not yet designed that tell apart the candidates of each target (a
+    /// candidate and those it must be told from), for the candidates `needy`, and say so in a
+    /// step. The observations they added, or `None` when the pool has none to run.
+    fn run_separating<'r>(
+        &mut self,
+        needy: Vec<String>,
+        targets: &[(usize, Vec<usize>)],
+        runner: &mut (dyn MotionRunner + 'r),
+    ) -> Result<Option<usize>, DiagnoseError> {
+        let (pool, mut per_motion, _) = self.pool_contributions(targets)?;
+        let left_out = self.leave_out(&pool, &mut per_motion, runner.tracks_fringes())?;
+        let have = vec![0.0; targets.len()];
+        let motions: Vec<DesignedMotion> =
+            Self::choose(&per_motion, &have, scoring::naming_threshold(self.candidates.len()))
+                .into_iter()
+                .map(|m| pool[m].clone())
+                .filter(|m| !self.designed.contains(m))
+                .collect();
         if motions.is_empty() {
-            return Ok(false);
+            return Ok(None);
         }
-        let labels = motions.iter().map(|m| m.label.clone()).collect();
         let added = self.run_motions(runner, &motions)?;
         self.steps.push(Step::Designed {
-            needy: std::iter::once(name).chain(ambiguous.iter().map(|&o| self.candidates[o].name.clone())).collect(),
-            motions: labels,
+            needy,
+            motions: motions.iter().map(|m| m.label.clone()).collect(),
             ran_on: Some(runner.name()),
             added_observations: added,
             rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
@@ -294,25 +314,7 @@ impl Diagnosis {
             short: left_out.short,
             recorded: left_out.recorded,
         });
-        Ok(true)
-    }
-
-    /// Pool motions not yet designed that tell apart the candidates of each target (a candidate
-    /// and those it must be told from), and the pool motions left out.
-    fn separating_motions(
-        &self,
-        targets: &[(usize, Vec<usize>)],
-        tracked: bool,
-    ) -> Result<(Vec<DesignedMotion>, LeftOut), DiagnoseError> {
-        let (pool, mut per_motion, _) = self.pool_contributions(targets)?;
-        let left_out = self.leave_out(&pool, &mut per_motion, tracked)?;
-        let have = vec![0.0; targets.len()];
-        let motions = Self::choose(&per_motion, &have, scoring::naming_threshold(self.candidates.len()))
-            .into_iter()
-            .map(|m| pool[m].clone())
-            .filter(|m| !self.designed.contains(m))
-            .collect();
-        Ok((motions, left_out))
+        Ok(Some(added))
     }
 
     /// Once nothing is left to name, on a bench: motions that tell apart each pair of candidates
@@ -335,21 +337,7 @@ impl Diagnosis {
             .filter_map(|[a, b]| Some((index(a)?, index(b)?)))
             .flat_map(|(a, b)| [(a, vec![b]), (b, vec![a])])
             .collect();
-        let (motions, left_out) = self.separating_motions(&targets, runner.tracks_fringes())?;
-        if motions.is_empty() {
-            return Ok(false);
-        }
-        let added = self.run_motions(runner, &motions)?;
-        self.steps.push(Step::Designed {
-            needy: pairs.iter().flatten().cloned().collect(),
-            motions: motions.iter().map(|m| m.label.clone()).collect(),
-            ran_on: Some(runner.name()),
-            added_observations: added,
-            rms_sigma: self.fit.as_ref().map_or(f64::NAN, |f| f.rms()),
-            avoided: left_out.turns,
-            short: left_out.short,
-            recorded: left_out.recorded,
-        });
-        Ok(added > 0)
+        let needy = pairs.iter().flatten().cloned().collect();
+        Ok(self.run_separating(needy, &targets, runner)?.is_some_and(|added| added > 0))
     }
 }
