@@ -836,7 +836,9 @@ fn diagnosis_view_proposes_saves_and_adds_the_discriminating_motions() {
     let pairs = again.cancelling_pairs.clone();
     assert!(!pairs.is_empty(), "the designed plan's motions leave pairs open");
     if again.settled {
-        h.get_by_label(photorobot_app::views::diagnosis::PAIRS_LEFT_OPEN);
+        let open = again.pairs_left_open().expect("a settled result with pairs says they are left open");
+        assert!(open.contains("from recordings alone"), "{open}");
+        h.get_by_label(open);
     }
     let header = format!("{} pairs these data cannot tell apart (sizes that cancel would show nothing)", pairs.len());
     h.get_by_label(&header).scroll_to_me();

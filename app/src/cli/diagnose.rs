@@ -152,11 +152,7 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
                 "settled: no discriminating motion that these data lack would tell more of a single candidate (each \
                  is named, ruled out at its typical size, equivalent to an extrinsic change, or too small for any \
                  motion){}",
-                if result.cancelling_pairs.is_empty() {
-                    ""
-                } else {
-                    "; the pairs above are left open: no motion is designed to separate them"
-                }
+                result.pairs_left_open().map_or(String::new(), |open| format!("\n{open}"))
             )?,
             None => {}
         }

@@ -212,8 +212,8 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
             }
             if d.settled {
                 ui.label(RichText::new(SETTLED).strong());
-                if !d.cancelling_pairs.is_empty() {
-                    ui.label(PAIRS_LEFT_OPEN);
+                if let Some(open) = d.pairs_left_open() {
+                    ui.label(open);
                 }
             }
         }
@@ -261,10 +261,6 @@ fn ruled_out_above(ui: &mut egui::Ui, bounds: &[photorobot_core::diagnose::Bound
         }
     });
 }
-
-/// What a settled diagnosis adds when it leaves pairs open.
-pub const PAIRS_LEFT_OPEN: &str =
-    "The pairs these data cannot tell apart are left open: no motion is designed to separate them.";
 
 /// What a settled diagnosis says.
 pub const SETTLED: &str =

@@ -137,6 +137,22 @@ pub struct DiagnosisResult {
     pub extrinsics: Extrinsics,
 }
 
+impl DiagnosisResult {
+    /// What a settled result says of the pairs it leaves open, if it leaves any: with a bench
+    /// the motions the pool has for each pair ran once (a pair the pool cannot separate has
+    /// none); from recordings alone none is proposed for them.
+    pub fn pairs_left_open(&self) -> Option<&'static str> {
+        if !self.settled || self.cancelling_pairs.is_empty() {
+            return None;
+        }
+        Some(if self.discriminating_motions_ran {
+            "The pairs these data cannot tell apart are left open: the pool's motions for them ran and did not separate them."
+        } else {
+            "The pairs these data cannot tell apart are left open: from recordings alone no motion is proposed to separate them."
+        })
+    }
+}
+
 /// Why a diagnosis cannot run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DiagnoseError {

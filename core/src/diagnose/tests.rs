@@ -349,3 +349,20 @@ fn a_stop_ends_the_step_in_progress_within_one_evaluation() {
     assert_eq!(stopped.step(None).err(), Some(DiagnoseError::Stopped), "and every later step");
     assert!(stopped.result().is_none(), "a stopped diagnosis has no result");
 }
+
+/// A settled result that leaves pairs open says why: with a bench the pool's motions for them
+/// ran, from recordings alone none was proposed; unsettled, or without pairs, it says nothing.
+#[test]
+fn a_settled_result_says_why_it_leaves_pairs_open() {
+    let (mut r, _) = diagnose(vec![], 3, false);
+    r.cancelling_pairs = vec![["axis tilt q3 toward link y".into(), "axis tilt q4 toward link y".into()]];
+    r.settled = false;
+    assert_eq!(r.pairs_left_open(), None);
+    r.settled = true;
+    r.discriminating_motions_ran = false;
+    assert!(r.pairs_left_open().unwrap().contains("from recordings alone no motion is proposed"));
+    r.discriminating_motions_ran = true;
+    assert!(r.pairs_left_open().unwrap().contains("motions for them ran and did not separate them"));
+    r.cancelling_pairs.clear();
+    assert_eq!(r.pairs_left_open(), None);
+}
