@@ -146,7 +146,7 @@ impl DiagnosisResult {
             return None;
         }
         Some(if self.discriminating_motions_ran {
-            "The pairs these data cannot tell apart are left open: the pool's motions for them ran and did not separate them."
+            "The pairs these data cannot tell apart are left open: the pool's motions for them, if it has any, ran and did not separate them."
         } else {
             "The pairs these data cannot tell apart are left open: from recordings alone no motion is proposed to separate them."
         })

@@ -362,7 +362,7 @@ fn a_settled_result_says_why_it_leaves_pairs_open() {
     r.discriminating_motions_ran = false;
     assert!(r.pairs_left_open().unwrap().contains("from recordings alone no motion is proposed"));
     r.discriminating_motions_ran = true;
-    assert!(r.pairs_left_open().unwrap().contains("motions for them ran and did not separate them"));
+    assert!(r.pairs_left_open().unwrap().contains("motions for them, if it has any, ran and did not separate them"));
     r.cancelling_pairs.clear();
     assert_eq!(r.pairs_left_open(), None);
 }
