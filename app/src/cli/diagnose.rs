@@ -377,9 +377,8 @@ fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()>
         )?;
     }
     if !r.ruled_out_above.is_empty() {
-        let bounds: Vec<String> =
-            r.ruled_out_above.iter().map(|b| format!("{} < {:.4} {}", b.name, b.below, b.unit)).collect();
-        writeln!(out, "not named, each below (|estimate| + 3σ): {}", bounds.join("; "))?;
+        let bounds: Vec<String> = r.ruled_out_above.iter().map(|b| b.describe()).collect();
+        writeln!(out, "not named, each smaller than the data would show (|estimate| + 3σ): {}", bounds.join("; "))?;
     }
     if !r.not_seen.is_empty() {
         writeln!(out, "no observation can see: {}", r.not_seen.join(", "))?;

@@ -69,6 +69,27 @@ pub struct Bound {
     pub below: f64,
 }
 
+impl Bound {
+    /// The candidate, its estimate ± σ and the size a larger effect would exceed, all to the
+    /// decimals that give σ three significant digits: "joint scale error q1: -86 ± 127 ppm,
+    /// below 467 ppm".
+    pub fn describe(&self) -> String {
+        let d = if self.sigma > 0.0 && self.sigma.is_finite() {
+            (2 - self.sigma.log10().floor() as i32).max(0) as usize
+        } else {
+            4
+        };
+        format!(
+            "{}: {:.d$} ± {:.d$} {u}, below {:.d$} {u}",
+            self.name,
+            self.estimate,
+            self.sigma,
+            self.below,
+            u = self.unit
+        )
+    }
+}
+
 /// The diagnosis result, serialisable (for sessions and `--json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DiagnosisResult {

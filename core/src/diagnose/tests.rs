@@ -366,3 +366,19 @@ fn a_settled_result_says_why_it_leaves_pairs_open() {
     r.cancelling_pairs.clear();
     assert_eq!(r.pairs_left_open(), None);
 }
+
+/// A bound prints σ to three significant digits, the estimate and the bound to the same
+/// decimals, whatever the unit's scale.
+#[test]
+fn a_bound_is_printed_to_the_digits_its_sigma_has() {
+    let b = |estimate: f64, sigma: f64, unit: &str| crate::diagnose::Bound {
+        name: "c".into(),
+        unit: unit.into(),
+        estimate,
+        sigma,
+        below: estimate.abs() + 3.0 * sigma,
+    };
+    assert_eq!(b(-86.1632, 126.9992, "ppm").describe(), "c: -86 ± 127 ppm, below 467 ppm");
+    assert_eq!(b(-0.0043, 0.0071, "°").describe(), "c: -0.00430 ± 0.00710 °, below 0.02560 °");
+    assert_eq!(b(0.5, 0.0, "µm").describe(), "c: 0.5000 ± 0.0000 µm, below 0.5000 µm");
+}
