@@ -177,13 +177,14 @@ fn bound(v: &Value, name: &str) -> Option<(f64, String)> {
 /// How the result reports hidden scalars it did not name: the lists that hold them.
 fn reported_as(v: &Value, scalars: &[HiddenScalar]) -> String {
     let lists = ["need_motions", "not_detectable", "not_seen", "equivalent_to_extrinsics"];
+    let named = named(v);
     let mut out = Vec::new();
     for h in scalars {
         let holds = |f: &str| v[f].as_array().is_some_and(|a| a.iter().any(|n| n.as_str() == Some(h.name.as_str())));
         let partial =
             v["partial"].as_array().into_iter().flatten().any(|p| p["name"].as_str() == Some(h.name.as_str()));
-        let wrong_size = named(v).iter().any(|n| n.name == h.name);
-        let beside = named(v).into_iter().find(|n| n.ambiguous_with.contains(&h.name));
+        let wrong_size = named.iter().any(|n| n.name == h.name);
+        let beside = named.iter().find(|n| n.ambiguous_with.contains(&h.name));
         let removed = v["steps"].as_array().into_iter().flatten().find_map(|s| {
             let r = &s["Removed"];
             (r["effect"]["name"].as_str() == Some(h.name.as_str()))
@@ -201,7 +202,7 @@ fn reported_as(v: &Value, scalars: &[HiddenScalar]) -> String {
             None if partial => "tried (partial)".into(),
             None if removed.is_some() => format!("tried and removed: {}", removed.unwrap_or_default()),
             None if beside.is_some() => {
-                format!("listed as what the named {} cannot be told from", beside.map(|n| n.name).unwrap_or_default())
+                format!("listed as what the named {} cannot be told from", beside.map_or("", |n| n.name.as_str()))
             }
             None if bound(v, &h.name).is_some() => {
                 let (below, unit) = bound(v, &h.name).unwrap_or_default();

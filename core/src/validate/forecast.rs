@@ -231,11 +231,15 @@ mod tests {
         let preset = BenchPreset::resolve("table2-ideal").unwrap();
         let model = PhaseModel::of_preset(&preset, preset.truth).unwrap();
         let e = preset.truth;
+        let planned: Vec<_> = ValidationMotion::ALL
+            .iter()
+            .map(|&m| waypoints(&model, &e, m, [0.0; 6], m.waypoint_count()).unwrap())
+            .collect();
         let relative = |real: &PhaseModel| -> Vec<f64> {
             ValidationMotion::ALL
                 .iter()
-                .map(|&m| {
-                    let w = waypoints(&model, &e, m, [0.0; 6], m.waypoint_count()).unwrap();
+                .zip(&planned)
+                .map(|(&m, w)| {
                     let l: Vec<f64> = w.iter().map(|q| real.gap_and_tilt(q).unwrap().0).collect();
                     let pp = l.iter().copied().fold(f64::NEG_INFINITY, f64::max)
                         - l.iter().copied().fold(f64::INFINITY, f64::min);

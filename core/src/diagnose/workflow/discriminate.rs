@@ -323,8 +323,8 @@ impl Diagnosis {
     /// alone the pairs stay listed: proposed, such motions left the pairs' signatures as
     /// collinear over all the data on table2-ideal's designed plan.
     pub(super) fn separate_pairs<'r>(&mut self, runner: &mut (dyn MotionRunner + 'r)) -> Result<bool, DiagnoseError> {
-        let state = self.fit.as_ref().map(|f| f.state.clone()).ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
-        let not_detectable = self.not_detectable(&state);
+        let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("no fit".into()))?;
+        let not_detectable = self.not_detectable(&f.state);
         let pairs: Vec<[String; 2]> =
             self.cancelling_pairs(&not_detectable).into_iter().filter(|p| !self.separated_pairs.contains(p)).collect();
         if pairs.is_empty() {

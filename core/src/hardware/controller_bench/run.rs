@@ -272,18 +272,22 @@ impl ControllerBench {
     /// The time (s) of a move's straight ramp: every joint arrives with the slowest, which moves
     /// at its speed limit.
     pub(super) fn ramp_s(&self, seg: &TimedSegment) -> f64 {
-        let limit = |j: usize| self.motion.for_link(&self.robot.links[j]).0;
-        (0..6).map(|j| (seg.to_display[j] - seg.from_display[j]).abs() / limit(j)).fold(0.0, f64::max)
+        (0..6).map(|j| (seg.to_display[j] - seg.from_display[j]).abs() / self.speed_limit(j)).fold(0.0, f64::max)
+    }
+
+    /// Joint `j`'s speed limit (µm/s or °/s): its own from the robot file, else its type's.
+    fn speed_limit(&self, j: usize) -> f64 {
+        self.motion.for_link(&self.robot.links[j]).0
     }
 
     fn set_speeds(&mut self, seg: &TimedSegment) -> Result<(), HwError> {
         let d: [f64; 6] = std::array::from_fn(|j| (seg.to_display[j] - seg.from_display[j]).abs());
-        let limit = |j: usize| self.motion.for_link(&self.robot.links[j]).0;
         // All joints arrive together: the slowest sets the time.
         let time = self.ramp_s(seg);
         for (j, &dj) in d.iter().enumerate() {
+            let limit = self.speed_limit(j);
             // A joint that moves by rounding noise still gets a speed the controller can express.
-            let v = if dj > 0.0 && time > 0.0 { (dj / time).max(MIN_SPEED_FRACTION * limit(j)) } else { limit(j) };
+            let v = if dj > 0.0 && time > 0.0 { (dj / time).max(MIN_SPEED_FRACTION * limit) } else { limit };
             if (v - self.velocities[j]).abs() > 1e-9 * v || self.velocities[j].is_nan() {
                 let m = self.joints[j];
                 self.controllers[m.controller].set_velocity(m.axis, v)?;
