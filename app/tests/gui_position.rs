@@ -73,7 +73,10 @@ fn the_quick_calibration_then_a_confirmed_move_in_the_position_view() {
     assert_eq!(r.verdict, Verdict::Confirmed, "{}", r.note);
     h.get_by_label("CONFIRMED");
     h.get_by_label_contains("measured gap 860.0");
+    h.get_by_label_contains("tilt from the fringe contrast: ");
     let truth = truth_at(&r.joints_end.to_array());
+    let t = r.tilt.expect("the tilt measured at the end pose");
+    assert!((t.tilt_deg - truth.tilt_angle_rad().to_degrees()).abs() <= 3.0 * t.sigma_deg, "{t:?} vs {truth:?}");
     let error_nm = (truth.gap_um - target.gap_um) * 1e3;
     eprintln!(
         "true gap error {error_nm:+.2} nm, measured {:+.2} nm ± bound {:.2} nm",

@@ -57,24 +57,49 @@ fn main() {
     let truth = PhaseModel::of_preset(&preset, preset.truth).unwrap();
     let (mut worst, mut confirmed, mut within) = (0.0f64, 0, 0);
     println!(
-        "{:>3} {:>11} {:>12} {:>12} {:>10} {:>10}  verdict",
-        "#", "gap µm", "true err nm", "measured nm", "σ fc nm", "bound nm"
+        "{:>3} {:>11} {:>12} {:>12} {:>10} {:>10} {:>9} {:>10} {:>10}  verdict",
+        "#", "gap µm", "true err nm", "measured nm", "σ fc nm", "bound nm", "σ meas", "tilt °", "tilt err °"
     );
+    let (mut tilt_z, mut tilt_sigmas, mut gap_z) = (Vec::new(), Vec::new(), Vec::new());
     for (k, (m, t)) in doc["moves"].as_array().unwrap().iter().zip(&targets).enumerate() {
         let (gap_um, _) = true_gap_and_tilt(&truth, m);
         let error_nm = (gap_um - t.gap_um) * 1e3;
         let sigma = m["forecast"]["gap_sigma_nm"].as_f64().unwrap();
         let verdict = m["verdict"].as_str().unwrap();
+        let true_tilt_deg = {
+            let j = &m["joints_end"];
+            let q: [f64; 6] = std::array::from_fn(|i| {
+                j[["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"][i]].as_f64().unwrap()
+            });
+            truth.gap_and_tilt(&q).unwrap().1.to_degrees()
+        };
+        let tilt = m["tilt"]["tilt_deg"].as_f64().unwrap_or(f64::NAN);
+        let tilt_sigma = m["tilt"]["sigma_deg"].as_f64().unwrap_or(f64::NAN);
+        tilt_z.push((tilt - true_tilt_deg) / tilt_sigma);
+        tilt_sigmas.push(tilt_sigma);
+        let measured_sigma = m["measurement"]["sigma_nm"].as_f64().unwrap_or(f64::NAN);
+        gap_z.push(((m["gap_error_nm"].as_f64().unwrap_or(f64::NAN) - error_nm) / measured_sigma).abs());
         println!(
-            "{k:>3} {:>11.4} {error_nm:>+12.3} {:>+12.3} {sigma:>10.2} {:>10.2}  {verdict}",
+            "{k:>3} {:>11.4} {error_nm:>+12.3} {:>+12.3} {sigma:>10.2} {:>10.2} {:>9.2} {tilt:>10.4} {:>+10.4}  {verdict}",
             t.gap_um,
             m["gap_error_nm"].as_f64().unwrap_or(f64::NAN),
-            m["bound_nm"].as_f64().unwrap_or(f64::NAN)
+            m["bound_nm"].as_f64().unwrap_or(f64::NAN),
+            m["measurement"]["sigma_nm"].as_f64().unwrap_or(f64::NAN),
+            tilt - true_tilt_deg
         );
         worst = worst.max(error_nm.abs());
         confirmed += usize::from(verdict == "confirmed");
         within += usize::from(error_nm.abs() <= 10.0 && error_nm.abs() <= 3.0 * sigma);
     }
+    let mean_z = tilt_z.iter().sum::<f64>() / tilt_z.len() as f64;
+    let worst_z = tilt_z.iter().map(|z| z.abs()).fold(0.0, f64::max);
+    let range = |v: &[f64]| (v.iter().copied().fold(f64::INFINITY, f64::min), v.iter().copied().fold(0.0, f64::max));
+    let (s_lo, s_hi) = range(&tilt_sigmas);
+    println!(
+        "tilt from the contrast against the truth: mean {mean_z:+.2}σ, worst {worst_z:.2}σ (σ {s_lo:.4}-{s_hi:.4}°); \
+         measured gap against the truth: worst {:.2}σ of the measurement",
+        range(&gap_z).1
+    );
     println!("calibrated: {confirmed} of {n} confirmed, {within} of {n} with the true gap within 10 nm and 3σ of the forecast, worst {worst:.3} nm");
     let mut nominal_errors = Vec::new();
     let nominal = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/extrinsics/nominal.ron");
@@ -98,6 +123,12 @@ fn main() {
         let doc: Value = serde_json::from_str(&text).unwrap();
         let m = &doc["moves"][0];
         let (gap_um, _) = true_gap_and_tilt(&truth, m);
+        let measured = m["gap_error_nm"].as_f64().unwrap_or(f64::NAN);
+        let sigma = m["measurement"]["sigma_nm"].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "nominal: true gap error {:+.1} nm, measured {measured:+.1} ± {sigma:.2} nm",
+            (gap_um - t.gap_um) * 1e3
+        );
         nominal_errors.push(((gap_um - t.gap_um) * 1e3, m["verdict"] == "off"));
     }
     let abs: Vec<f64> = nominal_errors.iter().map(|e| e.0.abs()).collect();

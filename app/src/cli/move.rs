@@ -285,6 +285,9 @@ fn print_move(r: &MoveRecord, out: &mut dyn Write) -> Result<(), CliError> {
     if let Some(m) = &r.measurement {
         writeln!(out, "  measured gap: {:.4} µm ± {:.2} nm ({})", m.gap_um, m.sigma_nm, m.method)?;
     }
+    if let Some(t) = &r.tilt {
+        writeln!(out, "  {}", t.describe())?;
+    }
     writeln!(out, "  {}: {}", r.verdict.word().to_uppercase(), r.note)?;
     writeln!(out, "  {}", r.model_only)?;
     Ok(())

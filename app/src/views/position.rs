@@ -135,7 +135,12 @@ fn planned(ui: &mut egui::Ui, plan: &MovePlan, from: &[f64; 6]) {
         photorobot_core::position::ProofKind::Fringes(r) => format!("the fringes along the path from {}", r.source),
         photorobot_core::position::ProofKind::None(why) => why.clone(),
     };
-    ui.label(format!("path: {} waypoints; the gap proven by {proof}", plan.path.joints.len() - 1));
+    let tilt = if matches!(plan.proof, photorobot_core::position::ProofKind::None(_)) {
+        ""
+    } else {
+        ", read at the tilt the contrast measures there (two ±3° rotations)"
+    };
+    ui.label(format!("path: {} waypoints; the gap proven by {proof}{tilt}", plan.path.joints.len() - 1));
     match &plan.forecast {
         Some(f) => ui.label(format!(
             "forecast σ at the target: gap {:.2} nm, tilt ({:.5}°, {:.5}°), lateral ({:.4}, {:.4}) µm, rotation {:.5}°",
@@ -216,6 +221,9 @@ fn result(ui: &mut egui::Ui, r: &MoveRecord) {
     ui.label(format!("requested {}", r.requested.describe()));
     if let Some(m) = &r.measurement {
         ui.label(format!("measured gap {:.4} µm ± {:.2} nm, by {}", m.gap_um, m.sigma_nm, m.method));
+    }
+    if let Some(t) = &r.tilt {
+        ui.label(t.describe());
     }
     ui.label(&r.note);
     if let Some(a) = &r.achieved {

@@ -10,9 +10,11 @@
 //! measures the gap ([`proof`]); the forecast at the end pose ([`forecast`]) and the
 //! measurement's σ bound the error a confirmed move may show ([`record::Verdict`]).
 //!
-//! The tilt, the lateral position and the rotation are placed through the model: no
-//! measurement on this bench sees them without the extrinsics to the σ the calibration gives
-//! (a fringe's contrast changes by 10⁻⁵ for 0.01° of tilt). The record says so.
+//! The tilt is measured at the end pose from the fringe contrast along two small rotations
+//! ([`tilt`]), to a few thousandths of a degree: what turns the distance the fringes see into
+//! the gap along the beam without the extrinsics, though coarser than the calibration places it.
+//! The lateral position and the rotation about the beam are placed through the model: no
+//! measurement on this bench sees them without the extrinsics. The record says so.
 
 pub mod forecast;
 pub mod path;
@@ -20,11 +22,13 @@ pub mod proof;
 pub mod recipe;
 pub mod record;
 pub mod target;
+pub mod tilt;
 
 pub use forecast::{PoseForecast, Uncertainty};
-pub use proof::{ProofKind, Reference};
+pub use proof::{ProofKind, Reference, TiltForGap};
 pub use record::{Achieved, GapMeasurement, Joints, MoveRecord, Verdict};
 pub use target::{Target, TaskFrame};
+pub use tilt::TiltMeasurement;
 
 use crate::bench::{run_plan, Bench, RunControl};
 use crate::model::effects::{self, Effect};
@@ -167,6 +171,7 @@ pub fn run_move(
         waypoints: plan.path.joints.len() - 1,
         forecast: plan.forecast,
         measurement: None,
+        tilt: None,
         achieved: None,
         gap_error_nm: None,
         bound_nm: None,
@@ -185,21 +190,61 @@ pub fn run_move(
     let frame = TaskFrame::at(model, &model.extrinsics, &read);
     record.achieved =
         frame.and_then(|f| f.target_at(model, &read)).map(|t| Achieved { gap_um: None, gap_sigma_nm: None, model: t });
-    let measured = match &plan.proof {
-        ProofKind::Sweep => sweep_of(&run.traces)
-            .and_then(|s| proof::gap_from_sweep(s, model, &plan.target))
-            .map(|(g, s)| (g, s, proof::SWEEP_METHOD.to_string())),
-        ProofKind::Fringes(r) => fringes_of(&run.traces, plan, placement)
-            .and_then(|(path, real, dither_end)| proof::gap_from_fringes(&path, real.as_ref(), dither_end, model, r))
-            .map(|(g, s)| (g, s, format!("fringes along the path from a pose at {:.4} µm ({})", r.gap_um, r.source))),
-        ProofKind::None(why) => {
-            record.verdict = Verdict::Unconfirmed;
-            record.note = format!("placed through the model; the gap is not measured: {why}");
+    if let ProofKind::None(why) = &plan.proof {
+        record.verdict = Verdict::Unconfirmed;
+        record.note = format!("placed through the model; the gap is not measured: {why}");
+        return record;
+    }
+    let (tilt, tilt_note) = match tilt::measure_at(bench, placement, plan.path.end(), control) {
+        Ok(t) => {
+            record.tilt = Some(t);
+            record.model_only = MODEL_ONLY_TILT_MEASURED.into();
+            let (rad, sigma_rad) = t.rad();
+            (TiltForGap { rad, sigma_rad }, None)
+        }
+        Err(_) if control.cancelled() => {
+            record.verdict = Verdict::Stopped;
+            record.note = "stopped while the tilt was measured at the end pose".into();
             return record;
         }
+        Err(why) => {
+            let sigma_deg = plan.forecast.map_or(0.0, |f| f.tilt_sigma_deg[0].hypot(f.tilt_sigma_deg[1]));
+            let t = TiltForGap { rad: plan.target.tilt_angle_rad(), sigma_rad: sigma_deg.to_radians() };
+            (t, Some(format!("; the gap read at the requested tilt, which was not measured: {why}")))
+        }
+    };
+    record.bench_time_s = bench.clock_s() - t0;
+    let measured = match &plan.proof {
+        ProofKind::Fringes(r) => fringes_of(&run.traces, plan, placement)
+            .and_then(|(path, real, d)| proof::gap_from_fringes(&path, real.as_ref(), d, model, r, Some(&tilt)))
+            .map(|(g, s)| (g, s, format!("fringes along the path from a pose at {:.4} µm ({})", r.gap_um, r.source))),
+        _ => sweep_of(&run.traces)
+            .and_then(|s| proof::gap_from_sweep(s, model, &tilt))
+            .map(|(g, s)| (g, s, proof::SWEEP_METHOD.to_string())),
     };
     judge(&mut record, plan, measured);
+    record.note.push_str(&tilt_note.unwrap_or_default());
+    judge_tilt(&mut record, plan);
     record
+}
+
+/// The tilt measured at the end pose against the model's there: beyond
+/// [`record::BOUND_SIGMAS`] × the combined σ of the measurement and the forecast, a confirmed
+/// move is off (the extrinsics placed the lamella at another tilt than they say).
+fn judge_tilt(record: &mut MoveRecord, plan: &MovePlan) {
+    let Some(t) = record.tilt else { return };
+    let forecast_deg = plan.forecast.map_or(0.0, |f| f.tilt_sigma_deg[0].hypot(f.tilt_sigma_deg[1]));
+    let bound_deg = record::BOUND_SIGMAS * t.sigma_deg.hypot(forecast_deg);
+    let within = (t.tilt_deg - t.model_deg).abs() <= bound_deg;
+    record.note.push_str(&format!(
+        "; tilt from the contrast {:.4}° against the model's {:.4}°, {} ±{bound_deg:.4}°",
+        t.tilt_deg,
+        t.model_deg,
+        if within { "within" } else { "beyond" }
+    ));
+    if !within && record.verdict == Verdict::Confirmed {
+        record.verdict = Verdict::Off;
+    }
 }
 
 /// Plan and run a move from where the bench stands, proven as the bench allows (a sweep with a
@@ -224,6 +269,10 @@ pub fn move_to(
 /// What the record says of the coordinates no measurement here sees.
 pub const MODEL_ONLY: &str = "tilt, lateral position and rotation placed through the model only: no measurement on \
      this bench sees them without the extrinsics (their σ is the forecast's)";
+/// [`MODEL_ONLY`] when the tilt was measured at the end pose.
+pub const MODEL_ONLY_TILT_MEASURED: &str = "lateral position and rotation placed through the model only: no \
+     measurement on this bench sees them without the extrinsics (their σ is the forecast's); the tilt is measured \
+     from the fringe contrast";
 
 /// The verdict from the measured gap: confirmed within [`record::BOUND_SIGMAS`] × the combined
 /// σ of the forecast and the measurement, off beyond.

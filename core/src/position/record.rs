@@ -121,6 +121,9 @@ pub struct MoveRecord {
     pub forecast: Option<PoseForecast>,
     /// The gap measured at the end; `None` when nothing measured it.
     pub measurement: Option<GapMeasurement>,
+    /// The tilt measured from the contrast at the end pose; `None` when it was not.
+    #[serde(default)]
+    pub tilt: Option<super::tilt::TiltMeasurement>,
     /// What was reached.
     pub achieved: Option<Achieved>,
     /// Measured − requested gap (nm).

@@ -43,6 +43,16 @@ fn a_move_with_the_true_extrinsics_reaches_its_target_and_the_sweep_confirms_it(
         assert!((tilt_rad - target.tilt_angle_rad()).abs() < 1e-7, "{tilt_rad}");
         assert!((m.gap_um - gap_um).abs() * 1e3 < 3.0 * m.sigma_nm, "measured {} ± {} nm", m.gap_um, m.sigma_nm);
         assert_eq!(r.verdict, Verdict::Confirmed, "{}", r.note);
+        let t = r.tilt.expect("the tilt measured at the end pose");
+        eprintln!(
+            "tilt from the contrast {:.5} ± {:.5}° ({:?} ± {:?}), true {:.5}°",
+            t.tilt_deg,
+            t.sigma_deg,
+            t.components_deg,
+            t.components_sigma_deg,
+            tilt_rad.to_degrees()
+        );
+        assert!((t.tilt_deg - tilt_rad.to_degrees()).abs() <= 3.0 * t.sigma_deg, "{t:?}");
     }
 }
 
@@ -99,4 +109,23 @@ fn without_a_tunable_laser_the_fringes_from_a_measured_pose_prove_the_move() {
         m.sigma_nm
     );
     assert_eq!(r.verdict, Verdict::Confirmed, "{}", r.note);
+}
+
+/// A tilt near the goniometers' travel leaves no room for the rotations that read it: the gap is
+/// read at the requested tilt, the record says so, and the stages stand at the target.
+#[test]
+fn a_tilt_the_rotations_cannot_reach_is_read_at_the_request_and_said_so() {
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    let p = placement(&preset);
+    let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
+    let target = Target { gap_um: 900.0, tilt_deg: [8.5, 0.0], lateral_um: [-60.0, -60.0], rotation_deg: 0.0 };
+    let r = run(&mut bench, &p, &target, &[]).unwrap();
+    eprintln!("{}", r.note);
+    assert!(r.tilt.is_none());
+    assert!(r.note.contains("the gap read at the requested tilt, which was not measured: "), "{}", r.note);
+    assert!(r.note.contains("above its upper limit"), "{}", r.note);
+    assert_eq!(r.model_only, MODEL_ONLY);
+    assert_eq!(r.verdict, Verdict::Confirmed, "{}", r.note);
+    let (gap_um, _) = truth(&preset, &bench);
+    assert!((gap_um - target.gap_um).abs() < 1e-6, "true gap {gap_um}");
 }

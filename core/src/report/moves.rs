@@ -2,7 +2,7 @@
 //! extrinsics, its error against the bound the forecast and the measurement allow, the verdict.
 
 use super::escape;
-use crate::position::{MoveRecord, Verdict, MODEL_ONLY};
+use crate::position::{MoveRecord, Verdict, MODEL_ONLY, MODEL_ONLY_TILT_MEASURED};
 use crate::session::Session;
 use std::fmt::Write as _;
 
@@ -19,11 +19,12 @@ pub(super) fn moves(h: &mut String, s: &Session) {
          pose a sweep measured); a move is confirmed when the measured gap is within 3σ of the request, σ the \
          forecast's and the measurement's together. {}.</p>",
         s.moves.len(),
-        escape(MODEL_ONLY)
+        escape(if s.moves.iter().any(|m| m.tilt.is_some()) { MODEL_ONLY_TILT_MEASURED } else { MODEL_ONLY })
     );
     h.push_str(
         "<table>\n<tr><th>#</th><th>label</th><th>requested</th><th>measured gap (µm)</th><th>error (nm)</th>\
-         <th>bound (nm)</th><th>forecast σ gap (nm)</th><th>verdict</th><th>measured by</th></tr>\n",
+         <th>bound (nm)</th><th>forecast σ gap (nm)</th><th>tilt from the contrast (°)</th><th>verdict</th>\
+         <th>measured by</th></tr>\n",
     );
     for (k, m) in s.moves.iter().enumerate() {
         row(h, k, m);
@@ -41,7 +42,7 @@ fn row(h: &mut String, k: usize, m: &MoveRecord) {
     let _ = writeln!(
         h,
         "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
-         <td class=\"num\">{}</td><td class=\"{class}\">{}</td><td>{}</td></tr>",
+         <td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"{class}\">{}</td><td>{}</td></tr>",
         k + 1,
         escape(&m.label),
         escape(&m.requested.describe()),
@@ -49,6 +50,10 @@ fn row(h: &mut String, k: usize, m: &MoveRecord) {
         num(m.gap_error_nm, 2),
         num(m.bound_nm, 2),
         num(m.forecast.map(|f| f.gap_sigma_nm), 2),
+        m.tilt.map_or("–".to_string(), |t| format!(
+            "{:.4} ± {:.4} (model {:.4})",
+            t.tilt_deg, t.sigma_deg, t.model_deg
+        )),
         m.verdict.word(),
         escape(m.measurement.as_ref().map_or(m.note.as_str(), |x| x.method.as_str())),
     );
@@ -56,7 +61,9 @@ fn row(h: &mut String, k: usize, m: &MoveRecord) {
 
 #[cfg(test)]
 mod tests {
-    use crate::position::{Achieved, GapMeasurement, Joints, MoveRecord, PoseForecast, Target, Verdict, MODEL_ONLY};
+    use crate::position::{
+        Achieved, GapMeasurement, Joints, MoveRecord, PoseForecast, Target, TiltMeasurement, Verdict, MODEL_ONLY,
+    };
     use crate::session::Session;
 
     fn a_move(verdict: Verdict, error_nm: f64) -> MoveRecord {
@@ -82,6 +89,7 @@ mod tests {
                 gap_um: 870.0 + error_nm * 1e-3,
                 sigma_nm: 0.1,
             }),
+            tilt: None,
             achieved: Some(Achieved { gap_um: Some(870.0 + error_nm * 1e-3), gap_sigma_nm: Some(0.1), model: target }),
             gap_error_nm: Some(error_nm),
             bound_nm: Some(9.6),
@@ -100,6 +108,14 @@ mod tests {
         let mut s = crate::session::tests::sample_session(dir.path());
         assert!(!super::super::render_html(&s).contains("Moves of the lamella"), "no moves: no section");
         s.moves = vec![a_move(Verdict::Confirmed, -0.3), a_move(Verdict::Off, 1204.5)];
+        s.moves[0].tilt = Some(TiltMeasurement {
+            tilt_deg: 0.559,
+            sigma_deg: 0.004,
+            components_deg: [0.5, -0.25],
+            components_sigma_deg: [0.003, 0.003],
+            model_deg: 0.5591,
+            bench_time_s: 7.5,
+        });
         s.save(dir.path()).unwrap();
         let back = Session::load(dir.path()).unwrap();
         assert_eq!(back.moves, s.moves);
@@ -109,6 +125,8 @@ mod tests {
             "{html}"
         );
         assert!(html.contains("<td class=\"num\">1204.50</td><td class=\"num\">9.60</td>"), "{html}");
+        assert!(html.contains("<td class=\"num\">0.5590 ± 0.0040 (model 0.5591)</td>"), "{html}");
+        assert!(html.contains("the tilt is measured from the fringe contrast"), "{html}");
         assert!(html.contains("<td class=\"no\">off</td>") && html.contains("<td class=\"yes\">confirmed</td>"));
         let text = std::fs::read_to_string(crate::session::session_path(dir.path())).unwrap();
         let start = text.find("    moves: [").expect("the moves field");

@@ -11,6 +11,7 @@ use crate::validate::{
     record_validation, Compensation, RecordedValidation, StopSettings, ValidationError, ValidationFigure,
     ValidationMotion,
 };
+use std::sync::atomic::AtomicBool;
 use std::sync::{Mutex, PoisonError};
 
 /// One validation motion, planned before and after calibration.
@@ -44,7 +45,16 @@ fn run_all<const K: usize>(
     rayon::in_place_scope(|scope| {
         for (motion, row) in ValidationMotion::ALL.into_iter().zip(&slots) {
             for (planned_with, slot) in planned.iter().zip(row) {
-                let recorded = record_validation(bench, analysis, planned_with, motion, [0.0; 6], &none, stops);
+                let recorded = record_validation(
+                    bench,
+                    analysis,
+                    planned_with,
+                    motion,
+                    [0.0; 6],
+                    &none,
+                    stops,
+                    &AtomicBool::new(false),
+                );
                 scope.spawn(move |_| {
                     let figure = recorded.and_then(|r: RecordedValidation| r.measure(analysis));
                     *slot.lock().unwrap_or_else(PoisonError::into_inner) = Some(figure);

@@ -163,6 +163,16 @@ impl TiltTerm {
         self.c[1]
     }
 
+    /// The lamella's tilt against the beam in the plane of a rotation about a transverse axis,
+    /// at rotation angle `angle_rad` (rad, signed), and its standard uncertainty (rad): with
+    /// `c1 = cos ψ`, `c2 = sin ψ`, `cos γ(φ) = cos(φ − ψ)`, so the tilt there is `φ − ψ`. The
+    /// σ includes the relative error of a κ not fitted.
+    pub fn in_plane_tilt_rad(&self, angle_rad: f64) -> (f64, f64) {
+        let psi = self.c[1].atan2(self.c[0]);
+        let sigma_c2 = self.cov[1][1].max(0.0).sqrt().hypot(self.relative * self.c[1]);
+        (angle_rad - psi, sigma_c2 / psi.cos().abs().max(1e-9))
+    }
+
     fn gradient(&self, angle_rad: f64) -> [f64; 2] {
         [-self.gap_um * (angle_rad.cos() - 1.0), -self.gap_um * angle_rad.sin()]
     }

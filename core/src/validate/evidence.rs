@@ -121,6 +121,9 @@ pub struct Evidence {
     pub checks: Vec<Check>,
     /// Sentences for the user: what is missing, what disagrees.
     pub notes: Vec<String>,
+    /// The tilt term fitted to the contrast, on a rotation where it was.
+    #[serde(skip)]
+    pub tilt_term: Option<TiltTerm>,
 }
 
 impl Evidence {
@@ -363,6 +366,7 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
         sweep_sigma_nm,
         checks,
         notes,
+        tilt_term: tilt.as_ref().map(|(t, _)| t.clone()),
     }
 }
 

@@ -42,6 +42,7 @@ fn which_half_biases() {
                 [0.0; 6],
                 &Compensation::default(),
                 &StopSettings::default(),
+                &AtomicBool::new(false),
             )
             .unwrap();
             let t = &r.trace;
@@ -110,6 +111,7 @@ fn chi2_against_tilt() {
                 [0.0; 6],
                 &Compensation::default(),
                 &StopSettings::default(),
+                &AtomicBool::new(false),
             )
             .unwrap();
             let t = &r.trace;

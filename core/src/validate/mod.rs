@@ -371,7 +371,8 @@ pub fn run_validation_planned(
     start: [f64; 6],
     compensation: &Compensation,
 ) -> Result<ValidationFigure, ValidationError> {
-    record_validation(bench, planning, planned_with, motion, start, compensation, &StopSettings::NONE)?
+    let cancel = AtomicBool::new(false);
+    record_validation(bench, planning, planned_with, motion, start, compensation, &StopSettings::NONE, &cancel)?
         .measure(analysis)
 }
 
@@ -393,7 +394,10 @@ pub struct RecordedValidation {
 /// The bench half of [`run_validation_planned`]: plan with `planned_with` through the IGM of
 /// `planning`, compensate what `compensation` says, and run on the bench from `start`, stopping
 /// where `stops` says. The plan runs piece by piece: a sweep the bench refuses or fails costs
-/// that pose's absolute gap (recorded as its problem), not the motion.
+/// that pose's absolute gap (recorded as its problem), not the motion. Setting `cancel` stops it
+/// (the bench checks it as it runs): an error naming the motion, whose unfinished recording
+/// proves nothing.
+#[allow(clippy::too_many_arguments)]
 pub fn record_validation(
     bench: &mut dyn Bench,
     planning: &PhaseModel,
@@ -402,6 +406,7 @@ pub fn record_validation(
     start: [f64; 6],
     compensation: &Compensation,
     stops: &StopSettings,
+    cancel: &AtomicBool,
 ) -> Result<RecordedValidation, ValidationError> {
     let count = motion.waypoint_count();
     let play = &compensation.play;
@@ -429,7 +434,7 @@ pub fn record_validation(
         w = waypoints_shifted(planning, planned_with, motion, start, count, &axial_um)?;
         p = plan(&w);
     }
-    let (traces, refused) = run_pieces(bench, &p.plan, motion)?;
+    let (traces, refused) = run_pieces(bench, &p.plan, motion, cancel)?;
     // Stages with play: their real joints follow every recorded command in order, the stops'
     // dithers included.
     let real = play.iter().any(|w| *w != 0.0).then(|| {
@@ -447,8 +452,12 @@ type Pieces = (Vec<Trace>, Vec<(String, String)>);
 
 /// Run `plan` in pieces split at its sweeps: every trace recorded, and each sweep that failed
 /// with why (its label, the problem); any other failure is the motion's.
-fn run_pieces(bench: &mut dyn Bench, plan: &Plan, motion: ValidationMotion) -> Result<Pieces, ValidationError> {
-    let cancel = AtomicBool::new(false);
+fn run_pieces(
+    bench: &mut dyn Bench,
+    plan: &Plan,
+    motion: ValidationMotion,
+    cancel: &AtomicBool,
+) -> Result<Pieces, ValidationError> {
     let mut traces = Vec::new();
     let mut refused = Vec::new();
     let mut piece: Vec<crate::plan::Segment> = Vec::new();
@@ -466,7 +475,7 @@ fn run_pieces(bench: &mut dyn Bench, plan: &Plan, motion: ValidationMotion) -> R
         let sweep = matches!(segments[0], crate::plan::Segment::Sweep { .. });
         let label = segments[0].label().to_string();
         let part = Plan { name: plan.name.clone(), description: String::new(), segments };
-        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        let mut control = RunControl { cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
         let run = run_plan(bench, &part, &mut control);
         match run.outcome {
             Ok(()) => traces.extend(run.traces),
