@@ -202,11 +202,6 @@ pub fn run_move(
             let (rad, sigma_rad) = t.rad();
             (TiltForGap { rad, sigma_rad }, None)
         }
-        Err(_) if control.cancelled() => {
-            record.verdict = Verdict::Stopped;
-            record.note = "stopped while the tilt was measured at the end pose".into();
-            return record;
-        }
         Err(why) => {
             let sigma_deg = plan.forecast.map_or(0.0, |f| f.tilt_sigma_deg[0].hypot(f.tilt_sigma_deg[1]));
             let t = TiltForGap { rad: plan.target.tilt_angle_rad(), sigma_rad: sigma_deg.to_radians() };
@@ -225,6 +220,11 @@ pub fn run_move(
     judge(&mut record, plan, measured);
     record.note.push_str(&tilt_note.unwrap_or_default());
     judge_tilt(&mut record, plan);
+    if control.cancelled() {
+        // The gap measured before the stop is kept; the move is not proven.
+        record.verdict = Verdict::Stopped;
+        record.note = format!("stopped while the tilt was measured at the end pose; {}", record.note);
+    }
     record
 }
 

@@ -129,3 +129,34 @@ fn a_tilt_the_rotations_cannot_reach_is_read_at_the_request_and_said_so() {
     let (gap_um, _) = truth(&preset, &bench);
     assert!((gap_um - target.gap_um).abs() < 1e-6, "true gap {gap_um}");
 }
+
+/// Stopped while the tilt is measured (after the sweep at the end): the move is recorded as
+/// stopped, and the gap the sweep measured is kept in the record.
+#[test]
+fn a_stop_during_the_tilt_measurement_keeps_the_measured_gap() {
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    let p = placement(&preset);
+    let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
+    let target = Target { gap_um: 880.0, tilt_deg: [0.5, 0.0], lateral_um: [-60.0, -60.0], rotation_deg: 0.0 };
+    let cancel = AtomicBool::new(false);
+    let (end_nm, last_sample) = (proof::SWEEP_NM.1, std::cell::Cell::new(0.0));
+    let mut on_samples = |t: &Trace, _: usize| {
+        if t.meta.label == proof::SWEEP_LABEL {
+            last_sample.set(t.wavelength_nm.last().copied().unwrap_or(0.0));
+        }
+    };
+    // The stop comes from the first check after the sweep's last sample.
+    let mut on_progress = |_: f64| {
+        if last_sample.get() >= end_nm - 1e-9 {
+            cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    };
+    let mut control = RunControl { cancel: &cancel, on_samples: &mut on_samples, on_progress: &mut on_progress };
+    let r = move_to(&mut bench, &p, &target, false, &[], true, &mut control).unwrap();
+    eprintln!("{:?}: {}", r.verdict, r.note);
+    assert_eq!(r.verdict, Verdict::Stopped, "{}", r.note);
+    assert!(r.note.starts_with("stopped while the tilt was measured at the end pose; measured gap"), "{}", r.note);
+    let m = r.measurement.expect("the sweep's gap kept");
+    assert!((m.gap_um - 880.0).abs() < 0.01, "{m:?}");
+    assert!(r.tilt.is_none());
+}
