@@ -117,6 +117,17 @@ fn random_targets_reach_the_true_gap_within_the_forecast() {
     assert_eq!(Session::load(&session).unwrap().moves.len(), targets.len());
 }
 
+/// `photorobot move --json` to 880 µm, tilt (0.5°, −0.5°), lateral (−60, −90) µm, planned with
+/// the nominal design's extrinsics, with `extra` flags: the result and the JSON.
+fn nominal_move(extra: &[&str]) -> (Result<(), CliError>, Value) {
+    let nominal = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/extrinsics/nominal.ron");
+    let mut args = vec!["move", "--bench", "table2-ideal", "--extrinsics", nominal, "--gap-um", "880"];
+    args.extend(["--tilt-deg", "0.5,-0.5", "--lateral-um", "-60,-90", "--json"]);
+    args.extend(extra);
+    let (r, text) = cli(&args);
+    (r, serde_json::from_str(&text).unwrap())
+}
+
 /// Planned with the nominal design's extrinsics instead of a calibration, the lamella misses its
 /// gap by most of a micrometre (as the validation "before" shows 3.3 µm on the circle), and the
 /// sweep at the end sees it: the move is off, and the measured error is the true one within the
@@ -124,23 +135,8 @@ fn random_targets_reach_the_true_gap_within_the_forecast() {
 /// measured from the contrast, not taken from the extrinsics under test.
 #[test]
 fn with_the_nominal_extrinsics_the_sweep_shows_the_move_off() {
-    let nominal = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/extrinsics/nominal.ron");
-    let (r, text) = cli(&[
-        "move",
-        "--bench",
-        "table2-ideal",
-        "--extrinsics",
-        nominal,
-        "--gap-um",
-        "880",
-        "--tilt-deg",
-        "0.5,-0.5",
-        "--lateral-um",
-        "-60,-90",
-        "--json",
-    ]);
+    let (r, doc) = nominal_move(&[]);
     assert_eq!(r.unwrap_err().exit_code(), 1, "an off move is no result");
-    let doc: Value = serde_json::from_str(&text).unwrap();
     let m = &doc["moves"][0];
     assert_eq!(m["verdict"], "off", "{m}");
     let (gap_um, _) = true_gap_and_tilt(&truth(), m);
@@ -168,6 +164,23 @@ fn with_the_nominal_extrinsics_the_sweep_shows_the_move_off() {
     let note = m["note"].as_str().unwrap();
     assert!(note.contains("against the model's 0.7071°, beyond ±"), "the tilt is seen off too: {note}");
     assert!(m["forecast"].is_null(), "an extrinsics file has no forecast");
+}
+
+/// With `--no-tilt` the same move reads its gap at the requested tilt, as the nominal extrinsics
+/// claim it: the reading is then 50 nm from the truth, far beyond its σ, and the record says the
+/// tilt was not measured.
+#[test]
+fn without_the_tilt_measured_the_sweep_reads_the_gap_at_the_requested_tilt() {
+    let (_, doc) = nominal_move(&["--no-tilt"]);
+    let m = &doc["moves"][0];
+    assert!(m["tilt"].is_null(), "{m}");
+    assert!(m["note"].as_str().unwrap().contains("which was not measured: not asked for"), "{m}");
+    let (gap_um, _) = true_gap_and_tilt(&truth(), m);
+    let true_error_nm = (gap_um - 880.0) * 1e3;
+    let measured_nm = m["gap_error_nm"].as_f64().unwrap();
+    let sigma_nm = m["measurement"]["sigma_nm"].as_f64().unwrap();
+    eprintln!("--no-tilt: true gap error {true_error_nm:+.1} nm, measured {measured_nm:+.1} ± {sigma_nm:.2} nm");
+    assert!((measured_nm - true_error_nm).abs() > 30.0 && (measured_nm - true_error_nm).abs() > 10.0 * sigma_nm);
 }
 
 /// A target the stages cannot reach and a tilt beyond the goniometers are refused with the joint

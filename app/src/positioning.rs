@@ -29,6 +29,7 @@ impl AppState {
         let key = PreviewKey {
             target: p.target,
             keep_gap: p.keep_gap,
+            measure_tilt: p.measure_tilt,
             from: self.q_display,
             extrinsics: placement.model.extrinsics.to_array(),
         };
@@ -40,8 +41,12 @@ impl AppState {
                     "the fringes from the nearest pose a sweep measured (chosen when the move starts)".into(),
                 )
             };
-            let planned =
-                plan_move(&placement, self.q_display, &key.target, key.keep_gap, proof).map_err(|e| e.to_string());
+            let planned = plan_move(&placement, self.q_display, &key.target, key.keep_gap, proof)
+                .map(|mut plan| {
+                    plan.measure_tilt = key.measure_tilt;
+                    plan
+                })
+                .map_err(|e| e.to_string());
             self.position.preview = Some((key, planned));
         }
         self.position.preview.as_ref().map(|(_, r)| r)
@@ -73,8 +78,9 @@ impl AppState {
             &self.position.moves,
             &placement.model,
         );
-        let (target, keep_gap) = (self.position.target, self.position.keep_gap);
+        let (target, keep_gap, measure_tilt) =
+            (self.position.target, self.position.keep_gap, self.position.measure_tilt);
         self.worker.send(Command::SetPace(self.settings.pace()));
-        self.worker.send(Command::Move { placement: Box::new(placement), target, keep_gap, references });
+        self.worker.send(Command::Move { placement: Box::new(placement), target, keep_gap, references, measure_tilt });
     }
 }

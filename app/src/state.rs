@@ -255,6 +255,8 @@ pub struct PreviewKey {
     pub target: Target,
     /// Hold the gap.
     pub keep_gap: bool,
+    /// Measure the tilt at the end pose.
+    pub measure_tilt: bool,
     /// The bench's joints (µm, °).
     pub from: [f64; 6],
     /// The extrinsics planned with.
@@ -268,6 +270,8 @@ pub struct PositionState {
     pub target: Target,
     /// Hold the gap while the rest moves.
     pub keep_gap: bool,
+    /// Measure the tilt at the end pose (default on).
+    pub measure_tilt: bool,
     /// The move planned for the target from the bench's joints, or why it is refused.
     pub preview: Option<(PreviewKey, Result<MovePlan, String>)>,
     /// The moves made in this session, in order.
@@ -283,6 +287,7 @@ impl Default for PositionState {
         Self {
             target: Target { gap_um: 880.0, tilt_deg: [0.0, 0.0], lateral_um: [-100.0, -100.0], rotation_deg: 0.0 },
             keep_gap: false,
+            measure_tilt: true,
             preview: None,
             moves: Vec::new(),
             refused: None,

@@ -16,7 +16,7 @@ use photorobot_core::model::effects::Effect;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::{JointTarget, Plan, Segment};
-use photorobot_core::position::{move_to, MoveRecord, Placement, Reference, Target};
+use photorobot_core::position::{move_to, MoveRecord, Placement, ProofOptions, Reference, Target};
 use photorobot_core::session::Progress;
 use photorobot_core::trace::Trace;
 use photorobot_core::validate::before_after::{check_calibration, run_before_and_after};
@@ -107,6 +107,8 @@ pub enum Command {
         keep_gap: bool,
         /// Poses whose gap a sweep measured (a bench without a tunable laser tracks from them).
         references: Vec<Reference>,
+        /// Measure the tilt at the end pose.
+        measure_tilt: bool,
     },
     /// Report the stage controllers' view of every joint axis ([`Event::HardwareStatus`]; nothing on a
     /// simulated bench).
@@ -550,8 +552,8 @@ impl Thread {
                 Command::Diagnose { traces, extrinsics, branches, run_motions } => {
                     self.serve_diagnose(&traces, extrinsics, &branches, run_motions)
                 }
-                Command::Move { placement, target, keep_gap, references } => {
-                    self.serve_move(&placement, &target, keep_gap, &references)
+                Command::Move { placement, target, keep_gap, references, measure_tilt } => {
+                    self.serve_move(&placement, &target, keep_gap, &references, measure_tilt)
                 }
                 Command::Analyse { index, trace, extrinsics } => {
                     let model = PhaseModel { extrinsics, ..self.nominal.clone() };
@@ -580,7 +582,14 @@ impl Thread {
     }
 
     /// Move the lamella to `target` with the calibrated `placement`, paced as the plans are.
-    fn serve_move(&mut self, placement: &Placement, target: &Target, keep_gap: bool, references: &[Reference]) {
+    fn serve_move(
+        &mut self,
+        placement: &Placement,
+        target: &Target,
+        keep_gap: bool,
+        references: &[Reference],
+        measure_tilt: bool,
+    ) {
         self.send(Event::Busy(Some(BUSY_MOVING.into())));
         // Paced as the plans are: a virtual bench's move takes the time a real one does.
         let (pace, wall0, bench_t0) = (self.pace, Instant::now(), self.bench.clock_s());
@@ -594,7 +603,8 @@ impl Thread {
         };
         let mut control = RunControl { cancel: &self.cancel, on_samples: &mut on_samples, on_progress: &mut |_| {} };
         let started = photorobot_core::session::now_utc_rfc3339();
-        let record = move_to(self.bench.as_mut(), placement, target, keep_gap, references, true, &mut control)
+        let options = ProofOptions { sweeps: true, tilt: measure_tilt };
+        let record = move_to(self.bench.as_mut(), placement, target, keep_gap, references, options, &mut control)
             .map(|mut r| {
                 r.started_utc = Some(started);
                 Box::new(r)

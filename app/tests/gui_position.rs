@@ -137,11 +137,19 @@ fn the_quick_calibration_then_a_confirmed_move_in_the_position_view() {
         if matches!(&h.state().state.position.preview, Some((_, Err(_)))) {
             continue;
         }
+        // The last one with the tilt measurement unticked: read at the requested tilt, and said.
+        if placed == 3 {
+            h.get_by_label("measure the tilt at the end").click();
+            h.run_steps(3);
+            assert!(!h.state().state.position.measure_tilt);
+            h.get_by_label_contains("read at the requested tilt");
+        }
         let before = h.state().state.position.moves.len();
         h.get_by_label("Go (F5)").click();
         wait_until(&mut h, "a random move", Duration::from_secs(120), |w| w.state.position.moves.len() > before);
         let r = h.state().state.position.moves[before].clone();
         assert_eq!(r.verdict, Verdict::Confirmed, "{target:?}: {}", r.note);
+        assert_eq!(r.tilt.is_none(), placed == 3, "{}", r.note);
         let error_nm = (truth_at(&r.joints_end.to_array()).gap_um - target.gap_um) * 1e3;
         eprintln!("{target:?}: true gap error {error_nm:+.2} nm, bound {:.2} nm", r.bound_nm.unwrap());
         assert!(error_nm.abs() <= 10.0 && error_nm.abs() <= r.bound_nm.unwrap(), "{target:?}: {error_nm} nm");

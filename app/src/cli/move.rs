@@ -17,7 +17,7 @@ use photorobot_core::hardware::emulator::EmuClock;
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::position::recipe::Recipe;
-use photorobot_core::position::{move_to, MoveError, MoveRecord, Placement, Target, Verdict};
+use photorobot_core::position::{move_to, MoveError, MoveRecord, Placement, ProofOptions, Target, Verdict};
 use photorobot_core::session::{now_utc_rfc3339, FolderLock, Session};
 use serde::Serialize;
 use std::io::Write;
@@ -70,6 +70,10 @@ pub struct MoveArgs {
     /// the end, as on a bench without a tunable laser.
     #[arg(long)]
     pub no_sweeps: bool,
+    /// Do not measure the tilt at the end pose (two ±3° rotations about X_f and Z_f, about 20 s
+    /// of bench time per move): the gap is then read at the requested tilt, as the extrinsics say.
+    #[arg(long)]
+    pub no_tilt: bool,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -131,7 +135,7 @@ pub fn move_lamella(a: &MoveArgs, out: &mut dyn Write) -> Result<(), CliError> {
         let mut control = RunControl { cancel: &INTERRUPT, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
         let started = now_utc_rfc3339();
         let mut record =
-            move_to(bench.as_mut(), &placement, target, *keep_gap, &references, !a.no_sweeps, &mut control)
+            move_to(bench.as_mut(), &placement, target, *keep_gap, &references, proof_options(a), &mut control)
                 .map_err(|e| refused(&steps, *index, e))?;
         record.label = label.clone();
         record.recipe = steps.recipe.as_ref().map(|(r, _)| (r.name.clone(), *index));
@@ -256,7 +260,15 @@ fn resume_command(a: &MoveArgs, recipe: &Path, session: &Path) -> String {
     if a.no_sweeps {
         cmd += " --no-sweeps";
     }
+    if a.no_tilt {
+        cmd += " --no-tilt";
+    }
     cmd
+}
+
+/// What the proof of each move measures, as the flags ask.
+fn proof_options(a: &MoveArgs) -> ProofOptions {
+    ProofOptions { sweeps: !a.no_sweeps, tilt: !a.no_tilt }
 }
 
 /// One move as text: requested, forecast, measured, verdict.

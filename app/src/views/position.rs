@@ -94,6 +94,10 @@ fn target_fields(ui: &mut egui::Ui, s: &mut AppState) {
     ui.checkbox(&mut s.position.keep_gap, "keep the gap on the way").on_hover_text(
         "the gap is held at the larger of start and end while the rest moves, then changed along the beam",
     );
+    ui.checkbox(&mut s.position.measure_tilt, "measure the tilt at the end").on_hover_text(
+        "two ±3° rotations about X_f and Z_f through P_r read the tilt from the fringe contrast (about 20 s of \
+         bench time); the gap is read at that tilt, so its proof uses no extrinsics. Off: read at the requested tilt",
+    );
 }
 
 /// The move planned from where the bench stands: joints, path, forecast and proof; whether Go
@@ -135,10 +139,10 @@ fn planned(ui: &mut egui::Ui, plan: &MovePlan, from: &[f64; 6]) {
         photorobot_core::position::ProofKind::Fringes(r) => format!("the fringes along the path from {}", r.source),
         photorobot_core::position::ProofKind::None(why) => why.clone(),
     };
-    let tilt = if matches!(plan.proof, photorobot_core::position::ProofKind::None(_)) {
-        ""
-    } else {
+    let tilt = if plan.measure_tilt {
         ", read at the tilt the contrast measures there (two ±3° rotations)"
+    } else {
+        ", read at the requested tilt"
     };
     ui.label(format!("path: {} waypoints; the gap proven by {proof}{tilt}", plan.path.joints.len() - 1));
     match &plan.forecast {

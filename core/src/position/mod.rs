@@ -119,6 +119,25 @@ pub struct MovePlan {
     pub plan: Plan,
     /// The stages' state at the plan's first recorded sample (stages with play).
     state: effects::Backlash,
+    /// Measure the tilt at the end pose ([`tilt`]); else the gap is read at the requested tilt.
+    pub measure_tilt: bool,
+}
+
+/// What a move's proof measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProofOptions {
+    /// A sweep at the end pose when the bench has a tunable laser; else the fringes from a pose a
+    /// sweep measured.
+    pub sweeps: bool,
+    /// The tilt at the end pose from the fringe contrast (two ±3° rotations).
+    pub tilt: bool,
+}
+
+impl Default for ProofOptions {
+    /// Both.
+    fn default() -> Self {
+        ProofOptions { sweeps: true, tilt: true }
+    }
 }
 
 /// Plan a move to `target` from joints `from` (µm, °; the path starts at the reference pose
@@ -146,7 +165,7 @@ pub fn plan_move(
         plan.segments.push(Segment::Sweep { from_nm, to_nm, rate_nm_per_s, label: proof::SWEEP_LABEL.into() });
     }
     plan.description = format!("move to {}", target.describe());
-    Ok(MovePlan { target: *target, keep_gap, path, forecast, proof, plan, state })
+    Ok(MovePlan { target: *target, keep_gap, path, forecast, proof, plan, state, measure_tilt: true })
 }
 
 /// Run a planned move on the bench (stoppable through `control`) and prove it: the record of
@@ -195,7 +214,11 @@ pub fn run_move(
         record.note = format!("placed through the model; the gap is not measured: {why}");
         return record;
     }
-    let (tilt, tilt_note) = match tilt::measure_at(bench, placement, plan.path.end(), control) {
+    let measured_tilt = match plan.measure_tilt {
+        true => tilt::measure_at(bench, placement, plan.path.end(), control),
+        false => Err("not asked for".to_string()),
+    };
+    let (tilt, tilt_note) = match measured_tilt {
         Ok(t) => {
             record.tilt = Some(t);
             record.model_only = MODEL_ONLY_TILT_MEASURED.into();
@@ -247,22 +270,22 @@ fn judge_tilt(record: &mut MoveRecord, plan: &MovePlan) {
     }
 }
 
-/// Plan and run a move from where the bench stands, proven as the bench allows (a sweep with a
-/// tunable laser when `sweeps` allows it, else the fringes from the nearest of `references`):
-/// the one function the CLI and the GUI call. `Err` only when the move is refused before
-/// anything moves.
+/// Plan and run a move from where the bench stands, proven as the bench allows and `options`
+/// ask (a sweep with a tunable laser when they allow it, else the fringes from the nearest of
+/// `references`; the tilt at the end pose when they ask for it): the one function the CLI and
+/// the GUI call. `Err` only when the move is refused before anything moves.
 pub fn move_to(
     bench: &mut dyn Bench,
     placement: &Placement,
     target: &Target,
     keep_gap: bool,
     references: &[Reference],
-    sweeps: bool,
+    options: ProofOptions,
     control: &mut RunControl<'_>,
 ) -> Result<MoveRecord, MoveError> {
     let from = bench.position_display();
-    let proof = ProofKind::choose(sweeps && bench.tunable_laser(), references, &from);
-    let plan = plan_move(placement, from, target, keep_gap, proof)?;
+    let proof = ProofKind::choose(options.sweeps && bench.tunable_laser(), references, &from);
+    let plan = MovePlan { measure_tilt: options.tilt, ..plan_move(placement, from, target, keep_gap, proof)? };
     Ok(run_move(bench, placement, &plan, control))
 }
 

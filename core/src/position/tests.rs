@@ -14,7 +14,7 @@ fn placement(preset: &BenchPreset) -> Placement {
 fn run(bench: &mut VirtualBench, p: &Placement, target: &Target, refs: &[Reference]) -> Result<MoveRecord, MoveError> {
     let cancel = AtomicBool::new(false);
     let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-    move_to(bench, p, target, false, refs, true, &mut control)
+    move_to(bench, p, target, false, refs, ProofOptions::default(), &mut control)
 }
 
 /// The true gap and tilt at the bench's joints (the preset's hidden truth).
@@ -152,11 +152,34 @@ fn a_stop_during_the_tilt_measurement_keeps_the_measured_gap() {
         }
     };
     let mut control = RunControl { cancel: &cancel, on_samples: &mut on_samples, on_progress: &mut on_progress };
-    let r = move_to(&mut bench, &p, &target, false, &[], true, &mut control).unwrap();
+    let r = move_to(&mut bench, &p, &target, false, &[], ProofOptions::default(), &mut control).unwrap();
     eprintln!("{:?}: {}", r.verdict, r.note);
     assert_eq!(r.verdict, Verdict::Stopped, "{}", r.note);
     assert!(r.note.starts_with("stopped while the tilt was measured at the end pose; measured gap"), "{}", r.note);
     let m = r.measurement.expect("the sweep's gap kept");
     assert!((m.gap_um - 880.0).abs() < 0.01, "{m:?}");
     assert!(r.tilt.is_none());
+}
+
+/// Asked not to measure the tilt, a move reads its gap at the requested tilt and says so, in
+/// less bench time.
+#[test]
+fn a_move_asked_not_to_measure_the_tilt_reads_the_gap_at_the_request() {
+    let preset = BenchPreset::resolve("table2-ideal").unwrap();
+    let p = placement(&preset);
+    let target = Target { gap_um: 880.0, tilt_deg: [0.5, 0.0], lateral_um: [-60.0, -60.0], rotation_deg: 0.0 };
+    let cancel = AtomicBool::new(false);
+    let mut times = Vec::new();
+    for tilt in [true, false] {
+        let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
+        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
+        let options = ProofOptions { sweeps: true, tilt };
+        let r = move_to(&mut bench, &p, &target, false, &[], options, &mut control).unwrap();
+        assert_eq!(r.verdict, Verdict::Confirmed, "{}", r.note);
+        assert_eq!(r.tilt.is_some(), tilt);
+        assert_eq!(r.note.contains("the gap read at the requested tilt, which was not measured: not asked for"), !tilt);
+        times.push(r.bench_time_s);
+    }
+    eprintln!("bench time with the tilt measured {:.1} s, without {:.1} s", times[0], times[1]);
+    assert!(times[1] < times[0] - 5.0, "{times:?}");
 }
