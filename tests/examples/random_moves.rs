@@ -7,8 +7,8 @@
 //! plan; `joint` for the paper's strategies with the extra measurements), then runs TARGETS
 //! random targets (default 20, target seed S, default 1) as one recipe, and again each with the
 //! nominal design's extrinsics instead of the calibration. Asserts that every calibrated move is
-//! confirmed with its true gap within 10 nm of the request and within 3σ of the forecast, and
-//! that every nominal move is off.
+//! confirmed with its true gap within 10 nm of the request and within 3σ of the forecast, its tilt
+//! from the contrast within 3σ of the truth, and that every nominal move is off.
 
 use photorobot_app::cli::run;
 use photorobot_core::bench::BenchPreset;
@@ -139,6 +139,7 @@ fn main() {
         abs.iter().copied().fold(0.0, f64::max)
     );
     assert!(ok, "every calibrated move confirmed");
+    assert!(worst_z <= 3.0, "a tilt {worst_z}σ from the truth");
     assert_eq!((confirmed, within), (n, n));
     assert_eq!(off, n, "every nominal move is seen off");
 }
