@@ -90,7 +90,9 @@ pub fn measure_at(
                     let from = figure.motion_start.min(figure.trace.len().saturating_sub(1));
                     let angles = rotation_angles_rad(&model.chain, &figure.trace, from);
                     let at_end = nearest_sample(&figure.trace, from, &end);
-                    Ok(term.in_plane_tilt_rad(angles[at_end - from]))
+                    let angle =
+                        angles.get(at_end - from).ok_or_else(|| format!("{}: nothing recorded", motion.name()))?;
+                    Ok(term.in_plane_tilt_rad(*angle))
                 });
         match read {
             Ok(c) => components[k] = c,
