@@ -141,15 +141,32 @@ pub struct Score {
     pub wrong: Vec<String>,
 }
 
-/// Score a diagnosis' JSON against the hidden effects.
+/// Whether the result lists hidden scalar `h` as equivalent to a change of the extrinsics: what
+/// a calibration absorbs and no motion of the model tells apart.
+fn equivalent_to_extrinsics(v: &Value, h: &HiddenScalar) -> bool {
+    v["equivalent_to_extrinsics"].as_array().is_some_and(|a| a.iter().any(|n| n.as_str() == Some(h.name.as_str())))
+}
+
+/// Score a diagnosis' JSON against the hidden effects. An effect of several parameters (a pivot
+/// offset along two axes) counts as named when some are named within 3σ and the others are
+/// listed as equivalent to a change of the extrinsics: those the data cannot tell, listed as such.
 pub fn score(v: &Value, hidden: &[Effect]) -> Score {
     let named = named(v);
     let mut s = Score::default();
     for e in hidden {
         let scalars = scalars_of(e);
         let label = format!("{e:?}");
-        if !scalars.is_empty() && scalars.iter().all(|h| named.iter().any(|n| names_it(n, h))) {
-            s.named.push(label);
+        let is_named = |h: &HiddenScalar| named.iter().any(|n| names_it(n, h));
+        let absorbed: Vec<&str> = scalars
+            .iter()
+            .filter(|h| !is_named(h) && equivalent_to_extrinsics(v, h))
+            .map(|h| h.name.as_str())
+            .collect();
+        if scalars.iter().any(is_named) && scalars.iter().all(|h| is_named(h) || equivalent_to_extrinsics(v, h)) {
+            s.named.push(match absorbed.is_empty() {
+                true => label,
+                false => format!("{label} ({} listed as equivalent to an extrinsic change)", absorbed.join(", ")),
+            });
         } else {
             s.missed.push((label, reported_as(v, &scalars)));
         }
@@ -183,6 +200,10 @@ fn reported_as(v: &Value, scalars: &[HiddenScalar]) -> String {
         let holds = |f: &str| v[f].as_array().is_some_and(|a| a.iter().any(|n| n.as_str() == Some(h.name.as_str())));
         let partial =
             v["partial"].as_array().into_iter().flatten().any(|p| p["name"].as_str() == Some(h.name.as_str()));
+        if named.iter().any(|n| names_it(n, h)) {
+            out.push(format!("{}: named within 3σ", h.name));
+            continue;
+        }
         let wrong_size = named.iter().any(|n| n.name == h.name);
         let beside = named.iter().find(|n| n.ambiguous_with.contains(&h.name));
         let removed = v["steps"].as_array().into_iter().flatten().find_map(|s| {
