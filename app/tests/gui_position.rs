@@ -76,6 +76,7 @@ fn the_quick_calibration_then_a_confirmed_move_in_the_position_view() {
     h.get_by_label_contains("tilt from the fringe contrast: ");
     let truth = truth_at(&r.joints_end.to_array());
     let t = r.tilt.expect("the tilt measured at the end pose");
+    h.get_by_label(&format!("{:.4} ± {:.4}°", t.tilt_deg, t.sigma_deg));
     assert!((t.tilt_deg - truth.tilt_angle_rad().to_degrees()).abs() <= 3.0 * t.sigma_deg, "{t:?} vs {truth:?}");
     let error_nm = (truth.gap_um - target.gap_um) * 1e3;
     eprintln!(

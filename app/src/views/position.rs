@@ -239,8 +239,8 @@ fn result(ui: &mut egui::Ui, r: &MoveRecord) {
 /// Every move of the session.
 fn history(ui: &mut egui::Ui, moves: &[MoveRecord]) {
     ui.label(RichText::new(format!("Moves in this session ({})", moves.len())).size(16.0).strong());
-    egui::Grid::new("moves").num_columns(6).striped(true).show(ui, |ui| {
-        for h in ["#", "requested gap", "measured gap", "error", "bound", "verdict"] {
+    egui::Grid::new("moves").num_columns(7).striped(true).show(ui, |ui| {
+        for h in ["#", "requested gap", "measured gap", "error", "bound", "tilt (contrast)", "verdict"] {
             ui.label(RichText::new(h).strong());
         }
         ui.end_row();
@@ -250,6 +250,7 @@ fn history(ui: &mut egui::Ui, moves: &[MoveRecord]) {
             ui.monospace(r.measurement.as_ref().map_or("–".into(), |m| format!("{:.4} µm", m.gap_um)));
             ui.monospace(r.gap_error_nm.map_or("–".into(), |e| format!("{e:+.2} nm")));
             ui.monospace(r.bound_nm.map_or("–".into(), |b| format!("±{b:.2} nm")));
+            ui.monospace(r.tilt.map_or("–".into(), |t| format!("{:.4} ± {:.4}°", t.tilt_deg, t.sigma_deg)));
             ui.colored_label(verdict_color(r.verdict), r.verdict.word());
             ui.end_row();
         }
