@@ -7,7 +7,7 @@ use photorobot_app::cli::{run, CliError};
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::session::Session;
-use photorobot_e2e::moves::{random_recipe, true_gap_and_tilt};
+use photorobot_e2e::moves::{joints_end, random_recipe, true_gap_and_tilt};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -143,10 +143,7 @@ fn with_the_nominal_extrinsics_the_sweep_shows_the_move_off() {
     let true_error_nm = (gap_um - 880.0) * 1e3;
     let measured_nm = m["gap_error_nm"].as_f64().unwrap();
     let sigma_nm = m["measurement"]["sigma_nm"].as_f64().unwrap();
-    let q: [f64; 6] = std::array::from_fn(|i| {
-        m["joints_end"][["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"][i]].as_f64().unwrap()
-    });
-    let true_tilt_deg = truth().gap_and_tilt(&q).unwrap().1.to_degrees();
+    let true_tilt_deg = truth().gap_and_tilt(&joints_end(m)).unwrap().1.to_degrees();
     let (tilt_deg, tilt_sigma_deg) =
         (m["tilt"]["tilt_deg"].as_f64().unwrap(), m["tilt"]["sigma_deg"].as_f64().unwrap());
     eprintln!(

@@ -139,14 +139,16 @@ pub mod moves {
     /// The true target (the bench's hidden extrinsics) at the joints a move's JSON ended at:
     /// its gap (µm) and tilt (°).
     pub fn true_gap_and_tilt(truth: &PhaseModel, m: &serde_json::Value) -> (f64, [f64; 2]) {
-        let j = &m["joints_end"];
-        let q: [f64; 6] = std::array::from_fn(|i| {
-            let key = ["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"][i];
-            j[key].as_f64().unwrap()
-        });
+        let q = joints_end(m);
         let frame = TaskFrame::at(truth, &truth.extrinsics, &q).unwrap();
         let t = frame.target_at(truth, &q).unwrap();
         (t.gap_um, t.tilt_deg)
+    }
+
+    /// A move's `joints_end` (µm, °) from its `--json` record.
+    pub fn joints_end(m: &serde_json::Value) -> [f64; 6] {
+        let j = &m["joints_end"];
+        std::array::from_fn(|i| j[["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"][i]].as_f64().unwrap())
     }
 }
 pub mod two_beam;

@@ -13,7 +13,7 @@
 use photorobot_app::cli::run;
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::model::phase::PhaseModel;
-use photorobot_e2e::moves::{random_recipe, true_gap_and_tilt};
+use photorobot_e2e::moves::{joints_end, random_recipe, true_gap_and_tilt};
 use serde_json::Value;
 
 fn cli(args: &[String]) -> (bool, String) {
@@ -66,13 +66,7 @@ fn main() {
         let error_nm = (gap_um - t.gap_um) * 1e3;
         let sigma = m["forecast"]["gap_sigma_nm"].as_f64().unwrap();
         let verdict = m["verdict"].as_str().unwrap();
-        let true_tilt_deg = {
-            let j = &m["joints_end"];
-            let q: [f64; 6] = std::array::from_fn(|i| {
-                j[["q1_um", "q2_um", "q3_um", "q4_deg", "q5_deg", "q6_deg"][i]].as_f64().unwrap()
-            });
-            truth.gap_and_tilt(&q).unwrap().1.to_degrees()
-        };
+        let true_tilt_deg = truth.gap_and_tilt(&joints_end(m)).unwrap().1.to_degrees();
         let tilt = m["tilt"]["tilt_deg"].as_f64().unwrap_or(f64::NAN);
         let tilt_sigma = m["tilt"]["sigma_deg"].as_f64().unwrap_or(f64::NAN);
         tilt_z.push((tilt - true_tilt_deg) / tilt_sigma);

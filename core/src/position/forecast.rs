@@ -62,6 +62,13 @@ pub struct PoseForecast {
     pub rotation_sigma_deg: f64,
 }
 
+impl PoseForecast {
+    /// σ of the angle between the lamella's normal and the beam (°): the two tilts' together.
+    pub fn tilt_angle_sigma_deg(&self) -> f64 {
+        self.tilt_sigma_deg[0].hypot(self.tilt_sigma_deg[1])
+    }
+}
+
 /// The forecast at joints `q_display` of `model`'s robot, planned in `frame` (the identified
 /// extrinsics) whose uncertainty is `u`; `None` when the beam misses the lamella.
 pub fn forecast_at(

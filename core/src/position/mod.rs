@@ -226,7 +226,7 @@ pub fn run_move(
             (TiltForGap { rad, sigma_rad }, None)
         }
         Err(why) => {
-            let sigma_deg = plan.forecast.map_or(0.0, |f| f.tilt_sigma_deg[0].hypot(f.tilt_sigma_deg[1]));
+            let sigma_deg = plan.forecast.map_or(0.0, |f| f.tilt_angle_sigma_deg());
             let t = TiltForGap { rad: plan.target.tilt_angle_rad(), sigma_rad: sigma_deg.to_radians() };
             (t, Some(format!("; the gap read at the requested tilt, which was not measured: {why}")))
         }
@@ -256,7 +256,7 @@ pub fn run_move(
 /// move is off (the extrinsics placed the lamella at another tilt than they say).
 fn judge_tilt(record: &mut MoveRecord, plan: &MovePlan) {
     let Some(t) = record.tilt else { return };
-    let forecast_deg = plan.forecast.map_or(0.0, |f| f.tilt_sigma_deg[0].hypot(f.tilt_sigma_deg[1]));
+    let forecast_deg = plan.forecast.map_or(0.0, |f| f.tilt_angle_sigma_deg());
     let bound_deg = record::BOUND_SIGMAS * t.sigma_deg.hypot(forecast_deg);
     let within = (t.tilt_deg - t.model_deg).abs() <= bound_deg;
     record.note.push_str(&format!(

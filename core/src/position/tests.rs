@@ -12,9 +12,19 @@ fn placement(preset: &BenchPreset) -> Placement {
 }
 
 fn run(bench: &mut VirtualBench, p: &Placement, target: &Target, refs: &[Reference]) -> Result<MoveRecord, MoveError> {
+    run_with(bench, p, target, refs, ProofOptions::default())
+}
+
+fn run_with(
+    bench: &mut VirtualBench,
+    p: &Placement,
+    target: &Target,
+    refs: &[Reference],
+    options: ProofOptions,
+) -> Result<MoveRecord, MoveError> {
     let cancel = AtomicBool::new(false);
     let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-    move_to(bench, p, target, false, refs, ProofOptions::default(), &mut control)
+    move_to(bench, p, target, false, refs, options, &mut control)
 }
 
 /// The true gap and tilt at the bench's joints (the preset's hidden truth).
@@ -168,13 +178,10 @@ fn a_move_asked_not_to_measure_the_tilt_reads_the_gap_at_the_request() {
     let preset = BenchPreset::resolve("table2-ideal").unwrap();
     let p = placement(&preset);
     let target = Target { gap_um: 880.0, tilt_deg: [0.5, 0.0], lateral_um: [-60.0, -60.0], rotation_deg: 0.0 };
-    let cancel = AtomicBool::new(false);
     let mut times = Vec::new();
     for tilt in [true, false] {
         let mut bench = VirtualBench::new(&preset, Some(5)).unwrap();
-        let mut control = RunControl { cancel: &cancel, on_samples: &mut |_, _| {}, on_progress: &mut |_| {} };
-        let options = ProofOptions { sweeps: true, tilt };
-        let r = move_to(&mut bench, &p, &target, false, &[], options, &mut control).unwrap();
+        let r = run_with(&mut bench, &p, &target, &[], ProofOptions { sweeps: true, tilt }).unwrap();
         assert_eq!(r.verdict, Verdict::Confirmed, "{}", r.note);
         assert_eq!(r.tilt.is_some(), tilt);
         assert_eq!(r.note.contains("the gap read at the requested tilt, which was not measured: not asked for"), !tilt);

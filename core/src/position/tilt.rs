@@ -71,37 +71,13 @@ pub fn measure_at(
     let t0 = bench.clock_s();
     let model = &placement.model;
     let compensation = Compensation { play: placement.play, drift: Vec::new() };
-    let stops = StopSettings { stops: STOPS, sweeps: false };
     let mut components = [(0.0, 0.0); 2];
-    let mut result = Ok(());
-    for (k, motion) in [ValidationMotion::RotationXf, ValidationMotion::RotationZf].into_iter().enumerate() {
-        let read =
-            record_validation(bench, model, &model.extrinsics, motion, end, &compensation, &stops, control.cancel)
-                .and_then(|r| r.measure(model))
-                .map_err(|e| e.to_string())
-                .and_then(|figure| {
-                    let term = figure.evidence.tilt_term.as_ref().ok_or_else(|| {
-                        format!(
-                            "{}: the contrast along it gives no tilt ({})",
-                            motion.name(),
-                            figure.evidence.notes.join("; ")
-                        )
-                    })?;
-                    let from = figure.motion_start.min(figure.trace.len().saturating_sub(1));
-                    let angles = rotation_angles_rad(&model.chain, &figure.trace, from);
-                    let at_end = nearest_sample(&figure.trace, from, &end);
-                    let angle =
-                        angles.get(at_end - from).ok_or_else(|| format!("{}: nothing recorded", motion.name()))?;
-                    Ok(term.in_plane_tilt_rad(*angle))
-                });
-        match read {
-            Ok(c) => components[k] = c,
-            Err(e) => {
-                result = Err(e);
-                break;
-            }
-        }
-    }
+    let result = [ValidationMotion::RotationXf, ValidationMotion::RotationZf].into_iter().enumerate().try_for_each(
+        |(k, motion)| {
+            components[k] = in_plane_component(bench, placement, &compensation, motion, end, control.cancel)?;
+            Ok::<(), String>(())
+        },
+    );
     let back = return_to(bench, end, &placement.play, control);
     result?;
     back?;
@@ -115,6 +91,31 @@ pub fn measure_at(
         model_deg: model.gap_and_tilt(&end).map_or(f64::NAN, |g| g.1.to_degrees()),
         bench_time_s: bench.clock_s() - t0,
     })
+}
+
+/// The tilt (rad, signed) at `end` in the plane of `motion` (a rotation about X_f or Z_f from
+/// `end`), and its σ: the rotation run, its contrast fitted, the angle at `end` read from the joints.
+fn in_plane_component(
+    bench: &mut dyn Bench,
+    placement: &Placement,
+    compensation: &Compensation,
+    motion: ValidationMotion,
+    end: [f64; 6],
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<(f64, f64), String> {
+    let model = &placement.model;
+    let stops = StopSettings { stops: STOPS, sweeps: false };
+    let figure = record_validation(bench, model, &model.extrinsics, motion, end, compensation, &stops, cancel)
+        .and_then(|r| r.measure(model))
+        .map_err(|e| e.to_string())?;
+    let term = figure.evidence.tilt_term.as_ref().ok_or_else(|| {
+        format!("{}: the contrast along it gives no tilt ({})", motion.name(), figure.evidence.notes.join("; "))
+    })?;
+    let from = figure.motion_start.min(figure.trace.len().saturating_sub(1));
+    let angles = rotation_angles_rad(&model.chain, &figure.trace, from);
+    let at_end = nearest_sample(&figure.trace, from, &end);
+    let angle = angles.get(at_end - from).ok_or_else(|| format!("{}: nothing recorded", motion.name()))?;
+    Ok(term.in_plane_tilt_rad(*angle))
 }
 
 /// The tilt and its σ (rad) from its two components and theirs: `tan² γ = tan² a + tan² b`; near
