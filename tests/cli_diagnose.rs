@@ -293,6 +293,7 @@ fn two_effects_that_cancel_are_told_apart_by_motions_designed_for_the_pair() {
     assert!(designed_for_the_pair, "no motions ran for the pair: {}", v["steps"]);
     assert_eq!(v["verdict"], "named", "{v}");
     let found = named(v);
+    println!("named: {found:?}");
     for hidden in preset.effects.iter().flat_map(scalars_of) {
         assert!(found.iter().any(|n| names_it(n, &hidden)), "{} not named within 3σ: {found:?}", hidden.name);
     }
@@ -316,4 +317,34 @@ fn diagnose_on_a_folder_without_traces_says_what_it_expected() {
     let err = photorobot_app::cli::run(["photorobot", "diagnose", dir.path().to_str().unwrap()], &mut out).unwrap_err();
     let msg = err.to_string();
     assert!(msg.contains("traces") && msg.contains("photorobot calibrate"), "{msg}");
+}
+
+/// femto-lab (five effects at once) on seed 3 of the designed plan, through `calibrate` and
+/// `diagnose` with its discriminating motions: at least 4 of the 5 named within 3σ (the q5 zero
+/// offset among them, which only motions run together show), nothing named that is not there,
+/// and with the named effects the validation on the truth near the figures docs/diagnosis.md
+/// gives for this seed (within twice those).
+#[test]
+fn femto_lab_names_four_of_its_five_effects_and_nothing_else() {
+    use photorobot_e2e::multi_effect::validation_on_the_truth;
+    use photorobot_e2e::multi_effect::{calibrate_then_diagnose, named, names_it, scalars_of, score};
+    let dir = tempfile::tempdir().unwrap();
+    let preset = BenchPreset::resolve("femto-lab").unwrap();
+    let run =
+        calibrate_then_diagnose(std::path::Path::new("femto-lab"), 3, &["--plan", "optimised"], dir.path()).unwrap();
+    let v = &run.diagnosis;
+    let s = score(v, &preset.effects);
+    println!("named {:?}\nmissed {:?}\nwrong {:?}", s.named, s.missed, s.wrong);
+    assert!(s.named.len() >= 4, "{s:?}");
+    assert!(s.wrong.is_empty(), "{s:?}");
+    let zero = preset.effects.iter().flat_map(scalars_of).find(|h| h.name == "joint zero offset q5").unwrap();
+    assert!(named(v).iter().any(|n| names_it(n, &zero)), "{s:?}");
+    let rows = validation_on_the_truth(&dir.path().join("session"), &preset).unwrap();
+    println!("{rows:?}");
+    // circle, 6° about X_f, 6° about Z_f, 45.5° about the beam: twice the documented figures.
+    let bounds = [2.0 * 22.7, 2.0 * 1.8, 2.0 * 3.2, 2.0 * 4.9];
+    assert_eq!(rows.len(), bounds.len(), "{rows:?}");
+    for ((motion, _, with), bound) in rows.iter().zip(bounds) {
+        assert!(*with <= bound, "{motion}: {with:.1} nm with the named effects");
+    }
 }

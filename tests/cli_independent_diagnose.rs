@@ -64,6 +64,7 @@ fn another_simulators_q1_scale_too_small_to_name_is_bounded_above_its_size() {
         .find(|b| b["name"] == "joint scale error q1")
         .unwrap_or_else(|| panic!("no bound for the q1 scale: {}", v["ruled_out_above"]));
     let below = bound["below"].as_f64().unwrap();
+    println!("the q1 scale is ruled out above {below:.0} ppm");
     assert!(below > 500.0, "the q1 scale ruled out above {below} ppm, under the hidden 500 ppm: {bound}");
     assert_eq!(bound["unit"], "ppm");
 }

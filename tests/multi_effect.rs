@@ -125,7 +125,22 @@ pub fn names_it(n: &Named, h: &HiddenScalar) -> bool {
     if n.name == h.name {
         return within(n.estimate, h.value);
     }
+    if let Some(v) = as_exact_equivalent(&h.name, &n.name, h.value) {
+        return within(n.estimate, v);
+    }
     (h.equivalents.contains(&n.name) || n.ambiguous_with.contains(&h.name)) && within(n.estimate.abs(), h.value.abs())
+}
+
+/// Hidden scalar `name` of `value` expressed as candidate `other`, when the two are the same
+/// effect on every motion in another unit, with an extrinsic change: a joint-6 axis tilt toward
+/// link x (mrad) is a joint-5 zero offset (°) of the opposite sign with a fixed turn of the
+/// lamella (docs/diagnosis.md, "Equivalent effects").
+fn as_exact_equivalent(name: &str, other: &str, value: f64) -> Option<f64> {
+    match (name, other) {
+        ("joint zero offset q5", "axis tilt q6 toward link x") => Some(-value.to_radians() * 1e3),
+        ("axis tilt q6 toward link x", "joint zero offset q5") => Some(-(value * 1e-3).to_degrees()),
+        _ => None,
+    }
 }
 
 /// How a diagnosis fared against the hidden effects.

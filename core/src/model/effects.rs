@@ -409,6 +409,38 @@ mod tests {
         assert_relative_eq!(p, Vector3::new(0.0, 20.0 - 20.0 * phi.cos(), -20.0 * phi.sin()), epsilon = 1e-9);
     }
 
+    /// Joint 6's link frame is joint 5's turned −90° about x, so a turn of joint 6's axis toward
+    /// its link x (about its link y) is a turn about joint 5's axis before joint 6 turns, and
+    /// one of the tool after: R_x(−90°)·R_y(ε) = R_z(−ε)·R_x(−90°). With a q6 tilt of ε toward
+    /// link x and a q5 zero offset of −ε the end effector is at the same point at any joint
+    /// values, turned by the same ε about its own −y: a fixed turn of the tool, which the
+    /// lamella's tilt extrinsics carry. With +ε the turn between the two changes with the joints.
+    #[test]
+    fn a_joint6_tilt_toward_link_x_is_a_joint5_zero_offset_and_a_turn_of_the_tool() {
+        let eps_mrad = 0.6;
+        let zero = |sign: f64| Effect::JointZeroOffset {
+            joint: "q5".into(),
+            offset: sign * (eps_mrad * 1e-3f64).to_degrees(),
+        };
+        let tilt = Effect::AxisTilt { joint: "q6".into(), tilt_mrad: [eps_mrad, 0.0] };
+        let chain =
+            |e: &Effect| Chain::new(apply_all(std::slice::from_ref(e), &RobotDescription::femto_6dof()).unwrap());
+        let (tilted, offset, wrong) = (chain(&tilt), chain(&zero(-1.0)), chain(&zero(1.0)));
+        let mut wrong_angles = Vec::new();
+        for k in 0..20 {
+            let u = |i: usize| ((k * 6 + i) as f64 * 0.618_034).fract() * 2.0 - 1.0;
+            let q = [150.0 * u(0), 150.0 * u(1), 150.0 * u(2), 0.17 * u(3), 0.17 * u(4), 3.1 * u(5)];
+            let (a, b, c) = (tilted.end_effector(&q), offset.end_effector(&q), wrong.end_effector(&q));
+            assert_relative_eq!(a.translation.vector, b.translation.vector, epsilon = 1e-9);
+            let turn = b.rotation.inverse() * a.rotation;
+            assert_relative_eq!(turn.scaled_axis(), Vector3::new(0.0, -eps_mrad * 1e-3, 0.0), epsilon = 1e-12);
+            wrong_angles.push((c.rotation.inverse() * a.rotation).angle());
+        }
+        let spread =
+            wrong_angles.iter().fold(0.0f64, |m, v| m.max(*v)) - wrong_angles.iter().fold(1.0f64, |m, v| m.min(*v));
+        assert!(spread > 5e-4, "{wrong_angles:?}");
+    }
+
     #[test]
     fn unknown_joint_is_named() {
         let e = Effect::JointScale { joint: "q9".into(), ppm: 1.0 };

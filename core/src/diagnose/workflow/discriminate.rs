@@ -1,10 +1,10 @@
-//! The discriminating motions: each pool motion's contribution to telling candidates apart,
-//! the greedy choice, and running them.
+//! The discriminating motions: what the pool can show of the candidates, the motions chosen
+//! for them ([`super::evidence`]), and running them.
 
+use super::evidence::{PoolEvidence, Target};
 use super::{Diagnosis, Stage};
 use crate::diagnose::fit;
 use crate::diagnose::motions::{self, DesignedMotion, MotionRunner};
-use crate::diagnose::projection::Projector;
 use crate::diagnose::result::DiagnoseError;
 use crate::diagnose::scoring;
 use crate::diagnose::settings::{DETECTABLE_SCORE, EQUIVALENT_SHARE, MAX_DESIGN_ROUNDS, MAX_MOTIONS};
@@ -12,10 +12,6 @@ use crate::diagnose::step::Step;
 use crate::diagnose::validation;
 use crate::identify::Observation;
 use crate::model::phase::PhaseModel;
-use nalgebra::{DMatrix, DVector};
-
-/// The pool, each motion's contribution per target, and each target's absorbed share.
-type PoolContributions = (Vec<DesignedMotion>, Vec<Vec<f64>>, Vec<f64>);
 
 /// Pool motions the design leaves out, and why (labels).
 #[derive(Debug, Default)]
@@ -29,11 +25,13 @@ struct LeftOut {
 }
 
 impl Diagnosis {
-    /// For each target (a candidate, and the candidates it must be told apart from), its
-    /// projected signature's contribution per pool motion at typical size, the extrinsics (and
-    /// the other candidates of the target) fitted on the data and the whole pool; and each
-    /// target's absorbed share on data and pool.
-    fn pool_contributions(&self, targets: &[(usize, Vec<usize>)]) -> Result<PoolContributions, DiagnoseError> {
+    /// The pool and what it can show of each target (a candidate, and the candidates it must be
+    /// told apart from): the Jacobian and the targets' signatures at the current state over the
+    /// data and every pool motion's templates.
+    fn pool_evidence(
+        &self,
+        targets: &[(usize, Vec<usize>)],
+    ) -> Result<(Vec<DesignedMotion>, PoolEvidence), DiagnoseError> {
         let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("design before the baseline".into()))?;
         let obs = self.fit_set();
         let t_end = self.observations.iter().map(|o| o.time_s[1]).fold(0.0, f64::max);
@@ -42,41 +40,29 @@ impl Diagnosis {
         let all: Vec<Observation> = obs.iter().chain(&templates).cloned().collect();
         let j = fit::jacobian_of(&self.predictor, &f.state, &all)?;
         let signatures = scoring::signatures(&self.predictor, &f.state, &self.candidates, &all)?;
-        let base_proj = Projector::new(&j);
-        let mut per_motion = vec![vec![0.0; targets.len()]; pool.len()];
-        let mut absorbed = Vec::new();
-        for (t, (c, others)) in targets.iter().enumerate() {
-            let s = &signatures[*c];
-            let sp = if others.is_empty() {
-                base_proj.orthogonal(s)
-            } else {
-                let mut cols: Vec<DVector<f64>> = j.column_iter().map(|c| c.into_owned()).collect();
-                cols.extend(others.iter().map(|&o| signatures[o].clone()));
-                Projector::new(&DMatrix::from_columns(&cols)).orthogonal(s)
-            };
-            absorbed.push(if s.norm_squared() > 0.0 { 1.0 - sp.norm_squared() / s.norm_squared() } else { 1.0 });
-            let typical = self.candidates[*c].typical;
-            for (k, o) in templates.iter().enumerate() {
-                let m = pool.iter().position(|p| p.label == o.label).unwrap_or(0);
-                per_motion[m][t] += sp[obs.len() + k].powi(2) * typical * typical;
-            }
-        }
-        Ok((pool, per_motion, absorbed))
+        let motion_rows = pool
+            .iter()
+            .map(|m| (0..templates.len()).filter(|&k| templates[k].label == m.label).map(|k| obs.len() + k).collect())
+            .collect();
+        let targets = targets
+            .iter()
+            .map(|(c, others)| Target {
+                signature: signatures[*c].clone(),
+                others: others.iter().map(|&o| signatures[o].clone()).collect(),
+                typical: self.candidates[*c].typical,
+            })
+            .collect();
+        Ok((pool, PoolEvidence { j, n_data: obs.len(), motion_rows, targets }))
     }
 
-    /// The pool motions the design leaves out, their contributions zeroed: those already
+    /// The pool motions the design may choose (true) and those it leaves out: those already
     /// recorded (a label the observations have: run again, they would add nothing the data lack),
     /// and, when the observations come from tracked fringes, those whose fringes cannot be
     /// analysed as the current model predicts them: the gap turns inside them
     /// ([`motions::gap_turns`]), or it travels under [`motions::MIN_FRINGES`] fringes
     /// ([`motions::too_short`]: a q6 turn of ±20° at a lateral offset moves the gap by 0.3 µm,
     /// under one fringe, and its trace is skipped when analysed).
-    fn leave_out(
-        &self,
-        pool: &[DesignedMotion],
-        per_motion: &mut [Vec<f64>],
-        tracked: bool,
-    ) -> Result<LeftOut, DiagnoseError> {
+    fn leave_out(&self, pool: &[DesignedMotion], tracked: bool) -> Result<(Vec<bool>, LeftOut), DiagnoseError> {
         let f = self.fit.as_ref().ok_or_else(|| DiagnoseError::Model("design before the baseline".into()))?;
         let mut out = LeftOut::default();
         let per: Vec<Vec<Observation>> =
@@ -89,7 +75,8 @@ impl Diagnosis {
             self.predictor.predict(&f.state.extrinsics, &f.state.library_effects(), &f.state.gains, &all)?
         };
         let mut at = 0;
-        for ((m, row), t) in pool.iter().zip(per_motion.iter_mut()).zip(&per) {
+        let mut allowed = vec![true; pool.len()];
+        for ((m, allow), t) in pool.iter().zip(allowed.iter_mut()).zip(&per) {
             let (from, to) = (at, at + t.len());
             at = to;
             let list = if self.recorded(m) {
@@ -101,52 +88,16 @@ impl Diagnosis {
             } else {
                 continue;
             };
-            row.iter_mut().for_each(|v| *v = 0.0);
+            *allow = false;
             list.push(m.label.clone());
         }
-        Ok(out)
+        Ok((allowed, out))
     }
 
     /// Whether the observations hold motion `m` already (recorded with the session, added
     /// later, or run by this diagnosis).
     fn recorded(&self, m: &DesignedMotion) -> bool {
         self.observations.iter().any(|o| o.label == m.label)
-    }
-
-    /// Choose pool motions greedily: the ones adding the most detectability (capped at
-    /// [`DETECTABLE_SCORE`]) to targets that have `have` on the data, for the targets the pool
-    /// can bring to the score that names a candidate (`naming`, [`scoring::naming_threshold`]): a
-    /// motion that adds to a target no set of motions can show at its typical size costs bench
-    /// time and settles nothing. Short of [`DETECTABLE_SCORE`] is not out of reach: a thermal
-    /// drift acceleration the whole pool brings to 23 (the naming score is 13) is worth motions,
-    /// and on the paper's calibration those showed a hidden 1 µm reversal error of q3 that the
-    /// others missed.
-    fn choose(per_motion: &[Vec<f64>], have: &[f64], naming: f64) -> Vec<usize> {
-        let reachable: Vec<bool> =
-            (0..have.len()).map(|t| have[t] + per_motion.iter().map(|m| m[t]).sum::<f64>() > naming).collect();
-        let per_motion: Vec<Vec<f64>> = per_motion
-            .iter()
-            .map(|m| m.iter().zip(&reachable).map(|(v, r)| if *r { *v } else { 0.0 }).collect())
-            .collect();
-        let mut have = have.to_vec();
-        let mut chosen: Vec<usize> = Vec::new();
-        loop {
-            let best = (0..per_motion.len()).filter(|m| !chosen.contains(m)).map(|m| {
-                let gain: f64 = (0..have.len())
-                    .map(|t| (have[t] + per_motion[m][t]).min(DETECTABLE_SCORE) - have[t].min(DETECTABLE_SCORE))
-                    .sum();
-                (m, gain)
-            });
-            match best.max_by(|a, b| a.1.total_cmp(&b.1)) {
-                Some((m, gain)) if gain > 1.0 && chosen.len() < MAX_MOTIONS => {
-                    for (t, h) in have.iter_mut().enumerate() {
-                        *h += per_motion[m][t];
-                    }
-                    chosen.push(m);
-                }
-                _ => return chosen,
-            }
-        }
     }
 
     /// Run motions on the runner, add their observations (all fitted), refit the current state, rescore.
@@ -195,8 +146,9 @@ impl Diagnosis {
             .filter(|&c| self.scores[c].detectability_at_typical < DETECTABLE_SCORE && !self.scores[c].significant)
             .collect();
         let targets: Vec<(usize, Vec<usize>)> = (0..self.candidates.len()).map(|c| (c, vec![])).collect();
-        let (pool, mut per_motion, absorbed) = self.pool_contributions(&targets)?;
-        let left_out = self.leave_out(&pool, &mut per_motion, runner.as_deref().is_none_or(|r| r.tracks_fringes()))?;
+        let (pool, evidence) = self.pool_evidence(&targets)?;
+        let absorbed = evidence.absorbed();
+        let (allowed, left_out) = self.leave_out(&pool, runner.as_deref().is_none_or(|r| r.tracks_fringes()))?;
         // An effect the model holds is named, not equivalent: on the branch its naming led to,
         // the Gouy phase's signature is absorbed by the extrinsics on the data and the pool.
         let in_model = |c: usize| {
@@ -206,9 +158,7 @@ impl Diagnosis {
             .filter(|&c| absorbed[c] >= EQUIVALENT_SHARE && !in_model(c))
             .map(|c| self.candidates[c].name.clone())
             .collect();
-        let needy_motion: Vec<Vec<f64>> = per_motion.iter().map(|m| needy.iter().map(|&c| m[c]).collect()).collect();
-        let have: Vec<f64> = needy.iter().map(|&c| self.scores[c].detectability_at_typical).collect();
-        let chosen = Self::choose(&needy_motion, &have, scoring::naming_threshold(self.candidates.len()));
+        let (chosen, seen) = evidence.only(&needy).choose(&allowed, scoring::naming_threshold(self.candidates.len()));
         let motions: Vec<DesignedMotion> = chosen.iter().map(|&m| pool[m].clone()).collect();
         // Settled: no motion of the pool not yet recorded would show a candidate the data
         // cannot, or a bench runs every one that would (the design was not cut short).
@@ -223,9 +173,7 @@ impl Diagnosis {
         let seen_with_motions: Vec<String> = needy
             .iter()
             .enumerate()
-            .filter(|&(t, &c)| {
-                reportable(c) && have[t] + chosen.iter().map(|&m| needy_motion[m][t]).sum::<f64>() >= DETECTABLE_SCORE
-            })
+            .filter(|&(t, &c)| reportable(c) && seen[t] >= DETECTABLE_SCORE)
             .map(|(_, &c)| self.candidates[c].name.clone())
             .collect();
         let labels: Vec<String> = motions.iter().map(|m| m.label.clone()).collect();
@@ -291,15 +239,15 @@ impl Diagnosis {
         targets: &[(usize, Vec<usize>)],
         runner: &mut (dyn MotionRunner + 'r),
     ) -> Result<Option<usize>, DiagnoseError> {
-        let (pool, mut per_motion, _) = self.pool_contributions(targets)?;
-        let left_out = self.leave_out(&pool, &mut per_motion, runner.tracks_fringes())?;
-        let have = vec![0.0; targets.len()];
-        let motions: Vec<DesignedMotion> =
-            Self::choose(&per_motion, &have, scoring::naming_threshold(self.candidates.len()))
-                .into_iter()
-                .map(|m| pool[m].clone())
-                .filter(|m| !self.designed.contains(m))
-                .collect();
+        let (pool, evidence) = self.pool_evidence(targets)?;
+        let (allowed, left_out) = self.leave_out(&pool, runner.tracks_fringes())?;
+        let motions: Vec<DesignedMotion> = evidence
+            .choose(&allowed, scoring::naming_threshold(self.candidates.len()))
+            .0
+            .into_iter()
+            .map(|m| pool[m].clone())
+            .filter(|m| !self.designed.contains(m))
+            .collect();
         if motions.is_empty() {
             return Ok(None);
         }

@@ -4,7 +4,9 @@
 
 mod branches;
 mod discriminate;
+mod evidence;
 mod naming;
+mod pair_naming;
 mod unnamed;
 
 use crate::diagnose::candidates::{self, Candidate};
@@ -59,6 +61,8 @@ pub struct Diagnosis {
     design_rounds: usize,
     /// The discriminating motions were designed (they are designed once the evident effects are named).
     design_done: bool,
+    /// Two effects together were tried once ([`Diagnosis::add_best_pair`]).
+    pair_tried: bool,
     /// No motion of the pool not yet recorded would show a candidate the data cannot.
     settled: bool,
     session_traces: Vec<crate::trace::Trace>,
@@ -147,6 +151,7 @@ impl Diagnosis {
             separated_pairs: Vec::new(),
             design_rounds: 0,
             design_done: false,
+            pair_tried: false,
             settled: false,
             session_traces: Vec::new(),
             stage: Stage::Baseline,

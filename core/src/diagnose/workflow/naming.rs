@@ -8,7 +8,7 @@ use crate::diagnose::motions::MotionRunner;
 use crate::diagnose::result::{DiagnoseError, NamedEffect};
 use crate::diagnose::scoring::{self, CandidateScore};
 use crate::diagnose::settings::{
-    DISCRIMINATING_PREFIX, EXCHANGE_MARGIN, MAX_EFFECTS, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA,
+    DISCRIMINATING_PREFIX, EXCHANGE_MARGIN, MAX_EFFECTS, NOISE_FLOOR_FACTOR, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA,
 };
 use crate::diagnose::step::Step;
 use crate::diagnose::validation;
@@ -16,7 +16,7 @@ use crate::identify::{Observation, ObservationKind};
 
 /// The effect `name` as named from its score `sc`, with the estimate and σ of effect `k` of
 /// the fit `f` (not yet cross-validated).
-fn named(name: String, sc: &CandidateScore, f: &Fit, k: usize, ambiguous_with: Vec<String>) -> NamedEffect {
+pub(super) fn named(name: String, sc: &CandidateScore, f: &Fit, k: usize, ambiguous_with: Vec<String>) -> NamedEffect {
     NamedEffect {
         name,
         estimate: f.state.effects[k].1,
@@ -53,6 +53,11 @@ impl Diagnosis {
                 if self.separate_pairs(r)? {
                     return Ok(());
                 }
+            }
+            // Above the floor with nothing left to name alone: two effects together.
+            let above = self.fit.as_ref().is_some_and(|f| f.rms() > NOISE_FLOOR_FACTOR);
+            if above && !self.pair_tried && self.add_best_pair(runner)? {
+                return Ok(());
             }
             self.stage = Stage::Finish;
             return self.conclude();
@@ -146,7 +151,7 @@ impl Diagnosis {
     /// A confirmed effect joins the model. The data analysed with the new model are the data
     /// every added effect must explain: each is tested again on them, against the others, and
     /// the traces analysed again while any is removed or exchanged.
-    fn keep_added<'r>(
+    pub(super) fn keep_added<'r>(
         &mut self,
         effect: NamedEffect,
         refitted: Fit,
@@ -167,7 +172,7 @@ impl Diagnosis {
     }
 
     /// The estimates and σ of every added effect from the latest fit.
-    fn refresh_added_estimates(&mut self) {
+    pub(super) fn refresh_added_estimates(&mut self) {
         if let Some(f) = &self.fit {
             for (k, (c, v)) in f.state.effects.iter().enumerate() {
                 if let Some(e) = self.added.iter_mut().find(|e| e.name == c.name) {
@@ -382,7 +387,7 @@ impl Diagnosis {
     /// allows. When they already miss the model by more than their σ (errors the analysis does
     /// not see), the allowance scales with that misfit, as σ would after a Birge-ratio
     /// correction.
-    fn held_out_allows(&self, held: [f64; 2]) -> bool {
+    pub(super) fn held_out_allows(&self, held: [f64; 2]) -> bool {
         let n_held = self.held_out.iter().filter(|h| **h).count().max(1) as f64;
         held[1] * held[1] <= held[0] * held[0] + 3.0 * (2.0 / n_held).sqrt() * (held[0] * held[0]).max(1.0)
     }
