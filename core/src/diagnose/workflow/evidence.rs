@@ -41,18 +41,17 @@ impl PoolEvidence {
     pub fn visibility(&self, motions: &[usize]) -> Vec<f64> {
         let rows: Vec<usize> =
             (0..self.n_data).chain(motions.iter().flat_map(|&m| self.motion_rows[m].iter().copied())).collect();
-        let pick = |v: &DVector<f64>| DVector::from_iterator(rows.len(), rows.iter().map(|&r| v[r]));
-        let cols: Vec<DVector<f64>> = self.j.column_iter().map(|c| pick(&c.into_owned())).collect();
-        let base = Projector::new(&DMatrix::from_columns(&cols));
+        let j = self.j.select_rows(rows.iter());
+        let base = Projector::new(&j);
         self.targets
             .iter()
             .map(|t| {
-                let s = pick(&t.signature);
+                let s = t.signature.select_rows(rows.iter());
                 let sp = if t.others.is_empty() {
                     base.orthogonal(&s)
                 } else {
-                    let mut with = cols.clone();
-                    with.extend(t.others.iter().map(pick));
+                    let others = t.others.iter().map(|o| o.select_rows(rows.iter()));
+                    let with: Vec<DVector<f64>> = j.column_iter().map(|c| c.into_owned()).chain(others).collect();
                     Projector::new(&DMatrix::from_columns(&with)).orthogonal(&s)
                 };
                 sp.norm_squared() * t.typical * t.typical

@@ -67,8 +67,7 @@ impl Diagnosis {
                 _ => groups.push(p),
             }
         }
-        let pairs = groups;
-        pairs.into_iter().map(|(a, b, x, _)| (a, b, x)).collect()
+        groups.into_iter().map(|(a, b, x, _)| (a, b, x)).collect()
     }
 
     /// Before the verdict, when the residual is above the floor: refit the best pairs in full and
