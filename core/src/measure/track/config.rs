@@ -43,6 +43,15 @@ pub struct GouyCorrection {
     pub gap_sign: f64,
 }
 
+/// Floor of the noise σ the samples are weighted with, relative to the fringe amplitude B. The
+/// fringe model (harmonics, envelope walks, or a model's shape) is not exact to better than about
+/// 1e-4 of B; weighting cleaner samples beyond that makes the smoother so stiff that Gauss-Newton
+/// stops on a phase ramp where the gap stands still near a fringe extremum: a validation circle
+/// planned with the true model on table2-ideal at 1e-5 detector noise read 0.0 to 149 nm with the
+/// start phase at a floor of 1e-7, under 0.02 nm at 1e-4 (test
+/// `validate::tests::a_validation_on_a_clean_signal_reads_a_still_gap_at_any_start_phase`).
+pub(super) const NOISE_FLOOR_REL: f64 = 1e-4;
+
 /// Settings of the phase tracker. The random walks are the priors of the smoother: how
 /// fast the phase may depart from the hint and the envelope may change, per fringe of
 /// motion and per sample of time.

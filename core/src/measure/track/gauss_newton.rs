@@ -360,7 +360,7 @@ pub(super) fn smooth(
     let iteration = IterationScale {
         decimation: dec,
         r_meas: from.r_meas,
-        r_floor: (1e-7 * from.b_typ).powi(2),
+        r_floor: (super::config::NOISE_FLOOR_REL * from.b_typ).powi(2),
         u_max: from.excursion * state.rad_per_hint_nm, // largest phase lever of γ over the trace
         b_typ: from.b_typ,
     };

@@ -231,7 +231,7 @@ pub(super) fn initial_state(
         .noise_ls
         .or(r_anchor)
         .unwrap_or_else(|| estimate_noise_sigma(start.intensity, &mut ws.scratch).powi(2))
-        .max((1e-7 * b_typ).powi(2));
+        .max((super::config::NOISE_FLOOR_REL * b_typ).powi(2));
     ws.x0.clear();
     ws.x0.extend((0..n_knots).map(|j| Vector3::new(state.delta[j], state.offset[j], state.amplitude[j])));
     let priors = priors(cfg, grid, scale, &state.amplitude, b_typ, from.scale_fit, &mut ws.seg_prec);
