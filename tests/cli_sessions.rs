@@ -181,7 +181,11 @@ fn assert_remapped_traces_identify_alike(root: &Path, traces: &[Trace], measured
     let foreign_session_dir = root.join("from-foreign");
     let foreign_dir = root.join("foreign/run").display().to_string();
     let mapping = mapping.display().to_string();
-    let remapped = calibrate(&["--traces", &foreign_dir, "--mapping", &mapping], &foreign_session_dir);
+    let remapped = calibrate(&["--traces", &foreign_dir, "--mapping", &mapping, "--before"], &foreign_session_dir);
+    // With --before the prediction plans each motion with the nominal extrinsics as well.
+    for v in remapped["validation"].as_array().unwrap() {
+        assert!(v["before_nm"].is_f64() && v["after_nm"].is_f64(), "{v}");
+    }
     eprintln!("--traces --mapping: {:.1} s", remap_started.elapsed().as_secs_f64());
     for (k, p) in measured["parameters"].as_array().unwrap().iter().enumerate() {
         let (a, b) = (p["value"].as_f64().unwrap(), remapped["parameters"][k]["value"].as_f64().unwrap());
@@ -215,7 +219,11 @@ fn assert_report_is_self_contained(root: &Path, session_dir: &Path, calibration:
         }
     }
     let svgs = html.matches("<svg ").count();
-    let curves = calibration.validation.iter().filter(|v| !v.before_curve_nm.is_empty()).count();
+    let curves = calibration
+        .validation
+        .iter()
+        .filter(|v| !(v.before_curve_nm.is_empty() && v.after_curve_nm.is_empty()))
+        .count();
     assert!(curves > 0, "validation curves recorded");
     assert_eq!(svgs, 1 + curves, "residual + validation plots");
     assert!(html.matches("<circle ").count() >= calibration.residuals.len() / 2, "residual markers");
@@ -241,6 +249,10 @@ fn session_round_trip_import_and_report() {
     let measured = calibrate(&["--traces", &sim_dir], &traces_session_dir);
     eprintln!("--traces (identify + predicted validation): {:.1} s", started.elapsed().as_secs_f64());
     assert_eq!(measured["validation_predicted"], true);
+    // Predicted as a bench runs it by default: planned with the identified extrinsics only.
+    let rows = measured["validation"].as_array().unwrap();
+    assert_eq!(rows.len(), 4);
+    assert!(rows.iter().all(|v| v["before_nm"].is_null() && v["after_nm"].is_f64()), "{rows:?}");
     assert_eq!(measured["observations"].as_u64().unwrap() as usize, measured["residuals"].as_array().unwrap().len());
 
     assert_occupied_folders_are_refused(root.path(), &sim_dir, &traces_session_dir);

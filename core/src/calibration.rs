@@ -654,16 +654,22 @@ pub fn validation_rows_after(
 
 /// Validation predicted without a bench (traces recorded elsewhere): the validation motions run
 /// on a virtual bench built from `preset` whose truth is `identified` and which hides no
-/// effects. "Before" then says what the nominal extrinsics would do on a bench that really has
-/// the identified ones; "after" is the tracking floor of the identified model.
+/// effects. "After" is the tracking floor of the identified model; with `before`, each motion
+/// also runs planned with the nominal extrinsics, which says what they would do on a bench that
+/// really has the identified ones (twice the time, as on a bench: [`validation_rows`]).
 pub fn predicted_validation_rows(
     preset: &crate::bench::BenchPreset,
     nominal: &PhaseModel,
     identified: &Extrinsics,
+    before: bool,
 ) -> Result<Vec<ValidationRow>, String> {
     let mut p = preset.clone();
     p.truth = *identified;
     p.effects.clear();
     let mut bench = crate::bench::VirtualBench::new(&p, None).map_err(|e| e.to_string())?;
-    Ok(validation_rows(&mut bench, nominal, identified, &StopSettings::default()))
+    let stops = StopSettings::default();
+    Ok(match before {
+        true => validation_rows(&mut bench, nominal, identified, &stops),
+        false => validation_rows_after(&mut bench, nominal, identified, &stops),
+    })
 }

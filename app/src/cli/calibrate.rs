@@ -95,8 +95,9 @@ pub struct CalibrateArgs {
     pub no_validation: bool,
     /// Run each validation motion twice: planned with the nominal (design) extrinsics as well as
     /// with the identified ones, the paper's before-and-after comparison (twice the validation's
-    /// bench time). Without it only the identified extrinsics are validated.
-    #[arg(long, conflicts_with_all = ["traces", "no_validation"])]
+    /// bench time; with --traces, twice its prediction's time). Without it only the identified
+    /// extrinsics are validated.
+    #[arg(long, conflicts_with = "no_validation")]
     pub before: bool,
     /// Continue the measurement autosaved in --out (after a crash) instead of starting anew.
     #[arg(long)]
@@ -251,7 +252,7 @@ fn calibrate_from_traces(
         let copy = scope.spawn(|| timed("copy_traces", || session.add_sourced_traces(&a.out, &sourced)));
         let identified = timed("identify", || identify(&sourced.traces, nominal, mode)).and_then(|id| {
             let extrinsics = id.estimate.extrinsics.with_angles_wrapped();
-            let validation = timed("validate", || predicted_validation_rows(preset, nominal, &extrinsics))?;
+            let validation = timed("validate", || predicted_validation_rows(preset, nominal, &extrinsics, a.before))?;
             Ok((id, validation))
         });
         (copy.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)), identified)
@@ -882,14 +883,11 @@ mod tests {
         assert!(a.before);
         assert_eq!(resume_command(&a), "photorobot calibrate --bench b --mode joint --before --out o --resume");
         assert!(!args(&["photorobot", "calibrate", "--bench", "b", "--out", "o"]).before, "after only by default");
-        for other in ["--no-validation", "--traces"] {
-            let mut line = vec!["photorobot", "calibrate", "--bench", "b", "--out", "o", "--before", other];
-            if other == "--traces" {
-                line.push("t");
-            }
-            let e = crate::cli::Cli::try_parse_from(line).unwrap_err();
-            assert!(e.to_string().contains("--before"), "{other}: {e}");
-        }
+        let line = ["photorobot", "calibrate", "--bench", "b", "--out", "o", "--before", "--no-validation"];
+        let e = crate::cli::Cli::try_parse_from(line).unwrap_err();
+        assert!(e.to_string().contains("--before"), "{e}");
+        let traces = args(&["photorobot", "calibrate", "--bench", "b", "--traces", "t", "--out", "o", "--before"]);
+        assert!(traces.before, "the prediction for traces takes --before too");
     }
 
     #[test]
