@@ -863,9 +863,9 @@ mod tests {
 
     /// The true model on table2-ideal with a detector 100 times cleaner (1e-5 of the fringe): a
     /// circle planned with it keeps the real gap still, and its figure must say so wherever the
-    /// start sits on the fringe. The start is moved along the beam (q2) to the phases where the
-    /// tracker once stopped on a phase ramp (32.8, 44.9, 113.3 and 149.1 nm; near a fringe's
-    /// foot, its top and between).
+    /// start sits on the fringe (0.0002-0.0003 nm). The start is moved along the beam (q2) to
+    /// the phases where a noise floor of 1e-7 of the amplitude stops the tracker on a phase ramp
+    /// (32.8, 44.9, 113.3 and 149.1 nm; near a fringe's foot, its top and between).
     #[test]
     fn a_validation_on_a_clean_signal_reads_a_still_gap_at_any_start_phase() {
         let mut preset = BenchPreset::resolve("table2-ideal").unwrap().without_noise();
@@ -875,7 +875,8 @@ mod tests {
             let mut bench = VirtualBench::new(&preset, Some(2)).unwrap();
             let start = [0.0, q2_um, 0.0, 0.0, 0.0, 0.0];
             let figure = run_validation(&mut bench, &model, &preset.truth, ValidationMotion::Circle, start).unwrap();
-            assert!(figure.peak_to_peak_nm < 1.0, "start q2 +{q2_um} µm: {} nm", figure.peak_to_peak_nm);
+            // 0.0002-0.0003 nm measured: twice that.
+            assert!(figure.peak_to_peak_nm < 6e-4, "start q2 +{q2_um} µm: {} nm", figure.peak_to_peak_nm);
         }
     }
 

@@ -48,7 +48,7 @@ pub struct GouyCorrection {
 /// 1e-4 of B; weighting cleaner samples beyond that makes the smoother so stiff that Gauss-Newton
 /// stops on a phase ramp where the gap stands still near a fringe extremum: a validation circle
 /// planned with the true model on table2-ideal at 1e-5 detector noise read 0.0 to 149 nm with the
-/// start phase at a floor of 1e-7, under 0.02 nm at 1e-4 (test
+/// start phase at a floor of 1e-7, 0.0002-0.0003 nm at 1e-4 (test
 /// `validate::tests::a_validation_on_a_clean_signal_reads_a_still_gap_at_any_start_phase`).
 pub(super) const NOISE_FLOOR_REL: f64 = 1e-4;
 
