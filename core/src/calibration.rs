@@ -667,9 +667,21 @@ pub fn predicted_validation_rows(
     p.truth = *identified;
     p.effects.clear();
     let mut bench = crate::bench::VirtualBench::new(&p, None).map_err(|e| e.to_string())?;
-    let stops = StopSettings::default();
-    Ok(match before {
-        true => validation_rows(&mut bench, nominal, identified, &stops),
-        false => validation_rows_after(&mut bench, nominal, identified, &stops),
-    })
+    Ok(validation_rows_as_asked(&mut bench, nominal, identified, &StopSettings::default(), before))
+}
+
+/// The validation a calibration asks for: each motion planned with the nominal extrinsics as
+/// well with `before` ([`validation_rows`]), else with the identified ones alone
+/// ([`validation_rows_after`]).
+pub fn validation_rows_as_asked(
+    bench: &mut dyn Bench,
+    nominal: &PhaseModel,
+    identified: &Extrinsics,
+    stops: &StopSettings,
+    before: bool,
+) -> Vec<ValidationRow> {
+    match before {
+        true => validation_rows(bench, nominal, identified, stops),
+        false => validation_rows_after(bench, nominal, identified, stops),
+    }
 }

@@ -16,7 +16,7 @@ use crate::hardware_bench::open_hardware_bench;
 use photorobot_core::bench::{Bench, BenchPreset, RunControl, RunTiming, StageTime, TimedBench, VirtualBench};
 use photorobot_core::calibration::{
     identify, plan_durations, plans, predicted_validation_rows, report_from_identification, report_from_traces,
-    validation_rows, validation_rows_after, CalibrationReport, Mode,
+    validation_rows_as_asked, CalibrationReport, Mode,
 };
 use photorobot_core::files::{save_ron, write_atomic, FileError};
 use photorobot_core::hardware::emulator::EmuClock;
@@ -368,9 +368,8 @@ fn measure_identify_validate(
         progress.borrow_mut().stage("validating");
         let stops = StopSettings { sweeps: !a.no_sweeps, ..StopSettings::default() };
         bench.set_stage("validate");
-        report.validation = stage(&mut stages, "validate", || match a.before {
-            true => validation_rows(&mut bench, nominal, &report.extrinsics, &stops),
-            false => validation_rows_after(&mut bench, nominal, &report.extrinsics, &stops),
+        report.validation = stage(&mut stages, "validate", || {
+            validation_rows_as_asked(&mut bench, nominal, &report.extrinsics, &stops, a.before)
         });
         tracing::info!(motions = report.validation.len(), "validation done");
     }
