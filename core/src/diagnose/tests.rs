@@ -382,3 +382,22 @@ fn a_bound_is_printed_to_the_digits_its_sigma_has() {
     assert_eq!(b(-0.0043, 0.0071, "°").describe(), "c: -0.00430 ± 0.00710 °, below 0.02560 °");
     assert_eq!(b(0.5, 0.0, "µm").describe(), "c: 0.5000 ± 0.0000 µm, below 0.5000 µm");
 }
+
+/// Equivalents found by refitting: on the paper's calibration alone a q2 scale error of 300 ppm
+/// and a drift rate (its motions run in time order) fit nearly alike, though their signatures
+/// are not collinear; the named scale lists the drift rate. With the discriminating motions run,
+/// which tell them apart, it does not.
+#[test]
+fn a_named_effect_lists_what_refitted_in_its_place_fits_as_well() {
+    let e = Effect::JointScale { joint: "q2".into(), ppm: 300.0 };
+    let listed = |run_motions: bool| {
+        let (r, _) = diagnose(vec![e.clone()], 7, run_motions);
+        assert_eq!(r.verdict, Verdict::Named, "{:?}", r.effects);
+        let named = r.effects.iter().find(|n| n.name == name_of(&e)).expect("the q2 scale named");
+        named.ambiguous_with.clone()
+    };
+    let alone = listed(false);
+    assert!(alone.iter().any(|n| n == "thermal drift rate"), "{alone:?}");
+    let with_motions = listed(true);
+    assert!(!with_motions.iter().any(|n| n == "thermal drift rate"), "{with_motions:?}");
+}

@@ -4,6 +4,7 @@
 
 mod branches;
 mod discriminate;
+mod equivalents;
 mod evidence;
 mod naming;
 mod pair_naming;
@@ -63,6 +64,10 @@ pub struct Diagnosis {
     design_done: bool,
     /// Two effects together were tried once ([`Diagnosis::add_best_pair`]).
     pair_tried: bool,
+    /// Candidates taken out of the model after being named, and whether they were given their
+    /// second look ([`Diagnosis::second_look`]).
+    removed: Vec<usize>,
+    second_look_done: bool,
     /// No motion of the pool not yet recorded would show a candidate the data cannot.
     settled: bool,
     session_traces: Vec<crate::trace::Trace>,
@@ -152,6 +157,8 @@ impl Diagnosis {
             design_rounds: 0,
             design_done: false,
             pair_tried: false,
+            removed: Vec::new(),
+            second_look_done: false,
             settled: false,
             session_traces: Vec::new(),
             stage: Stage::Baseline,
@@ -360,6 +367,9 @@ impl Diagnosis {
         };
         let (rms0, nm0, held0) = (before.rms(), obs_rms_nm(&obs, &before.residuals), self.held_rms(&before.state)?);
         let at_floor = f.rms() <= NOISE_FLOOR_FACTOR;
+        if at_floor && !self.added.is_empty() {
+            self.list_refitted_equivalents(&f)?;
+        }
         let not_detectable = self.not_detectable(&f.state);
         let cancelling_pairs = self.cancelling_pairs(&not_detectable);
         let ruled_out_above = self.bounds(&not_detectable, &cancelling_pairs);

@@ -59,6 +59,9 @@ impl Diagnosis {
             if above && !self.pair_tried && self.add_best_pair(runner)? {
                 return Ok(());
             }
+            if self.second_look()? {
+                return Ok(());
+            }
             self.stage = Stage::Finish;
             return self.conclude();
         };
@@ -97,6 +100,26 @@ impl Diagnosis {
         }
         self.refresh_added_estimates();
         Ok(())
+    }
+
+    /// Once nothing is left to name: the effects taken out of the model may be named again, once.
+    /// An effect removed while the model lacked another (a q5 zero offset whose held-out motions
+    /// were worse before the q4 pivot was named) is judged again beside the effects named after
+    /// it. Returns whether any is open again.
+    fn second_look(&mut self) -> Result<bool, DiagnoseError> {
+        if self.second_look_done || self.removed.is_empty() {
+            return Ok(false);
+        }
+        self.second_look_done = true;
+        let removed = std::mem::take(&mut self.removed);
+        self.excluded.retain(|c| !removed.contains(c));
+        self.rescore()?;
+        let open = self.scores.iter().any(|s| s.significant);
+        if !open {
+            self.excluded.extend(removed);
+            self.rescore()?;
+        }
+        Ok(open)
     }
 
     /// Among `best` and the candidates the data cannot tell from it with nearly equal evidence
@@ -285,6 +308,7 @@ impl Diagnosis {
         removed.sigma = f.effect_sigma[k];
         if let Some(c) = self.candidates.iter().position(|c| c.name == cand.name) {
             self.excluded.push(c);
+            self.removed.push(c);
         }
         self.steps.push(Step::Removed { effect: removed, rms_sigma: [f.rms(), without.rms()], reason });
         self.fit = Some(without);
