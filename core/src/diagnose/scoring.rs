@@ -188,13 +188,19 @@ pub fn score(
 
 /// Candidates (indices) whose projected signature is nearly collinear with candidate `best`'s.
 pub fn ambiguity_set(best: usize, projected: &[DVector<f64>]) -> Vec<usize> {
+    near_in_direction(best, projected, AMBIGUITY_COSINE)
+}
+
+/// Candidates (indices) whose projected signature makes |cos| above `cosine` with candidate
+/// `best`'s.
+pub fn near_in_direction(best: usize, projected: &[DVector<f64>], cosine: f64) -> Vec<usize> {
     let b = &projected[best];
     let nb = b.norm();
     (0..projected.len())
         .filter(|&k| k != best)
         .filter(|&k| {
             let nk = projected[k].norm();
-            nb > 0.0 && nk > 0.0 && (b.dot(&projected[k]) / (nb * nk)).abs() > AMBIGUITY_COSINE
+            nb > 0.0 && nk > 0.0 && (b.dot(&projected[k]) / (nb * nk)).abs() > cosine
         })
         .collect()
 }

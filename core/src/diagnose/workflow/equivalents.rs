@@ -30,12 +30,7 @@ impl Diagnosis {
             let nf = self.refit(&without)?;
             let signatures = scoring::signatures(&self.predictor, &nf.state, &self.candidates, &obs)?;
             let (scores, projected) = scoring::score(&self.candidates, &signatures, &nf.jacobian, &nf.residuals);
-            let b = &projected[c_own];
-            let near = |c: usize| {
-                let (nb, nc) = (b.norm(), projected[c].norm());
-                nb > 0.0 && nc > 0.0 && (b.dot(&projected[c]) / (nb * nc)).abs() > NEAR_COSINE
-            };
-            for c in (0..self.candidates.len()).filter(|&c| c != c_own && near(c)) {
+            for c in scoring::near_in_direction(c_own, &projected, NEAR_COSINE) {
                 let name = &self.candidates[c].name;
                 if self.added[i].ambiguous_with.contains(name) || f.state.effects.iter().any(|(e, _)| &e.name == name) {
                     continue;
