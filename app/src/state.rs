@@ -8,7 +8,7 @@ use crate::decimate::Decimator;
 use crate::dialogs::Dialogs;
 use crate::session_io::{remember, Loaded, Snapshot};
 use crate::settings::Settings;
-use crate::worker::{CheckedMotion, Command, EffectValidation, Event, Resume, ValidationPair, Worker};
+use crate::worker::{CheckedMotion, Command, DiagnosisStart, EffectValidation, Event, Resume, ValidationPair, Worker};
 use photorobot_core::bench::BenchPreset;
 use photorobot_core::calibration::{CalibrationReport, Mode};
 use photorobot_core::measure::alignment::SignalQuality;
@@ -596,14 +596,18 @@ impl AppState {
     pub fn diagnose(&mut self) {
         let traces: Vec<Trace> = self.all_traces().into_iter().cloned().collect();
         let propose_only = self.diagnosis.propose_only;
+        // A second pass (traces added since) may start where the first ended.
+        let earlier = match &self.diagnosis.result {
+            Some(Ok(r)) => Some(r.extrinsics),
+            _ => self.diagnosis.loaded_record.as_ref().and_then(|r| r.extrinsics),
+        };
         self.clear_diagnosis();
         self.diagnosis.propose_only = propose_only;
         self.diagnosis.from_calibration = self.extrinsics != self.worker.nominal.extrinsics;
         let branches = self.results.report.as_ref().map(|r| r.branch_extrinsics()).unwrap_or_default();
         self.worker.send(Command::Diagnose {
             traces,
-            extrinsics: self.extrinsics,
-            branches,
+            start: DiagnosisStart { extrinsics: self.extrinsics, branches, earlier },
             run_motions: !propose_only,
         });
     }

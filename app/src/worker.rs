@@ -40,6 +40,18 @@ pub enum Pace {
     Unpaced,
 }
 
+/// Where a diagnosis starts.
+#[derive(Debug, Clone)]
+pub struct DiagnosisStart {
+    /// The calibrated extrinsics.
+    pub extrinsics: Extrinsics,
+    /// The other branches the calibration tried ([`Diagnosis::set_branches`]).
+    pub branches: Vec<Extrinsics>,
+    /// Where an earlier diagnosis of the session ended ([`Diagnosis::set_earlier`]): a second
+    /// pass, traces added since, may start there.
+    pub earlier: Option<Extrinsics>,
+}
+
 /// What the UI asks for.
 #[derive(Debug)]
 pub enum Command {
@@ -88,10 +100,8 @@ pub enum Command {
     Diagnose {
         /// The recorded traces.
         traces: Vec<Trace>,
-        /// The calibrated extrinsics.
-        extrinsics: Extrinsics,
-        /// The other branches the calibration tried ([`Diagnosis::set_branches`]).
-        branches: Vec<Extrinsics>,
+        /// The extrinsics it starts from.
+        start: DiagnosisStart,
         /// Run the discriminating motions on the bench; otherwise propose them
         /// ([`Event::DiagnosisPlan`]) to be recorded and added later.
         run_motions: bool,
@@ -549,9 +559,7 @@ impl Thread {
                     self.send(Event::Checked(checked));
                     self.send(Event::Busy(None));
                 }
-                Command::Diagnose { traces, extrinsics, branches, run_motions } => {
-                    self.serve_diagnose(&traces, extrinsics, &branches, run_motions)
-                }
+                Command::Diagnose { traces, start, run_motions } => self.serve_diagnose(&traces, &start, run_motions),
                 Command::Move { placement, target, keep_gap, references, measure_tilt } => {
                     self.serve_move(&placement, &target, keep_gap, &references, measure_tilt)
                 }
@@ -617,9 +625,10 @@ impl Thread {
 
     /// A diagnosis of `traces` from `extrinsics`, then the validation motions with and without
     /// the named effects.
-    fn serve_diagnose(&mut self, traces: &[Trace], extrinsics: Extrinsics, branches: &[Extrinsics], run_motions: bool) {
+    fn serve_diagnose(&mut self, traces: &[Trace], start: &DiagnosisStart, run_motions: bool) {
         self.send(Event::Busy(Some("diagnosing".into())));
-        let outcome = self.diagnose(traces, extrinsics, branches, run_motions);
+        let outcome = self.diagnose(traces, start, run_motions);
+        let extrinsics = start.extrinsics;
         self.send(Event::Position(self.bench.position_display()));
         match outcome {
             Ok((result, effects, proposed)) => {
@@ -648,25 +657,27 @@ impl Thread {
     }
 
     /// The diagnosis, step by step (each step reported), discriminating motions on this bench
-    /// (or, without `run_motions`, proposed); the result, the library effects of its final model
-    /// and the proposed plan.
+    /// (or, without `run_motions`, proposed); the result, the library effects of its final
+    /// model and the proposed plan.
     fn diagnose(
         &mut self,
         traces: &[Trace],
-        extrinsics: Extrinsics,
-        branches: &[Extrinsics],
+        start: &DiagnosisStart,
         run_motions: bool,
     ) -> Result<(DiagnosisResult, Vec<Effect>, Option<Plan>), String> {
         // The stop ends the computing too: the traces' analysis within one trace, the steps
         // within one model evaluation.
         let cancel = self.cancel.clone();
         let stop = StopCheck::new(move || cancel.load(Ordering::Relaxed));
-        let (mut d, skipped) = match Diagnosis::from_traces(&self.nominal, traces, extrinsics, stop) {
+        let (mut d, skipped) = match Diagnosis::from_traces(&self.nominal, traces, start.extrinsics, stop) {
             Ok(d) => d,
             Err(_) if self.cancel.load(Ordering::Relaxed) => return Err(STOPPED.into()),
             Err(e) => return Err(e.to_string()),
         };
-        d.set_branches(branches);
+        d.set_branches(&start.branches);
+        if let Some(e) = start.earlier {
+            d.set_earlier(e);
+        }
         if !skipped.is_empty() {
             let _ = self.tx.send(Event::DiagnosisStep(
                 "0. traces".into(),

@@ -86,6 +86,7 @@ fn cases() -> Vec<Case> {
                 "pivot offset q4 along X_w",
                 "pivot offset q4 along Y_w",
                 "pivot offset q4 along Z_w",
+                "pivot offset q5 along Y_w",
                 "pivot offset q6 along X_w",
                 "pivot offset q6 along Y_w",
                 "pivot offset q6 along Z_w",

@@ -93,6 +93,10 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     if let Some(c) = read.session.as_ref().and_then(|s| s.calibration.as_ref()) {
         d.set_branches(&c.branch_extrinsics());
     }
+    // A second pass (traces added since) may start where the first ended.
+    if let Some(e) = read.session.as_ref().and_then(|s| s.diagnosis.as_ref()).and_then(|r| r.extrinsics) {
+        d.set_earlier(e);
+    }
     let mut bench = preset.as_ref().map(|p| resumed_bench(p, a.seed, &d)).transpose()?;
     let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, 0.0));
     if !a.json {

@@ -79,7 +79,8 @@ pub enum Step {
         #[serde(default)]
         reason: String,
     },
-    /// Another branch of the calibration fits better and replaces the extrinsics.
+    /// Another branch of the extrinsics (the calibration's, or where an earlier diagnosis ended) fits
+    /// better and replaces them.
     Branch {
         /// The extrinsics left.
         from: Extrinsics,
@@ -105,7 +106,7 @@ impl Step {
             Step::Scored { .. } => "2. candidates scored",
             Step::Added { .. } => "3. effect added, refitted, checked on held-out motions",
             Step::Removed { .. } => "3. effect removed: the final model does not need it",
-            Step::Branch { .. } => "3. another branch of the calibration fits better",
+            Step::Branch { .. } => "3. another branch of the extrinsics fits better",
             Step::Designed { .. } => "4. discriminating motions",
             Step::Finished { .. } => "5. verdict",
         }

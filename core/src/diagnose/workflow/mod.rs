@@ -44,6 +44,9 @@ pub struct Diagnosis {
     start: Extrinsics,
     /// The calibration's other branches ([`Diagnosis::set_branches`]).
     branches: Vec<Extrinsics>,
+    /// The extrinsics an earlier diagnosis of the session ended with, a start to consider before
+    /// the baseline ([`Diagnosis::set_earlier`]).
+    earlier: Option<Extrinsics>,
     fit: Option<Fit>,
     scores: Vec<CandidateScore>,
     projected: Vec<DVector<f64>>,
@@ -143,6 +146,7 @@ impl Diagnosis {
             excluded: Vec::new(),
             start: extrinsics,
             branches: Vec::new(),
+            earlier: None,
             fit: None,
             scores: Vec::new(),
             projected: Vec::new(),
@@ -292,7 +296,10 @@ impl Diagnosis {
             return Err(DiagnoseError::Stopped);
         }
         match self.stage {
-            Stage::Baseline => self.fit_baseline()?,
+            Stage::Baseline => {
+                self.start_from_earlier()?;
+                self.fit_baseline()?;
+            }
             Stage::Score => {
                 self.rescore()?;
                 let mut sorted = self.scores.clone();
