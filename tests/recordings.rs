@@ -64,26 +64,38 @@ pub fn assert_named(v: &Value, names: &[&str], value: f64, abs: bool) {
 /// the same simulator later on the same clock, added, and the diagnosis run again.
 /// (first, second)
 pub fn independent_calibrate_and_diagnose(hidden: crate::independent::Hidden, seed: u64) -> (Value, Option<Value>) {
+    let mut passes = independent_loop(hidden, seed, 2).into_iter();
+    let first = passes.next().expect("a first pass");
+    (first, passes.next())
+}
+
+/// [`independent_calibrate_and_diagnose`], the loop a technician follows: each proposed plan
+/// recorded (pass k by the simulator seeded `seed + 100·(k − 1)`, a minute after the last
+/// recording), added and diagnosed again, until no plan is proposed or after `max_passes`
+/// diagnoses. Every pass's result, in order.
+pub fn independent_loop(hidden: crate::independent::Hidden, seed: u64, max_passes: usize) -> Vec<Value> {
     use crate::independent::{lab_records, records_of, Recorder};
-    use photorobot_app::cli::diagnose::PROPOSED_PLAN_FILE;
     let dir = tempfile::tempdir().unwrap();
     let mut recorder = Recorder::new(seed);
     recorder.hidden = hidden;
     let traces = dir.path().join("recorded");
-    let (_, end_s) = recorder.write_folder(&lab_records(), &traces).unwrap();
+    let (_, mut end_s) = recorder.write_folder(&lab_records(), &traces).unwrap();
     let session = dir.path().join("session");
     let (t, s) = (traces.to_str().unwrap(), session.to_str().unwrap());
     let (_, text) = cli(&["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", t, "--out", s, "--json"]);
     assert!(session.join("extrinsics.ron").exists(), "calibrate wrote no extrinsics: {text}");
-    let first = diagnose_without_bench(&session);
-    let second = first["proposed_plan_file"].is_string().then(|| {
-        let plan = photorobot_core::plan::Plan::load(&session.join(PROPOSED_PLAN_FILE)).unwrap();
-        let mut later = Recorder::new(seed + 100);
+    let mut passes = vec![diagnose_without_bench(&session)];
+    for pass in 1..max_passes as u64 {
+        let Some(file) = passes.last().and_then(|v| v["proposed_plan_file"].as_str().map(String::from)) else {
+            break;
+        };
+        let plan = photorobot_core::plan::Plan::load(Path::new(&file)).unwrap();
+        let mut later = Recorder::new(seed + 100 * pass);
         later.hidden = hidden;
         later.start_clock_s = end_s + 60.0;
-        let added = dir.path().join("proposed");
-        later.write_folder(&records_of(&plan), &added).unwrap();
-        diagnose_adding(&session, Some(&added))
-    });
-    (first, second)
+        let added = dir.path().join(format!("proposed-{pass}"));
+        end_s = later.write_folder(&records_of(&plan), &added).unwrap().1;
+        passes.push(diagnose_adding(&session, Some(&added)));
+    }
+    passes
 }

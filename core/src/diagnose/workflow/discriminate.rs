@@ -136,7 +136,7 @@ impl Diagnosis {
 
     /// Stage 4, once what the data show is named: for candidates the data cannot see at their
     /// typical size, pool motions whose projected signature is large, run when a bench is given
-    /// (otherwise proposed).
+    /// (otherwise proposed, when they would make one detectable).
     pub(super) fn design_discriminating_motions<'r>(
         &mut self,
         runner: Option<&mut (dyn MotionRunner + 'r)>,
@@ -159,10 +159,6 @@ impl Diagnosis {
             .map(|c| self.candidates[c].name.clone())
             .collect();
         let (chosen, seen) = evidence.only(&needy).choose(&allowed, scoring::naming_threshold(self.candidates.len()));
-        let motions: Vec<DesignedMotion> = chosen.iter().map(|&m| pool[m].clone()).collect();
-        // Settled: no motion of the pool not yet recorded would show a candidate the data
-        // cannot, or a bench runs every one that would (the design was not cut short).
-        self.settled = motions.is_empty() || (runner.is_some() && motions.len() < MAX_MOTIONS);
         // Reported as needing motions: neither equivalent to an extrinsic change nor unseeable.
         let reportable = |c: usize| {
             !self.equivalent.contains(&self.candidates[c].name) && !self.not_seen.contains(&self.candidates[c].name)
@@ -176,6 +172,18 @@ impl Diagnosis {
             .filter(|&(t, &c)| reportable(c) && seen[t] >= DETECTABLE_SCORE)
             .map(|(_, &c)| self.candidates[c].name.clone())
             .collect();
+        // A plan is proposed only when it would make some candidate detectable: one that adds a
+        // little evidence for candidates it leaves undetectable teaches the technician nothing,
+        // and the loop would not end (on the other simulator's clean recordings a third pass
+        // proposed one q3 reversal for the q4-q6 reversals and lateral tilts no motion shows).
+        let motions: Vec<DesignedMotion> = if runner.is_some() || !seen_with_motions.is_empty() {
+            chosen.iter().map(|&m| pool[m].clone()).collect()
+        } else {
+            vec![]
+        };
+        // Settled: no motion of the pool not yet recorded would show a candidate the data
+        // cannot, or a bench runs every one that would (the design was not cut short).
+        self.settled = motions.is_empty() || (runner.is_some() && motions.len() < MAX_MOTIONS);
         let labels: Vec<String> = motions.iter().map(|m| m.label.clone()).collect();
         let mut added = 0;
         let mut ran_on = None;
