@@ -86,6 +86,16 @@ pub fn range_arg(args: &[String], flag: &str, default: std::ops::Range<u64>) -> 
     a.parse().unwrap_or_else(|_| panic!("{flag} A..B"))..b.parse().unwrap_or_else(|_| panic!("{flag} A..B"))
 }
 
+/// The optics named by `--optics` in `args`: `multi-beam` (the other simulator's own, the
+/// default) or `two-beam` (the model farther from ours, [`two_beam::TwoBeamOptics`]).
+pub fn optics_arg(args: &[String]) -> independent::OpticsModel {
+    match args.iter().position(|a| a == "--optics").and_then(|k| args.get(k + 1)).map(String::as_str) {
+        None | Some("multi-beam") => independent::Recorder::new(0).optics,
+        Some("two-beam") => independent::OpticsModel::TwoBeam(Default::default()),
+        Some(o) => panic!("--optics multi-beam|two-beam, not {o}"),
+    }
+}
+
 pub mod independent;
 pub mod lab_files;
 pub mod lab_recordings;

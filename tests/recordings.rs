@@ -74,10 +74,23 @@ pub fn independent_calibrate_and_diagnose(hidden: crate::independent::Hidden, se
 /// recording), added and diagnosed again, until no plan is proposed or after `max_passes`
 /// diagnoses. Every pass's result, in order.
 pub fn independent_loop(hidden: crate::independent::Hidden, seed: u64, max_passes: usize) -> Vec<Value> {
+    let optics = crate::independent::Recorder::new(seed).optics;
+    independent_loop_with(&optics, hidden, seed, max_passes)
+}
+
+/// [`independent_loop`] with the simulator's `optics` (its multi-beam model by default; the
+/// two-beam model is farther from ours).
+pub fn independent_loop_with(
+    optics: &crate::independent::OpticsModel,
+    hidden: crate::independent::Hidden,
+    seed: u64,
+    max_passes: usize,
+) -> Vec<Value> {
     use crate::independent::{lab_records, records_of, Recorder};
     let dir = tempfile::tempdir().unwrap();
     let mut recorder = Recorder::new(seed);
     recorder.hidden = hidden;
+    recorder.optics = optics.clone();
     let traces = dir.path().join("recorded");
     let (_, mut end_s) = recorder.write_folder(&lab_records(), &traces).unwrap();
     let session = dir.path().join("session");
@@ -92,6 +105,7 @@ pub fn independent_loop(hidden: crate::independent::Hidden, seed: u64, max_passe
         let plan = photorobot_core::plan::Plan::load(Path::new(&file)).unwrap();
         let mut later = Recorder::new(seed + 100 * pass);
         later.hidden = hidden;
+        later.optics = optics.clone();
         later.start_clock_s = end_s + 60.0;
         let added = dir.path().join(format!("proposed-{pass}"));
         end_s = later.write_folder(&records_of(&plan), &added).unwrap().1;

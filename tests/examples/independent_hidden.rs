@@ -2,18 +2,18 @@
 //! imperfection hidden at a time, through the path users run: `photorobot calibrate --bench
 //! table2-ideal --traces`, `photorobot diagnose S --bench none`, the proposed motions recorded by
 //! the same simulator later on the same clock and added (`diagnose --add`), and the diagnosis
-//! again (`recordings::independent_calibrate_and_diagnose`). Each case and seed says what was
-//! named before and after the proposed motions, and scores the last: named (the hidden effect, or
-//! an equivalent the result lists with it, within 3σ), listed (in a list of what the data could
-//! not tell: equivalent, need motions, not detectable, not seen, a cancelling pair, a named
-//! effect's ambiguity set), bounded (not named, its size under the bound the result gives: it
-//! cannot tell), wrong (a bound under the hidden size), missed, and anything named that is not
-//! there.
+//! again (`recordings::independent_loop_with`; `--optics two-beam` records with the model farther
+//! from ours). Each case and seed says what was named before and after the proposed motions, and
+//! scores the last: named (the hidden effect, or an equivalent the result lists with it, within
+//! 3σ), listed (in a list of what the data could not tell: equivalent, need motions, not
+//! detectable, not seen, a cancelling pair, a named effect's ambiguity set), bounded (not named,
+//! its size under the bound the result gives: it cannot tell), wrong (a bound under the hidden
+//! size), missed, and anything named that is not there.
 //!
-//!     cargo run --release -p photorobot-e2e --example independent_hidden [-- --seeds 1..4] [--only TEXT]
+//!     cargo run --release -p photorobot-e2e --example independent_hidden [-- --seeds 1..4] [--only TEXT] [--optics two-beam]
 
 use photorobot_e2e::independent::Hidden;
-use photorobot_e2e::recordings::independent_calibrate_and_diagnose;
+use photorobot_e2e::recordings::independent_loop_with;
 use serde_json::Value;
 
 /// A hidden imperfection: its label, the simulator's setting, the names that state it (the first
@@ -183,6 +183,7 @@ fn summary(v: &Value) -> String {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let seeds = photorobot_e2e::range_arg(&args, "--seeds", 1..4);
+    let optics = photorobot_e2e::optics_arg(&args);
     let mut tally: std::collections::BTreeMap<String, usize> = Default::default();
     let (mut runs, mut wrong_runs) = (0, 0);
     // `--only TEXT`: the cases whose label holds TEXT.
@@ -190,7 +191,8 @@ fn main() {
     for c in cases().into_iter().filter(|c| only.as_deref().is_none_or(|o| c.label.contains(o))) {
         for seed in seeds.clone() {
             let t0 = std::time::Instant::now();
-            let (first, second) = independent_calibrate_and_diagnose(c.hidden, 300 + seed);
+            let mut passes = independent_loop_with(&optics, c.hidden, 300 + seed, 2).into_iter();
+            let (first, second) = (passes.next().expect("a first pass"), passes.next());
             let last = second.as_ref().unwrap_or(&first);
             let (word, wrong) = score(last, &c);
             println!(
