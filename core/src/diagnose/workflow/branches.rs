@@ -5,7 +5,7 @@
 //! tried again with the current effects, its traces analysed with its own motion hint. A
 //! diagnosis of a session diagnosed before may start from where the earlier one ended.
 
-use super::{held_out_mask, not_held_out, Diagnosis};
+use super::{held_out_mask, not_held_out, usable, Diagnosis};
 use crate::diagnose::fit::{self, Fit, ModelState};
 use crate::diagnose::motions::MotionRunner;
 use crate::diagnose::result::DiagnoseError;
@@ -61,11 +61,7 @@ impl Diagnosis {
             self.predictor.stopped()
         })
         .ok_or(DiagnoseError::Stopped)?;
-        let obs: Vec<Observation> = extracted
-            .observations
-            .into_iter()
-            .filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0)
-            .collect();
+        let obs: Vec<Observation> = extracted.observations.into_iter().filter(usable).collect();
         self.predictor.extend(&obs).map_err(DiagnoseError::Model)?;
         let held = held_out_mask(&obs);
         let fitted = not_held_out(&obs, &held);

@@ -100,6 +100,11 @@ fn not_held_out(obs: &[Observation], held: &[bool]) -> Vec<Observation> {
     obs.iter().zip(held).filter(|(_, h)| !**h).map(|(o, _)| o.clone()).collect()
 }
 
+/// Whether an observation can be fitted: a finite value and a finite, positive σ.
+fn usable(o: &Observation) -> bool {
+    o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0
+}
+
 /// Which observations are held out of every fit, to confirm what the fits find.
 fn held_out_mask(obs: &[Observation]) -> Vec<bool> {
     // Every fifth recorded gap-change motion (by label, in order of appearance) is held out;
@@ -129,10 +134,7 @@ impl Diagnosis {
         observations: Vec<Observation>,
         extrinsics: Extrinsics,
     ) -> Result<Self, DiagnoseError> {
-        let observations: Vec<Observation> = observations
-            .into_iter()
-            .filter(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0)
-            .collect();
+        let observations: Vec<Observation> = observations.into_iter().filter(usable).collect();
         if observations.len() < 20 {
             return Err(DiagnoseError::TooFewObservations(observations.len()));
         }

@@ -1,7 +1,7 @@
 //! Naming effects: add the best candidate, confirm it on held-out motions, analyse the traces
 //! again with the new model, and remove the effects the final model does not need.
 
-use super::{held_out_mask, Diagnosis, Stage};
+use super::{held_out_mask, usable, Diagnosis, Stage};
 use crate::diagnose::crossval;
 use crate::diagnose::fit::Fit;
 use crate::diagnose::motions::MotionRunner;
@@ -249,7 +249,7 @@ impl Diagnosis {
             observations_from_traces(&self.session_traces, &analysis, &REANALYSE_OPTIONS).observations
         };
         obs.extend(again.unwrap_or_else(|| designed.into_iter().cloned().collect()));
-        obs.retain(|o| o.value().is_finite() && o.sigma.is_finite() && o.sigma > 0.0);
+        obs.retain(usable);
         obs.extend(first_gaps.into_iter().cloned());
         self.predictor.extend(&obs).map_err(DiagnoseError::Model)?;
         Ok(Some(obs))
