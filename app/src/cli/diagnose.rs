@@ -225,7 +225,7 @@ fn run_steps(
             break;
         }
         for step in &d.steps[shown..] {
-            tracing::info!("diagnosis step: {}", step.title());
+            tracing::info!("diagnosis step: {}\n{}", step.title(), step.summary());
             progress.stage(&format!("diagnosis: after {}", step.title()));
             if !json {
                 writeln!(out, "\n## {}\n{}", step.title(), step.summary())?;
@@ -390,8 +390,12 @@ fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()>
     for p in &r.partial {
         writeln!(
             out,
-            "partly explained by {} = {:+.4} {} (not named: the residual stays above the noise)",
-            p.name, p.estimate, p.unit
+            "partly explained by {} = {:+.4} ± {} {} (kept by every check against the other effects; not named: the residual stays at {:.2}σ, above the noise, so the model still lacks something)",
+            p.name,
+            p.estimate,
+            p.sigma.map_or("undetermined".into(), |s| format!("{s:.4}")),
+            p.unit,
+            r.residual_rms_after_sigma
         )?;
     }
     for g in &r.residual_where {

@@ -32,6 +32,12 @@ pub const FAMILY_FALSE_ALARM: f64 = 0.01;
 /// largest effects a bench shows are a few times the typical ones).
 pub const PLAUSIBLE_TYPICAL_MULTIPLE: f64 = 20.0;
 
+/// Whether `value` is a plausible size of candidate `c`: at most [`PLAUSIBLE_TYPICAL_MULTIPLE`]
+/// times its typical size.
+pub fn plausible_size(c: &Candidate, value: f64) -> bool {
+    value.abs() <= PLAUSIBLE_TYPICAL_MULTIPLE * c.typical.abs()
+}
+
 /// Cosine between two candidates' projected signatures above which they cannot be told apart.
 pub const AMBIGUITY_COSINE: f64 = 0.95;
 
@@ -167,7 +173,7 @@ pub fn score(
             let f = t / resid_var.max(1.0);
             let delta_bic = if rss > 0.0 && rss > t { n * (rss / (rss - t)).ln() - n.ln() } else { 0.0 };
             let sigma = if visible { resid_var.sqrt().max(1.0) / ns2.sqrt() } else { f64::INFINITY };
-            let plausible = estimate.abs() <= PLAUSIBLE_TYPICAL_MULTIPLE * c.typical.abs();
+            let plausible = plausible_size(c, estimate);
             projected.push(sp);
             CandidateScore {
                 name: c.name.clone(),

@@ -31,6 +31,12 @@ pub const EXTRACT_OPTIONS: ExtractOptions = ExtractOptions {
 /// is the better one: with the data-estimated shape a hidden q4 pivot offset drags a spurious
 /// joint scale error along with it (see docs/diagnosis.md).
 pub const REANALYSE_OPTIONS: ExtractOptions = ExtractOptions { shaped: true, sweeps: false, ..EXTRACT_OPTIONS };
+/// A re-analysis of the traces with the model is refused when the model's whitened rms on it
+/// exceeds its rms on the analysis it would replace by more than this factor, and the noise
+/// floor ([`NOISE_FLOOR_FACTOR`]): the motion hint then led the tracking astray. Under optics unlike the model's (a two-beam fringe) the
+/// re-analysis after a wrongly named effect doubled the misfit, and each later naming built on
+/// the data that effect had shaped.
+pub const REANALYSIS_RMS_TOLERANCE: f64 = 1.1;
 /// Label prefix of the discriminating motions ([`motions::pool`]).
 pub const DISCRIMINATING_PREFIX: &str = "D ";
 /// At most this many discriminating motions per design: room for a reversal of each prismatic

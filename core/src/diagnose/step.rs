@@ -91,6 +91,14 @@ pub enum Step {
         /// Whitened rms before and after.
         rms_sigma: [f64; 2],
     },
+    /// The traces analysed again with the model (its named effects in the fringe tracking's
+    /// motion hint), and that analysis refused: the model fits it worse than the analysis it
+    /// would replace, so the hint led the tracking astray (optics unlike the model's, or an
+    /// effect named wrongly), and the earlier analysis is kept.
+    ReanalysisRefused {
+        /// Whitened rms of the model on the earlier analysis and on the refused one.
+        rms_sigma: [f64; 2],
+    },
     /// The verdict.
     Finished {
         /// The verdict.
@@ -108,6 +116,7 @@ impl Step {
             Step::Removed { .. } => "3. effect removed: the final model does not need it",
             Step::Branch { .. } => "3. another branch of the extrinsics fits better",
             Step::Designed { .. } => "4. discriminating motions",
+            Step::ReanalysisRefused { .. } => "3. traces analysed again with the model: refused",
             Step::Finished { .. } => "5. verdict",
         }
     }
@@ -226,6 +235,10 @@ to   {}
                     rms_sigma[1]
                 )
             }
+            Step::ReanalysisRefused { rms_sigma } => format!(
+                "the model fits the new analysis worse (rms {:.2}σ → {:.2}σ): the earlier analysis is kept",
+                rms_sigma[0], rms_sigma[1]
+            ),
             Step::Finished { verdict } => match verdict {
                 Verdict::Named => "named: the effects above bring the residual to the noise floor".into(),
                 Verdict::None => "no significant missing effect".into(),

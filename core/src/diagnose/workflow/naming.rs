@@ -8,7 +8,8 @@ use crate::diagnose::motions::MotionRunner;
 use crate::diagnose::result::{DiagnoseError, NamedEffect};
 use crate::diagnose::scoring::{self, CandidateScore};
 use crate::diagnose::settings::{
-    DISCRIMINATING_PREFIX, EXCHANGE_MARGIN, MAX_EFFECTS, NOISE_FLOOR_FACTOR, REANALYSE_OPTIONS, REMOVE_BELOW_SIGMA,
+    DISCRIMINATING_PREFIX, EXCHANGE_MARGIN, MAX_EFFECTS, NOISE_FLOOR_FACTOR, REANALYSE_OPTIONS,
+    REANALYSIS_RMS_TOLERANCE, REMOVE_BELOW_SIGMA,
 };
 use crate::diagnose::step::Step;
 use crate::diagnose::validation;
@@ -82,8 +83,9 @@ impl Diagnosis {
         let k = nf.state.effects.len() - 1;
         // And the refit must keep the effect: an estimate within REMOVE_BELOW_SIGMA of neutral
         // after the refit is not an effect the data need (the linearised score chose it, the
-        // extrinsics refitted with it took the rest).
-        let kept = nf.effect_z(k) >= REMOVE_BELOW_SIGMA;
+        // extrinsics refitted with it took the rest), at a size a bench can have.
+        let kept = nf.effect_z(k) >= REMOVE_BELOW_SIGMA
+            && scoring::plausible_size(&self.candidates[best], nf.state.effects[k].1);
         let confirmed = kept && self.held_out_allows(held);
         let effect = named(sc.name.clone(), &sc, &nf, k, ambiguous);
         self.steps.push(Step::Added {
@@ -207,13 +209,22 @@ impl Diagnosis {
     }
 
     /// Analyse the traces again with the current model (effects included in the motion hint of
-    /// the fringe analysis), then refit and rescore. Nothing to do without traces.
+    /// the fringe analysis), then refit and rescore. Nothing to do without traces. The new
+    /// analysis replaces the old when the model fits it about as well or better
+    /// ([`REANALYSIS_RMS_TOLERANCE`]) or within the noise floor; otherwise the step says so and
+    /// the old one stays.
     pub(super) fn reanalyse<'r>(&mut self, runner: Option<&mut (dyn MotionRunner + 'r)>) -> Result<(), DiagnoseError> {
         let Some(f) = self.fit.clone() else { return Ok(()) };
         let Some(obs) = self.analysed_with(runner, &f.state)? else { return Ok(()) };
-        self.held_out = held_out_mask(&obs);
-        self.observations = obs;
+        let old_held_out = std::mem::replace(&mut self.held_out, held_out_mask(&obs));
+        let old_observations = std::mem::replace(&mut self.observations, obs);
         let nf = self.refit(&f.state)?;
+        if nf.rms() > (REANALYSIS_RMS_TOLERANCE * f.rms()).max(NOISE_FLOOR_FACTOR) {
+            self.steps.push(Step::ReanalysisRefused { rms_sigma: [f.rms(), nf.rms()] });
+            self.held_out = old_held_out;
+            self.observations = old_observations;
+            return Ok(());
+        }
         self.fit = Some(nf);
         self.rescore()
     }
@@ -382,6 +393,16 @@ impl Diagnosis {
         k: usize,
         cv_gain: f64,
     ) -> Result<Option<String>, DiagnoseError> {
+        let (cand, value) = &with.state.effects[k];
+        if !scoring::plausible_size(cand, *value) {
+            return Ok(Some(format!(
+                "its estimate, {value:+.4} {}, is beyond {} times its typical size ({} {}): no bench has it",
+                cand.unit,
+                scoring::PLAUSIBLE_TYPICAL_MULTIPLE,
+                cand.typical,
+                cand.unit
+            )));
+        }
         let z = with.effect_z(k);
         if z < REMOVE_BELOW_SIGMA {
             return Ok(Some(format!("its estimate is {z:.1}σ from none (needs {REMOVE_BELOW_SIGMA}σ)")));
