@@ -33,9 +33,9 @@ pub const EXTRACT_OPTIONS: ExtractOptions = ExtractOptions {
 pub const REANALYSE_OPTIONS: ExtractOptions = ExtractOptions { shaped: true, sweeps: false, ..EXTRACT_OPTIONS };
 /// A re-analysis of the traces with the model is refused when the model's whitened rms on it
 /// exceeds its rms on the analysis it would replace by more than this factor, and the noise
-/// floor ([`NOISE_FLOOR_FACTOR`]): the motion hint then led the tracking astray. Under optics unlike the model's (a two-beam fringe) the
-/// re-analysis after a wrongly named effect doubled the misfit, and each later naming built on
-/// the data that effect had shaped.
+/// floor ([`NOISE_FLOOR_FACTOR`]): the motion hint then led the tracking astray. Under optics
+/// unlike the model's (a two-beam fringe) the re-analysis after a wrongly named effect doubled
+/// the misfit, and each later naming built on the data that effect had shaped.
 pub const REANALYSIS_RMS_TOLERANCE: f64 = 1.1;
 /// Label prefix of the discriminating motions ([`motions::pool`]).
 pub const DISCRIMINATING_PREFIX: &str = "D ";
