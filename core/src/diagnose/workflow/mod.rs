@@ -10,6 +10,9 @@ mod naming;
 mod pair_naming;
 mod unnamed;
 
+#[cfg(test)]
+mod tests;
+
 use crate::diagnose::candidates::{self, Candidate};
 use crate::diagnose::fit::{self, Fit, ModelState, Predictor};
 use crate::diagnose::motions::{self, DesignedMotion, MotionRunner};
