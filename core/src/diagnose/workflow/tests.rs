@@ -1,5 +1,6 @@
-//! The re-analysis of a session's traces, driven alone: a motion hint the data contradict must
-//! not replace the analysis it was meant to improve.
+//! The checks of the workflow, driven alone on recorded traces: a re-analysis with a motion hint
+//! the data contradict must not replace the analysis it was meant to improve, and the held-out
+//! allowance at the noise floor and far above it.
 
 use super::*;
 use crate::bench::{run_plan, BenchPreset, RunControl, VirtualBench};
