@@ -312,6 +312,7 @@ fn fault_matrix_stops_keeps_data_explains_and_resumes() {
                     (Fault::ErrorCode(_), false) => "MCS error 146",
                     (Fault::Limit, true) => "PI_CNTR_ON_LIMIT_SWITCH",
                     (Fault::Limit, false) => "before its target",
+                    (Fault::Delay(_), _) => unreachable!("not among the faults tried"),
                 };
                 for want in [&format!("segment `{label}`"), controller, what, "Stages: PI E-712:", "stopped", "resume"]
                 {
@@ -722,4 +723,38 @@ fn an_axis_moves_on_its_controller_at_the_speed_its_robot_file_gives() {
     let crossing = |fraction: f64| t.t_s[q4.iter().position(|&q| q >= 2.0 * fraction).unwrap()];
     let speed = 1.6 / (crossing(0.9) - crossing(0.1));
     assert!((speed - 8.0).abs() < 0.8, "q4 moved at {speed} °/s");
+}
+
+/// A move on both controllers says how far apart their moves started; a move on one says 0. When
+/// the MCS takes its move command 20 ms late (a busy host), the spread holds the delay.
+#[test]
+fn a_move_on_two_controllers_says_how_far_apart_they_started() {
+    use photorobot_core::bench::TimedBench;
+    use photorobot_core::hardware::emulator::FaultSpec;
+    let _one = serial();
+    let preset = preset_2khz();
+    let r = rig(1.0, &preset, 5);
+    let mut bench = hardware_bench(&r, &preset, 2.0);
+    let step = |to: JointTarget, label: &str| Segment::Move { to, record: true, label: label.into(), through: false };
+    let target = |x: f64, q4: f64| JointTarget::default().with(0, x).with(3, q4);
+    let plan = Plan {
+        name: "spread".into(),
+        description: String::new(),
+        segments: vec![
+            step(target(10.0, 0.0), "X"),
+            step(target(12.0, 0.2), "X and q4"),
+            step(target(14.0, 0.4), "late"),
+        ],
+    };
+    // The third segment's MCS move (the second `:MAA`) arrives 20 ms late.
+    r.mcs.inject(FaultSpec::on_command(":MAA", 1, Fault::Delay(0.02)));
+    let mut timed = TimedBench::new(&mut bench, "measure");
+    let outcome = run(&mut timed, &plan).outcome;
+    assert!(outcome.is_ok(), "{outcome:?}");
+    assert_eq!(r.mcs.fired().len(), 1, "the delay was served");
+    let spreads: Vec<f64> = timed.finish().segments.iter().map(|s| s.breakdown.unwrap().start_spread_s).collect();
+    assert_eq!(spreads[0], 0.0, "one controller starts its axes together: {spreads:?}");
+    assert!(spreads[1] > 0.0, "two controllers start one command after the other: {spreads:?}");
+    assert!(spreads[2] >= 0.02, "the delayed move command is in the spread: {spreads:?}");
+    assert!(spreads[2] > spreads[1], "{spreads:?}");
 }

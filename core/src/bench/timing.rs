@@ -31,6 +31,11 @@ pub struct SegmentBreakdown {
     /// do not.
     #[serde(default)]
     pub commanded_s: f64,
+    /// From the first move command to the last one's answer, when the move's joints are on
+    /// several controllers (0 when they are on one): the controllers start one command after
+    /// another, and for this long the joints did not move together along the planned line.
+    #[serde(default)]
+    pub start_spread_s: f64,
 }
 
 /// One segment as it ran.
@@ -344,6 +349,7 @@ mod tests {
                 recorder_s: 0.2,
                 recorder_after_s: 0.15,
                 commanded_s: 0.2,
+                start_spread_s: 0.0,
             }),
         };
         assert!((s.waiting_s() - 0.55).abs() < 1e-12);

@@ -124,6 +124,29 @@ pub struct Evidence {
     /// The tilt term fitted to the contrast, on a rotation where it was.
     #[serde(skip)]
     pub tilt_term: Option<TiltTerm>,
+    /// Per run of the motion, the largest departure of |L| from its path that the controllers'
+    /// start spread implies (nm; 0 on a simulated bench): a run departing by more than
+    /// [`super::path_watch::MAX_PATH_DEPARTURE_NM`] is made again, and the figures are the run's
+    /// that departed least.
+    #[serde(default)]
+    pub path_departure_nm: Vec<f64>,
+}
+
+impl Evidence {
+    /// Record the runs made ([`Evidence::path_departure_nm`]), with a note when there were several.
+    pub fn note_runs(&mut self, departures_nm: Vec<f64>) {
+        if departures_nm.len() > 1 {
+            let kept = departures_nm.iter().copied().fold(f64::INFINITY, f64::min);
+            let each: Vec<String> = departures_nm.iter().map(|d| format!("{d:.1}")).collect();
+            self.notes.push(format!(
+                "run {} times: the controllers started their moves so far apart that |L| left its path by up to \
+                 {} nm; the figures are the run's that left it by {kept:.1} nm",
+                departures_nm.len(),
+                each.join(", ")
+            ));
+        }
+        self.path_departure_nm = departures_nm;
+    }
 }
 
 impl Evidence {
@@ -367,6 +390,7 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
         checks,
         notes,
         tilt_term: tilt.as_ref().map(|(t, _)| t.clone()),
+        path_departure_nm: Vec::new(),
     }
 }
 

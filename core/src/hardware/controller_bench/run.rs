@@ -60,7 +60,8 @@ impl ControllerBench {
         }
         let t_start = self.bench_now();
         self.marks.motion_s = Some(t_start);
-        let (t_trigger, trigger_rtt_s) = self.start_motion(seg)?;
+        let (t_trigger, trigger_rtt_s, spread_s) = self.start_motion(seg)?;
+        self.breakdown.start_spread_s = spread_s;
         if let Some(a) = acq.as_mut() {
             if !a.external {
                 a.t_trigger_s = t_trigger;
@@ -303,11 +304,17 @@ impl ControllerBench {
     /// (s). The polls of the other axes are stamped
     /// when their request is sent too, so the one-way latency to the controllers cancels; stamping
     /// at the reply would add whatever delay the host takes to read it (measured: under load,
-    /// stamps at the middle of the exchange put q4/q5 several nm of dL off).
-    fn start_motion(&mut self, seg: &TimedSegment) -> Result<(f64, f64), HwError> {
+    /// stamps at the middle of the exchange put q4/q5 several nm of dL off). Last, the bench time
+    /// from the first command to a moving joint to the last one's answer when the joints moving
+    /// are on several controllers, else 0 (one controller starts its axes together).
+    fn start_motion(&mut self, seg: &TimedSegment) -> Result<(f64, f64, f64), HwError> {
         let n = self.controllers.len();
         let mut t_trigger = self.bench_now();
         let mut trigger_rtt_s = 0.0;
+        let moving =
+            |c: usize| (0..6).any(|j| self.joints[j].controller == c && seg.to_display[j] != seg.from_display[j]);
+        let moving: Vec<bool> = (0..n).map(moving).collect();
+        let mut first_sent: Option<f64> = None;
         let order = std::iter::once(self.recorder_controller).chain((0..n).filter(|&c| c != self.recorder_controller));
         for c in order {
             let targets: Vec<(usize, f64)> = (0..6)
@@ -323,11 +330,22 @@ impl ControllerBench {
                 t_trigger = self.bench_now();
                 self.controllers[c].move_absolute(&targets)?;
                 trigger_rtt_s = (self.bench_now() - t_trigger) / self.clock.scale();
+                if moving[c] {
+                    first_sent = Some(t_trigger);
+                }
             } else {
+                let sent = self.bench_now();
                 self.controllers[c].move_absolute(&targets)?;
+                if moving[c] {
+                    first_sent.get_or_insert(sent);
+                }
             }
         }
-        Ok((t_trigger, trigger_rtt_s))
+        let spread_s = match first_sent {
+            Some(t) if moving.iter().filter(|m| **m).count() > 1 => self.bench_now() - t,
+            _ => 0.0,
+        };
+        Ok((t_trigger, trigger_rtt_s, spread_s))
     }
 
     fn all_on_target(&mut self) -> Result<bool, HwError> {

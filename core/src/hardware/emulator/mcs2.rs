@@ -4,7 +4,7 @@
 //! finite speed (velocity control off at `:CHANn:VEL 0`: the channel runs at its fastest), and the
 //! channel state bits; fault injection as the other emulators.
 
-use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, Server, SharedAxes};
+use super::{take_fault, EmuAxis, EmuClock, Fault, FaultSpec, Faults, Server, SharedAxes};
 use crate::hardware::smaract_mcs2::state;
 use std::collections::VecDeque;
 use std::io::{BufReader, Write};
@@ -189,9 +189,8 @@ const BAD_CHANNEL: Err2 = (34, "Invalid channel index");
 
 /// `None`: drop the connection; `Some(None)`: no reply; `Some(Some(line))`: reply.
 fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
-    let now = shared.clock.now_s();
-    let mut st = shared.state.lock().unwrap_or_else(|e| e.into_inner());
-    match st.faults.take(command, now) {
+    let (mut st, now, fired) = take_fault(&shared.state, |s| &mut s.faults, || shared.clock.now_s(), command);
+    match fired {
         Some(Fault::DropConnection) => return None,
         Some(Fault::NoReply) => return Some(None),
         Some(Fault::ErrorCode(c)) => {
@@ -207,7 +206,7 @@ fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
                 }
             }
         }
-        None => {}
+        Some(Fault::Delay(_)) | None => {}
     }
     match execute(shared, &mut st, now, command) {
         Ok(reply) => Some(reply),

@@ -162,6 +162,9 @@ pub enum Fault {
     ErrorCode(i64),
     /// Every moving axis stops where it is, on a limit (PI: error 216 pending; MCS: stopped short).
     Limit,
+    /// The command is taken this long (s, real time) after it arrives, as on a busy host or
+    /// network: a move starts that much later, a query reads the state then.
+    Delay(f64),
 }
 
 /// When it goes wrong.
@@ -251,6 +254,28 @@ impl Faults {
         let f = self.armed.remove(hit?);
         self.fired.push((command.to_string(), f.fault.clone()));
         Some(f.fault)
+    }
+}
+
+/// The emulator's state locked for `command`, the emulated time it is taken at, and the fault it
+/// meets. A [`Fault::Delay`] is served here (the lock released while the thread sleeps): the
+/// command then runs as if it had just arrived, without a fault.
+pub(crate) fn take_fault<'a, S>(
+    state: &'a Mutex<S>,
+    faults: impl Fn(&mut S) -> &mut Faults,
+    now_s: impl Fn() -> f64,
+    command: &str,
+) -> (std::sync::MutexGuard<'a, S>, f64, Option<Fault>) {
+    let lock = || state.lock().unwrap_or_else(|e| e.into_inner());
+    let now = now_s();
+    let mut st = lock();
+    match faults(&mut st).take(command, now) {
+        Some(Fault::Delay(s)) => {
+            drop(st);
+            std::thread::sleep(std::time::Duration::from_secs_f64(s.max(0.0)));
+            (lock(), now_s(), None)
+        }
+        fired => (st, now, fired),
     }
 }
 

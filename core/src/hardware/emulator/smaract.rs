@@ -2,7 +2,7 @@
 //! linear (nm) and rotary (µ° plus revolutions) channels moving at finite speed, each with its
 //! sensor type (`:GST`), and a channel that can be locked (status 9, moves refused with error 146).
 
-use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, Server, SharedAxes, NO_ACCELERATION_CONTROL};
+use super::{take_fault, EmuAxis, EmuClock, Fault, FaultSpec, Faults, Server, SharedAxes, NO_ACCELERATION_CONTROL};
 use crate::hardware::smaract::{angle_to_mcs, status};
 use std::io::{BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -203,8 +203,7 @@ fn leading_channel(args: &str) -> i64 {
 
 /// `None`: drop the connection; `Some(None)`: no reply; `Some(Some(line))`: reply.
 fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
-    let now = shared.clock.now_s();
-    let mut st = shared.state.lock().unwrap_or_else(|e| e.into_inner());
+    let (mut st, now, fired) = take_fault(&shared.state, |s| &mut s.faults, || shared.clock.now_s(), command);
     let Some(body) = command.strip_prefix(':') else {
         return Some(Some(":E-1,1".into()));
     };
@@ -215,7 +214,6 @@ fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
     ];
     let name = NAMES.iter().find(|n| body.starts_with(*n)).copied();
     let args = name.map_or("", |n| &body[n.len()..]);
-    let fired = st.faults.take(command, now);
     let limit_on_move = fired == Some(Fault::Limit) && name.is_some_and(|n| n.starts_with('M') || n == "FRM");
     match fired {
         Some(Fault::DropConnection) => return None,
@@ -231,7 +229,7 @@ fn handle(shared: &Shared, command: &str) -> Option<Option<String>> {
                 }
             }
         }
-        None => {}
+        Some(Fault::Delay(_)) | None => {}
     }
     let Some(name) = name else {
         return Some(Some(":E-1,2".into()));

@@ -13,7 +13,7 @@
 mod sweep;
 
 use super::emu_laser::{EmuLaser, SweepProfile};
-use super::{EmuClock, Fault, FaultSpec, Faults, Server, Trigger};
+use super::{take_fault, EmuClock, Fault, FaultSpec, Faults, Server, Trigger};
 use crate::hardware::controller_bench::LaserFamily;
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Write};
@@ -273,14 +273,13 @@ fn read_until_either(reader: &mut impl BufRead, out: &mut Vec<u8>) -> std::io::R
 
 /// Run one command line: faults first, then the command; a failed command queues its error.
 fn handle(shared: &Shared, command: &str) -> Reply {
-    let now = shared.laser.clock().now_s();
-    let mut st = shared.state.lock().unwrap_or_else(|e| e.into_inner());
+    let (mut st, now, fired) = take_fault(&shared.state, |s| &mut s.faults, || shared.laser.clock().now_s(), command);
     if let Some(t) = st.abort_at_s.filter(|&t| now >= t) {
         st.abort_at_s = None;
         st.faults.fired.push((command.to_string(), Fault::Limit));
         sweep::abort(shared, &mut st, t);
     }
-    match st.faults.take(command, now) {
+    match fired {
         Some(Fault::DropConnection) => return Reply::Drop,
         Some(Fault::NoReply) => return Reply::None,
         Some(Fault::ErrorCode(c)) => {
@@ -288,7 +287,7 @@ fn handle(shared: &Shared, command: &str) -> Reply {
             return Reply::None;
         }
         Some(Fault::Limit) => sweep::abort(shared, &mut st, now),
-        None => {}
+        Some(Fault::Delay(_)) | None => {}
     }
     match execute(shared, &mut st, now, command) {
         Ok(r) => r,

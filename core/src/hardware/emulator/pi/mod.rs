@@ -10,7 +10,7 @@
 mod recorder;
 
 use super::adc::Adc;
-use super::{EmuAxis, EmuClock, Fault, FaultSpec, Faults, PhotodiodeFn, Server, SharedAxes};
+use super::{take_fault, EmuAxis, EmuClock, Fault, FaultSpec, Faults, PhotodiodeFn, Server, SharedAxes};
 use recorder::Recorder;
 use std::io::{BufReader, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -272,9 +272,8 @@ fn reply_text(shared: &Shared, command: &str) -> Option<String> {
 pub(super) type Gcs<T> = Result<T, i64>;
 
 fn handle(shared: &Shared, command: &str) -> Reply {
-    let now = shared.clock.now_s();
-    let mut st = shared.state.lock().unwrap_or_else(|e| e.into_inner());
-    match st.faults.take(command, now) {
+    let (mut st, now, fired) = take_fault(&shared.state, |s| &mut s.faults, || shared.clock.now_s(), command);
+    match fired {
         Some(Fault::DropConnection) => return Reply::Drop,
         Some(Fault::NoReply) => return Reply::None,
         Some(Fault::ErrorCode(c)) => {
@@ -289,7 +288,7 @@ fn handle(shared: &Shared, command: &str) -> Reply {
             }
             st.last_error = 216;
         }
-        None => {}
+        Some(Fault::Delay(_)) | None => {}
     }
     let mut parts = command.split_whitespace();
     let name = parts.next().unwrap_or("").to_ascii_uppercase();
