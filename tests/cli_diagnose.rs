@@ -308,6 +308,15 @@ fn two_effects_that_cancel_are_told_apart_by_motions_designed_for_the_pair() {
     let text = photorobot_e2e::multi_effect::cli(&args).unwrap();
     let line = text.lines().find(|l| l.starts_with("the recorded data cannot tell these")).unwrap_or_default();
     assert!(pair.iter().all(|n| line.contains(n)), "{text}");
+    // The text gives each family's residual as the JSON does.
+    let line = text.lines().find(|l| l.starts_with("residual by family of observations")).unwrap_or_default();
+    let families = v["residual_by_family"].as_array().unwrap();
+    assert!(families.len() >= 3, "{v}");
+    for f in families {
+        let (before, after) = (f["before_sigma"].as_f64().unwrap(), f["after_sigma"].as_f64().unwrap());
+        let words = f["family"].as_str().unwrap().replace('_', " ");
+        assert!(line.contains(&format!("{words} {before:.2}σ → {after:.2}σ (n = {})", f["count"])), "{line}\n{f}");
+    }
 }
 
 #[test]

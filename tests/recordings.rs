@@ -86,14 +86,26 @@ pub fn independent_loop_with(
     seed: u64,
     max_passes: usize,
 ) -> Vec<Value> {
-    use crate::independent::{lab_records, records_of, Recorder};
     let dir = tempfile::tempdir().unwrap();
+    independent_loop_in(dir.path(), optics, hidden, seed, max_passes)
+}
+
+/// [`independent_loop_with`] in the folder `dir`, which keeps the recordings (`recorded/`,
+/// `proposed-K/`) and the session (`session/`) for a later look.
+pub fn independent_loop_in(
+    dir: &Path,
+    optics: &crate::independent::OpticsModel,
+    hidden: crate::independent::Hidden,
+    seed: u64,
+    max_passes: usize,
+) -> Vec<Value> {
+    use crate::independent::{lab_records, records_of, Recorder};
     let mut recorder = Recorder::new(seed);
     recorder.hidden = hidden;
     recorder.optics = optics.clone();
-    let traces = dir.path().join("recorded");
+    let traces = dir.join("recorded");
     let (_, mut end_s) = recorder.write_folder(&lab_records(), &traces).unwrap();
-    let session = dir.path().join("session");
+    let session = dir.join("session");
     let (t, s) = (traces.to_str().unwrap(), session.to_str().unwrap());
     let (_, text) = cli(&["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", t, "--out", s, "--json"]);
     assert!(session.join("extrinsics.ron").exists(), "calibrate wrote no extrinsics: {text}");
@@ -107,7 +119,7 @@ pub fn independent_loop_with(
         later.hidden = hidden;
         later.optics = optics.clone();
         later.start_clock_s = end_s + 60.0;
-        let added = dir.path().join(format!("proposed-{pass}"));
+        let added = dir.join(format!("proposed-{pass}"));
         end_s = later.write_folder(&records_of(&plan), &added).unwrap().1;
         passes.push(diagnose_adding(&session, Some(&added)));
     }

@@ -11,10 +11,10 @@
 //! its size under the bound the result gives: it cannot tell), wrong (a bound under the hidden
 //! size), missed, and anything named that is not there.
 //!
-//!     cargo run --release -p photorobot-e2e --example independent_hidden [-- --seeds 1..4] [--only TEXT] [--optics two-beam]
+//!     cargo run --release -p photorobot-e2e --example independent_hidden [-- --seeds 1..4] [--only TEXT] [--optics two-beam] [--keep DIR]
 
 use photorobot_e2e::independent::Hidden;
-use photorobot_e2e::recordings::independent_loop_with;
+use photorobot_e2e::recordings::{independent_loop_in, independent_loop_with};
 use serde_json::Value;
 
 /// A hidden imperfection: its label, the simulator's setting, the names that state it (the first
@@ -199,10 +199,20 @@ fn main() {
     let (mut runs, mut wrong_runs) = (0, 0);
     // `--only TEXT`: the cases whose label holds TEXT.
     let only = args.iter().position(|a| a == "--only").and_then(|k| args.get(k + 1)).cloned();
+    // `--keep DIR`: each case's recordings and session kept in DIR/<case>-seed-<seed>.
+    let keep = args.iter().position(|a| a == "--keep").and_then(|k| args.get(k + 1)).map(std::path::PathBuf::from);
     for c in cases().into_iter().filter(|c| only.as_deref().is_none_or(|o| c.label.contains(o))) {
         for seed in seeds.clone() {
             let t0 = std::time::Instant::now();
-            let mut passes = independent_loop_with(&optics, c.hidden, 300 + seed, 2).into_iter();
+            let mut passes = match &keep {
+                Some(k) => {
+                    let dir = k.join(format!("{}-seed-{seed}", c.label.replace([' ', '/'], "-")));
+                    std::fs::create_dir_all(&dir).expect("the --keep folder");
+                    independent_loop_in(&dir, &optics, c.hidden, 300 + seed, 2)
+                }
+                None => independent_loop_with(&optics, c.hidden, 300 + seed, 2),
+            }
+            .into_iter();
             let (first, second) = (passes.next().expect("a first pass"), passes.next());
             let last = second.as_ref().unwrap_or(&first);
             let (word, wrong) = score(last, &c);

@@ -387,16 +387,27 @@ fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()>
     if !r.not_seen.is_empty() {
         writeln!(out, "no observation can see: {}", r.not_seen.join(", "))?;
     }
+    let most = r
+        .worst_family()
+        .map_or(String::new(), |f| format!(", most in the {} ({:.2}σ)", f.family.words(), f.after_sigma));
     for p in &r.partial {
         writeln!(
             out,
-            "partly explained by {} = {:+.4} ± {} {} (kept by every check against the other effects; not named: the residual stays at {:.2}σ, above the noise, so the model still lacks something)",
+            "partly explained by {} = {:+.4} ± {} {} (kept by every check against the other effects; not named: the residual stays at {:.2}σ{most}, above the noise, so the model still lacks something)",
             p.name,
             p.estimate,
             p.sigma.map_or("undetermined".into(), |s| format!("{s:.4}")),
             p.unit,
             r.residual_rms_after_sigma
         )?;
+    }
+    if !r.residual_by_family.is_empty() {
+        let families: Vec<String> = r
+            .residual_by_family
+            .iter()
+            .map(|f| format!("{} {:.2}σ → {:.2}σ (n = {})", f.family.words(), f.before_sigma, f.after_sigma, f.count))
+            .collect();
+        writeln!(out, "residual by family of observations, before → after: {}", families.join("; "))?;
     }
     for g in &r.residual_where {
         writeln!(

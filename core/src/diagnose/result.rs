@@ -1,7 +1,7 @@
 //! What a diagnosis finds: the verdict, the named effects and the serialisable result, and why
 //! a diagnosis cannot run.
 
-use crate::diagnose::replay::ResidualGroup;
+use crate::diagnose::replay::{FamilyResidual, ResidualGroup};
 use crate::model::extrinsics::Extrinsics;
 use serde::{Deserialize, Serialize};
 
@@ -154,11 +154,19 @@ pub struct DiagnosisResult {
     pub settled: bool,
     /// Where the final residual lives, worst groups first (unexplained structure).
     pub residual_where: Vec<ResidualGroup>,
+    /// The residual of each family of observations, before and after the named effects.
+    #[serde(default)]
+    pub residual_by_family: Vec<FamilyResidual>,
     /// Extrinsics of the final model.
     pub extrinsics: Extrinsics,
 }
 
 impl DiagnosisResult {
+    /// The family of observations the final model misses most (whitened RMS after), if any.
+    pub fn worst_family(&self) -> Option<&FamilyResidual> {
+        self.residual_by_family.iter().max_by(|a, b| a.after_sigma.total_cmp(&b.after_sigma))
+    }
+
     /// What a settled result says of the pairs it leaves open, if it leaves any: with a bench
     /// the motions the pool has for each pair ran once (a pair the pool cannot separate has
     /// none); from recordings alone none is proposed for them.

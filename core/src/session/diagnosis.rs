@@ -81,6 +81,9 @@ impl DiagnosisRecord {
             result.residual_where.first().filter(|_| result.verdict == crate::diagnose::Verdict::Unexplained)
         {
             verdict.push_str(&format!("; worst: {} {} at {:.1} σ", g.by, g.key, g.rms_sigma));
+            if let Some(f) = result.worst_family() {
+                verdict.push_str(&format!("; most in the {} at {:.1} σ", f.family.words(), f.after_sigma));
+            }
         }
         Self { effects, verdict, ..Default::default() }
     }

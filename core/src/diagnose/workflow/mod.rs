@@ -418,6 +418,7 @@ impl Diagnosis {
             } else {
                 vec![]
             },
+            residual_by_family: replay::by_family(&obs, &before.residuals, &f.residuals),
             extrinsics: f.state.extrinsics,
         });
         self.steps.push(Step::Finished { verdict });
