@@ -416,9 +416,10 @@ pub fn record_validation(
     stops: &StopSettings,
     cancel: &AtomicBool,
 ) -> Result<RecordedValidation, ValidationError> {
+    let inputs = RecordingInputs { planning, planned_with, motion, start, compensation, stops };
     let run = |bench: &mut dyn Bench| {
         let mut watch = path_watch::PathWatch::new(bench);
-        let run = record_once(&mut watch, planning, planned_with, motion, start, compensation, stops, cancel)?;
+        let run = record_once(&mut watch, &inputs, cancel)?;
         Ok::<_, ValidationError>((watch.departure_nm(planning), run))
     };
     let mut kept = run(bench)?;
@@ -439,18 +440,23 @@ pub fn record_validation(
     Ok(RecordedValidation { departures_nm, ..kept.1 })
 }
 
-/// One run of [`record_validation`].
-#[allow(clippy::too_many_arguments)]
-fn record_once(
-    bench: &mut dyn Bench,
-    planning: &PhaseModel,
-    planned_with: &Extrinsics,
+/// What every run of one [`record_validation`] records from: its arguments but the bench.
+struct RecordingInputs<'a> {
+    planning: &'a PhaseModel,
+    planned_with: &'a Extrinsics,
     motion: ValidationMotion,
     start: [f64; 6],
-    compensation: &Compensation,
-    stops: &StopSettings,
+    compensation: &'a Compensation,
+    stops: &'a StopSettings,
+}
+
+/// One run of [`record_validation`].
+fn record_once(
+    bench: &mut dyn Bench,
+    inputs: &RecordingInputs,
     cancel: &AtomicBool,
 ) -> Result<RecordedValidation, ValidationError> {
+    let RecordingInputs { planning, planned_with, motion, start, compensation, stops } = *inputs;
     let count = motion.waypoint_count();
     let play = &compensation.play;
     let stop_at = stops::stop_waypoints(motion, count, stops.stops);
