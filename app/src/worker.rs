@@ -684,6 +684,12 @@ impl Thread {
                 format!("{} traces gave no observation (e.g. {}: {})", skipped.len(), skipped[0].0, skipped[0].1),
             ));
         }
+        if let Some((label, why)) = d.hint_led.first() {
+            let _ = self.tx.send(Event::DiagnosisStep(
+                "0. traces".into(),
+                format!("{} tracked motions do not match their fringe count (e.g. {label}: {why})", d.hint_led.len()),
+            ));
+        }
         // The bench's own times are already after the session when it recorded it (its clock
         // runs on); a bench started since (a session opened from disk) is shifted after it.
         let offset = (d.end_time_s() + photorobot_core::session::LATER_PAUSE_S - self.bench.clock_s()).max(0.0);

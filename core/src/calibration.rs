@@ -345,6 +345,9 @@ pub fn report_from_identification(
     for (label, why) in &id.skipped {
         warnings.push(format!("trace `{label}` not used: {why}"));
     }
+    for (label, why) in &id.hint_led {
+        warnings.push(format!("trace `{label}`: {why}"));
+    }
     if !est.converged {
         warnings
             .push(format!("the solver did not converge ({}): the values below are not a calibration", est.termination));

@@ -97,6 +97,8 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
     if let Some(e) = read.session.as_ref().and_then(|s| s.diagnosis.as_ref()).and_then(|r| r.extrinsics) {
         d.set_earlier(e);
     }
+    let mut warnings = read.warnings.clone();
+    warnings.extend(d.hint_led.iter().map(|(label, why)| format!("trace `{label}`: {why}")));
     let mut bench = preset.as_ref().map(|p| resumed_bench(p, a.seed, &d)).transpose()?;
     let mut runner = bench.as_mut().map(|b| BenchRunner::new(b, 0.0));
     if !a.json {
@@ -113,7 +115,7 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
                 }
             )?;
         }
-        for w in &read.warnings {
+        for w in &warnings {
             writeln!(out, "warning: {w}")?;
         }
         writeln!(out, "diagnosis of {} ({} traces, bench {named})", a.session.display(), traces.len())?;
@@ -143,7 +145,7 @@ pub fn diagnose(a: &DiagnoseArgs, out: &mut dyn Write) -> Result<(), CliError> {
             validation: &validation,
             proposed_plan_file: proposed.as_deref(),
             added_traces: &read.added,
-            warnings: &read.warnings,
+            warnings: &warnings,
         })?;
         writeln!(out, "{text}")?;
     } else {

@@ -105,6 +105,8 @@ struct Traced {
     observations: Vec<Observation>,
     free_start: bool,
     ends: Option<PhaseEnds>,
+    /// Why its tracking followed the motion hint rather than the fringes, when it did.
+    hint_led: Option<String>,
 }
 
 /// The gap change across the pause between `before` (ended at its last sample) and `after`
@@ -159,6 +161,7 @@ fn traced(
     let mut out = Vec::new();
     let mut free_start = false;
     let mut ends = None;
+    let mut hint_led = None;
     let measured = match seed {
         Some(seed) if crate::trace::is_sweep(trace) => measure::analyse_sweep(trace, model, Some(seed)),
         _ => measure::analyse_with(trace, model, analyse),
@@ -180,6 +183,7 @@ fn traced(
         }
         Measurement::Motion(m) => {
             free_start = m.free_start;
+            hint_led = measure::hint_led::hint_led(&m).map(|h| h.describe());
             let n = trace.len();
             ends = Some(PhaseEnds {
                 wavelength_nm: m.wavelength_nm,
@@ -229,7 +233,7 @@ fn traced(
             }
         }
     }
-    Ok(Traced { observations: out, free_start, ends })
+    Ok(Traced { observations: out, free_start, ends, hint_led })
 }
 
 /// At most `max` of `v`, evenly spread (the first and the last kept).
@@ -398,6 +402,9 @@ pub struct Extracted {
     /// Traces whose analysis failed: their label and why. Their data stay in the session;
     /// they only give no observation with the current model.
     pub skipped: Vec<(String, String)>,
+    /// Tracked motions whose travel departs from their fringe count: their label and why
+    /// ([`measure::hint_led`]). Their observations are kept; the report warns of them.
+    pub hint_led: Vec<(String, String)>,
 }
 
 /// Observations from many traces; a trace whose analysis fails is listed in
@@ -487,7 +494,7 @@ fn extract<T: Borrow<Trace> + Sync>(
             // A stopped run's traces give nothing; a sweep without its absolute gap gives what an
             // analysed sweep gives besides: no phase at its ends.
             if stopped() || (!options.sweeps && crate::trace::is_sweep(t)) {
-                return Ok(Traced { observations: Vec::new(), free_start: false, ends: None });
+                return Ok(Traced { observations: Vec::new(), free_start: false, ends: None, hint_led: None });
             }
             let analyse = AnalyseOptions { free_start: free_start(t), shaped: options.shaped, ..Default::default() };
             traced(t, model, options, 0, &analyse, seeds.get(k).and_then(Option::as_ref))
@@ -505,7 +512,7 @@ fn extract<T: Borrow<Trace> + Sync>(
         // Every trace moves the stages, analysed or not.
         let readings = Readings::new(t);
         let start = approach.enter(&readings);
-        let Traced { observations: mut obs, free_start: free, ends } = match r {
+        let Traced { observations: mut obs, free_start: free, ends, hint_led } = match r {
             Ok(o) => o,
             Err(e) => {
                 out.skipped.push((t.meta.label.clone(), e.to_string()));
@@ -513,6 +520,9 @@ fn extract<T: Borrow<Trace> + Sync>(
                 continue;
             }
         };
+        if let Some(why) = hint_led {
+            out.hint_led.push((t.meta.label.clone(), why));
+        }
         if let (Some((before, before_ends)), Some(after_ends)) = (previous, ends.as_ref()) {
             out.observations.extend(gap_across_pause((before, &before_ends), (t, after_ends), start, options));
         }

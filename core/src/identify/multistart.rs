@@ -89,6 +89,9 @@ pub struct Identification {
     pub step_a: Option<paper::StepA>,
     /// Traces that gave no observation (label, why).
     pub skipped: Vec<(String, String)>,
+    /// Tracked motions whose travel departs from their fringe count (label, why): their
+    /// tracking followed the motion hint of these extrinsics, not the fringes.
+    pub hint_led: Vec<(String, String)>,
     /// Every branch run, best first (the chosen one first).
     pub branches: Vec<BranchSummary>,
     /// The branches whose χ² ties with the chosen one's (indices into `branches`, never 0).
@@ -433,6 +436,7 @@ fn one_pass(
         observations,
         step_a,
         skipped: extracted.skipped,
+        hint_led: extracted.hint_led,
         branches: vec![],
         tied: vec![],
         downweighted: vec![],
@@ -571,6 +575,7 @@ mod tests {
             observations: vec![],
             step_a: None,
             skipped: vec![],
+            hint_led: vec![],
             branches: vec![],
             tied: vec![],
             downweighted: vec![],

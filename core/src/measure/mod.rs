@@ -10,6 +10,7 @@
 pub mod alignment;
 pub mod extrema;
 pub mod hint;
+pub mod hint_led;
 pub mod live_count;
 pub mod model_free;
 pub mod signal;

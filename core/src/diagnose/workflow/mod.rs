@@ -77,6 +77,10 @@ pub struct Diagnosis {
     /// No motion of the pool not yet recorded would show a candidate the data cannot.
     settled: bool,
     session_traces: Vec<crate::trace::Trace>,
+    /// Tracked motions of the session whose travel departs from their fringe count, on the
+    /// first analysis (label, why; [`crate::measure::hint_led`]): their tracking followed the
+    /// motion hint of the extrinsics the diagnosis starts from.
+    pub hint_led: Vec<(String, String)>,
     stage: Stage,
     /// The steps done so far.
     pub steps: Vec<Step>,
@@ -170,6 +174,7 @@ impl Diagnosis {
             second_look_done: false,
             settled: false,
             session_traces: Vec::new(),
+            hint_led: Vec::new(),
             stage: Stage::Baseline,
             steps: Vec::new(),
             result: None,
@@ -193,6 +198,7 @@ impl Diagnosis {
         let mut d = Self::new(base, extracted.observations, extrinsics)?;
         d.set_stop(stop);
         d.session_traces = traces.to_vec();
+        d.hint_led = extracted.hint_led;
         // The fringe analysis fits the fringe's harmonics, so a cyclic error of the phase (what
         // a pure-cosine analysis leaves) does not reach the gap changes it measures: on
         // table2-ideal a hidden 2 nm cyclic error changed the tracked gap changes of the
