@@ -11,6 +11,11 @@ use serde_json::Value;
 /// `photorobot diagnose --bench none`: both commands' `warnings` that say a tracking followed
 /// its hint (the motions' labels).
 fn hint_led(recorder: &Recorder) -> [Vec<String>; 2] {
+    warned(recorder).map(|w| w.iter().map(|w| w.split('`').nth(1).unwrap_or_default().to_string()).collect())
+}
+
+/// [`hint_led`]'s warnings, whole.
+fn warned(recorder: &Recorder) -> [Vec<String>; 2] {
     let dir = tempfile::tempdir().unwrap();
     let (traces, session) = (dir.path().join("recorded"), dir.path().join("session"));
     recorder.write_folder(&lab_records(), &traces).unwrap();
@@ -25,25 +30,37 @@ fn hint_led(recorder: &Recorder) -> [Vec<String>; 2] {
     [calibrated, diagnosed].map(|v| {
         let warnings = v["warnings"].as_array().cloned().unwrap_or_default();
         let led = warnings.iter().filter_map(Value::as_str).filter(|w| w.contains("followed the motion hint"));
-        led.map(|w| w.split('`').nth(1).unwrap_or_default().to_string()).collect()
+        led.map(String::from).collect()
     })
 }
 
+/// The steps tracked and the extrema counted that a warning states.
+fn figures(warning: &str) -> (f64, usize) {
+    let after = |key: &str| warning.split(key).nth(1).and_then(|r| r.split_whitespace().next()).unwrap_or_default();
+    (after("travels ").parse().unwrap_or(f64::NAN), after("shows ").parse().unwrap_or(usize::MAX))
+}
+
 /// Under the two-beam optics with a q5 zero offset of 0.05° hidden, the calibration lands about
-/// 3° off in three angles and tracks from there: its X and Z translations travel 27 and 49 steps
-/// where their signals show 9 and 10 extrema (with the true extrinsics' hint 8.7 and 10.0). Both
-/// commands say so, naming those motions; the Y translations, whose tracking matches their 77
-/// extrema, are not named.
+/// 3° off in three angles and tracks from there: its X and Z translations travel 27.0 and 51.2
+/// steps where their signals show 9 and 10 extrema (with the true extrinsics' hint 8.7 and
+/// 10.0). Both commands say so, naming those motions with those figures; the Y translations,
+/// whose tracking matches their 77 extrema, are not named.
 #[test]
 fn a_tracking_its_hint_led_is_named_by_calibrate_and_diagnose() {
     let mut recorder = Recorder::new(301);
     recorder.optics = OpticsModel::TwoBeam(Default::default());
     recorder.hidden = Hidden { joint_offset: [0.0, 0.0, 0.0, 0.0, 0.05, 0.0], ..Hidden::default() };
-    for (command, labels) in ["calibrate", "diagnose"].iter().zip(hint_led(&recorder)) {
-        for motion in ["X at Z 0", "Z at X -90", "Z at X 90"] {
-            assert!(labels.iter().any(|l| l == motion), "{command}: {motion} not named: {labels:?}");
+    for (command, warnings) in ["calibrate", "diagnose"].iter().zip(warned(&recorder)) {
+        let of =
+            |motion: &str| warnings.iter().find(|w| w.starts_with(&format!("trace `{motion}`"))).map(|w| figures(w));
+        for (motion, travel, count) in [("X at Z 0", 27.0, 9), ("Z at X -90", 51.2, 10), ("Z at X 90", 51.2, 10)] {
+            let (steps, counted) = of(motion).unwrap_or_else(|| panic!("{command}: {motion} not named: {warnings:?}"));
+            assert!(
+                steps > travel / 2.0 && steps < travel * 2.0 && counted.abs_diff(count) <= 1,
+                "{command}: {motion}: {steps} steps, {counted} extrema"
+            );
         }
-        assert!(!labels.iter().any(|l| l.starts_with("Y at")), "{command}: {labels:?}");
+        assert!(of("Y at 0,0").is_none() && of("Y at 100,-100").is_none(), "{command}: {warnings:?}");
     }
 }
 
