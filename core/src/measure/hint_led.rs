@@ -51,8 +51,7 @@ impl HintLed {
 /// [`HintLed`] when the tracked travel of `m` departs from its extrema count by more than
 /// [`HINT_LED_STEPS`] and [`HINT_LED_SHARE`] of the count.
 pub fn hint_led(m: &MotionMeasurement) -> Option<HintLed> {
-    let step_nm = m.wavelength_nm / (4.0 * m.n_air);
-    let travel_steps = tracked_travel_steps(&m.track.dl_nm, step_nm);
+    let travel_steps = tracked_travel_steps(&m.track.dl_nm, m.count.resolution_nm);
     let counted = m.count.counted;
     let allowed = HINT_LED_STEPS.max(HINT_LED_SHARE * counted as f64);
     ((travel_steps - counted as f64).abs() > allowed).then_some(HintLed { travel_steps, counted })
