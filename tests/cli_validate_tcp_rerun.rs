@@ -45,13 +45,17 @@ fn a_late_start_is_measured_and_the_motion_made_again() {
     let reruns = rerun_motions(&doc);
     eprintln!("true extrinsics, one wrist move 30 ms late: exit {code}, runs {reruns:?}");
     assert!(!reruns.is_empty(), "a motion with a 30 ms late start was made again: {doc}");
+    // A loaded machine's own jitter may send another motion a few nm off and have it made
+    // again too: by the same rule, so each rerun started above the limit and is told.
     for (motion, runs) in &reruns {
-        assert!(runs[0] > 10.0 * MAX_PATH_DEPARTURE_NM, "{motion}: the late start measured: {runs:?}");
-        let kept = runs.iter().copied().fold(f64::INFINITY, f64::min);
-        assert!(kept < runs[0], "{motion}: a run closer to its path kept: {runs:?}");
+        assert!(runs[0] > MAX_PATH_DEPARTURE_NM, "{motion}: made again though on its path: {runs:?}");
         let row = doc["validation"].as_array().unwrap().iter().find(|r| r["motion"] == motion.as_str()).unwrap();
         assert!(row["notes"].to_string().contains("run "), "{motion}: the reruns told: {row}");
     }
+    let (motion, runs) = reruns.iter().max_by(|a, b| a.1[0].total_cmp(&b.1[0])).unwrap();
+    assert!(runs[0] > 10.0 * MAX_PATH_DEPARTURE_NM, "{motion}: the late start measured: {runs:?}");
+    let kept = runs.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(kept < runs[0], "{motion}: a run closer to its path kept: {runs:?}");
     assert_eq!(check_against_truth("truth, one late start", &preset.truth, &doc, false), Vec::<String>::new());
 
     let mut wrong = preset.truth.to_array();
