@@ -49,6 +49,11 @@ const START_KEEP_MARGIN: f64 = 30.0;
 /// branch must not win by dropping the data it cannot explain.
 const SKIPPED_TRACE_COST: f64 = 100.0;
 
+/// Cost added per tracked motion whose tracking followed the branch's motion hint rather than
+/// its fringes ([`crate::measure::hint_led`]): such a tracking reports the gap change the
+/// branch predicts, so its residuals agree with the branch whatever the bench did.
+const HINT_LED_TRACE_COST: f64 = 100.0;
+
 /// The starts the data allow, without duplicates: the bootstrap from at least three absolute
 /// gaps (the lamella normal from gap differences between poses, and the gap), then the minima
 /// of the sign-free start fit.
@@ -117,10 +122,12 @@ impl Identification {
 }
 
 impl Identification {
-    /// χ² of the branch, with [`SKIPPED_TRACE_COST`] per trace it could not analyse.
+    /// χ² of the branch, with [`SKIPPED_TRACE_COST`] per trace it could not analyse and
+    /// [`HINT_LED_TRACE_COST`] per motion its hint led.
     fn cost(&self) -> f64 {
         self.estimate.normalised_residuals.iter().map(|r| r * r).sum::<f64>()
             + SKIPPED_TRACE_COST * self.skipped.len() as f64
+            + HINT_LED_TRACE_COST * self.hint_led.len() as f64
     }
 
     fn summary(&self, start: &str) -> BranchSummary {
@@ -132,6 +139,7 @@ impl Identification {
             chi2,
             rms_sigma: (chi2 / n as f64).sqrt(),
             skipped_traces: self.skipped.len(),
+            hint_led_traces: self.hint_led.len(),
         }
     }
 }
@@ -333,6 +341,7 @@ fn rival_on_the_same_data(
         chi2: cross,
         rms_sigma: (cross / refit.normalised_residuals.len().max(1) as f64).sqrt(),
         skipped_traces: best.skipped.len(),
+        hint_led_traces: best.hint_led.len(),
     })
 }
 

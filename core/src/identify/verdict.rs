@@ -61,6 +61,10 @@ pub struct BranchSummary {
     pub rms_sigma: f64,
     /// Traces it could not analyse.
     pub skipped_traces: usize,
+    /// Tracked motions whose tracking followed its extrinsics' motion hint rather than the
+    /// fringes ([`crate::measure::hint_led`]).
+    #[serde(default)]
+    pub hint_led_traces: usize,
 }
 
 /// One trace's share of the residual.
@@ -312,6 +316,7 @@ mod tests {
             chi2,
             rms_sigma: 0.1,
             skipped_traces: 0,
+            hint_led_traces: 0,
         };
         let mirrored = Extrinsics { beta_et_deg: -e.beta_et_deg, ..e };
         let far = Extrinsics { theta_et_deg: e.theta_et_deg + 1.0, ..e };

@@ -30,7 +30,7 @@ fn sign(label: &str, sources: &[SignSource]) -> TranslationSign {
 fn branch(beta_wf_deg: f64, chi2: f64) -> BranchSummary {
     let mut e = Extrinsics::table2();
     e.beta_wf_deg = beta_wf_deg;
-    BranchSummary { start: "s".into(), extrinsics: e, chi2, rms_sigma: 1.0, skipped_traces: 0 }
+    BranchSummary { start: "s".into(), extrinsics: e, chi2, rms_sigma: 1.0, skipped_traces: 0, hint_led_traces: 0 }
 }
 
 #[test]
