@@ -25,6 +25,8 @@ fn record_and_diagnose(bench: &str, dir: &std::path::Path, extra: &[&str], dump_
         &mut out,
     );
     eprintln!("calibration: {}", calibrated.as_ref().map_or_else(|e| e.to_string(), |_| "fits".into()));
+    let cal: serde_json::Value = serde_json::from_slice(&out).unwrap_or_default();
+    eprintln!("calibrated extrinsics: {}", cal["extrinsics"]);
     assert!(session.join("extrinsics.ron").exists(), "calibrate wrote no session: {calibrated:?}");
     let mut out = Vec::new();
     let mut args = vec!["photorobot", "diagnose", s];
@@ -202,14 +204,14 @@ fn diagnose_names_a_hidden_path_scale_from_virtual_bench_traces() {
 }
 
 /// The beam's Gouy phase hidden wrong (the bench has none, the model has it): the calibration
-/// without it picks the mirrored lamella (θ_et +0.595° for −0.595°, χ² 245 against 301 for the
-/// branch at the truth) and refuses the fit. The diagnosis names the Gouy phase from the
-/// session's traces, tries the calibration's other branch again with it, analysing the traces
-/// with that branch's motion hint, and takes it: the extrinsics end at the truth. From the
-/// mirrored branch the discriminating q6 turns missed by 200σ and the diagnosis ended
-/// "unexplained".
+/// without it keeps the branch at the truth (θ_et −0.594°: the mirrored lamella, θ_et +0.595°,
+/// fits its own analysis closer, χ² 245 against 301, but is charged for the motions its motion
+/// hint led) and is refused by its validation (34.6 nm on a 6° rotation about X_f). The diagnosis
+/// names the Gouy phase from the session's traces; had the calibration chosen another branch,
+/// the diagnosis tries it again with the effect, analysing the traces with that branch's
+/// motion hint (a `Branch` step), which must end at the truth. The extrinsics end at the truth.
 #[test]
-fn diagnose_names_the_gouy_phase_and_leaves_the_mirrored_branch_the_calibration_chose() {
+fn diagnose_names_the_gouy_phase_and_ends_on_the_truths_branch() {
     use photorobot_core::model::effects::Effect;
     let v = diagnose_hidden("hidden-gouy", vec![Effect::GouyPhase { scale_error: -1.0 }], "DIAGNOSE_DUMP_GOUY");
     assert_eq!(v["verdict"], "named", "{v}");
@@ -222,9 +224,10 @@ fn diagnose_names_the_gouy_phase_and_leaves_the_mirrored_branch_the_calibration_
     let after = v["residual_rms_after_sigma"].as_f64().unwrap();
     assert!(after <= 0.12, "residual {after}σ after, measured 0.06σ");
     let branch = v["steps"].as_array().unwrap().iter().find(|s| s.get("Branch").is_some());
-    let to = &branch.unwrap_or_else(|| panic!("no branch step: {v}"))["Branch"]["to"];
-    let theta_et = to["theta_et_deg"].as_f64().unwrap();
-    assert!((theta_et + 0.595).abs() < 0.01, "θ_et {theta_et}° after the branch step, truth −0.595°");
+    if let Some(step) = branch {
+        let theta_et = step["Branch"]["to"]["theta_et_deg"].as_f64().unwrap();
+        assert!((theta_et + 0.595).abs() < 0.01, "θ_et {theta_et}° after the branch step, truth −0.595°");
+    }
     let e = &v["extrinsics"];
     for (field, truth) in [("theta_et_deg", -0.595), ("theta_wf_deg", -0.520), ("beta_et_deg", 0.744)] {
         let got = e[field].as_f64().unwrap();
