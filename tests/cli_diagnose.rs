@@ -25,8 +25,6 @@ fn record_and_diagnose(bench: &str, dir: &std::path::Path, extra: &[&str], dump_
         &mut out,
     );
     eprintln!("calibration: {}", calibrated.as_ref().map_or_else(|e| e.to_string(), |_| "fits".into()));
-    let cal: serde_json::Value = serde_json::from_slice(&out).unwrap_or_default();
-    eprintln!("calibrated extrinsics: {}", cal["extrinsics"]);
     assert!(session.join("extrinsics.ron").exists(), "calibrate wrote no session: {calibrated:?}");
     let mut out = Vec::new();
     let mut args = vec!["photorobot", "diagnose", s];
