@@ -350,9 +350,25 @@ fn results_view_refuses_a_fit_the_model_cannot_explain() {
         start: "one more start".into(),
         ..listed[0].clone()
     });
-    h.state_mut().state.results.report = Some(again);
+    h.state_mut().state.results.report = Some(again.clone());
     h.run_steps(2);
     assert_eq!(shown(&h, "same branch"), 1 + (0..fit.branches.len()).filter(|&k| standing(k) == "same branch").count());
+    // A distinct branch with the lower χ², charged for nine motions its hint led: listed worse,
+    // with its counts and the cost that ranks it.
+    let listed = &mut again.fit.as_mut().unwrap().branches;
+    let mut charged = listed[0].clone();
+    charged.start = "a charged start".into();
+    charged.extrinsics.theta_et_deg += 3.0;
+    charged.chi2 = 0.5 * listed[0].chi2;
+    charged.hint_led_traces = 9;
+    let cost = format!("{:.1}", charged.cost());
+    listed.push(charged);
+    h.state_mut().state.results.report = Some(again);
+    h.run_steps(2);
+    assert_eq!(shown(&h, "worse"), 1 + (0..fit.branches.len()).filter(|&k| standing(k) == "worse").count());
+    h.get_by_label("a charged start");
+    h.get_by_label(&cost);
+    assert!(h.query_all_by_label("9").next().is_some(), "the hint-led count");
 }
 
 /// The discrepancy workflow from the GUI on strategy 2's traces: every step is shown, then the

@@ -23,7 +23,7 @@ use photorobot_core::hardware::emulator::EmuClock;
 use photorobot_core::hardware::HardwareConfig;
 use photorobot_core::identify::signs::{SignSource, TranslationSign};
 use photorobot_core::identify::sweep_cost::{self, Evidence, SweepCost};
-use photorobot_core::identify::verdict::{FitCheck, Verdict};
+use photorobot_core::identify::verdict::{BranchSummary, FitCheck, Verdict};
 use photorobot_core::model::phase::PhaseModel;
 use photorobot_core::plan::Plan;
 use photorobot_core::session::{
@@ -813,7 +813,7 @@ fn print_fit(fit: &FitCheck, out: &mut dyn Write) -> std::io::Result<()> {
     for (k, b) in fit.branches.iter().enumerate() {
         writeln!(
             out,
-            "  branch from {:<16} χ² {:>12.1}  rms {:>7.2} σ  {:<11} (β_et {:.4}°, θ_et {:.4}°, β_wf {:.4}°, θ_wf {:.4}°)",
+            "  branch from {:<16} χ² {:>12.1}  rms {:>7.2} σ  {:<11} (β_et {:.4}°, θ_et {:.4}°, β_wf {:.4}°, θ_wf {:.4}°){}",
             b.start,
             b.chi2,
             b.rms_sigma,
@@ -821,7 +821,8 @@ fn print_fit(fit: &FitCheck, out: &mut dyn Write) -> std::io::Result<()> {
             b.extrinsics.beta_et_deg,
             b.extrinsics.theta_et_deg,
             b.extrinsics.beta_wf_deg,
-            b.extrinsics.theta_wf_deg
+            b.extrinsics.theta_wf_deg,
+            charges(b)
         )?;
     }
     if fit.verdict == Verdict::DoesNotFit {
@@ -831,6 +832,20 @@ fn print_fit(fit: &FitCheck, out: &mut dyn Write) -> std::io::Result<()> {
         }
     }
     Ok(())
+}
+
+/// What a branch is charged beside its χ² and the cost it is ranked by, when it is charged: a
+/// branch listed after the chosen one may show the lower χ².
+fn charges(b: &BranchSummary) -> String {
+    if b.skipped_traces == 0 && b.hint_led_traces == 0 {
+        return String::new();
+    }
+    format!(
+        "  cost {:.1}: {} traces skipped, {} motions led by its hint",
+        b.cost(),
+        b.skipped_traces,
+        b.hint_led_traces
+    )
 }
 
 /// The sign of each translation and what fixed it.
@@ -912,5 +927,37 @@ mod tests {
             resume_command(&a),
             "photorobot calibrate --bench 'it'\\''s.ron' --mode joint --out s --resume --json"
         );
+    }
+
+    /// A branch charged for the motions its hint led is listed after the chosen one with its
+    /// lower χ² and the cost that ranks it; an uncharged branch prints no cost.
+    #[test]
+    fn a_charged_branch_prints_the_cost_that_ranks_it() {
+        use photorobot_core::model::extrinsics::Extrinsics;
+        let branch = |start: &str, chi2: f64, hint_led_traces: usize, beta: f64| BranchSummary {
+            start: start.into(),
+            extrinsics: Extrinsics { beta_et_deg: beta, ..Extrinsics::nominal_design() },
+            chi2,
+            rms_sigma: 1.0,
+            skipped_traces: 0,
+            hint_led_traces,
+        };
+        let fit = FitCheck {
+            verdict: Verdict::Fits,
+            rms_sigma: 1.0,
+            threshold_sigma: 3.0,
+            worst_traces: vec![],
+            branches: vec![branch("fringe travel 2", 279.0, 0, 0.7), branch("absolute gaps", 93.0, 9, 3.7)],
+            tied_branches: vec![],
+            ambiguous_parameters: vec![],
+            summary: "fits".into(),
+        };
+        let mut out = Vec::new();
+        print_fit(&fit, &mut out).unwrap();
+        let out = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = out.lines().filter(|l| l.contains("branch from")).collect();
+        assert!(!lines[0].contains("cost"), "{out}");
+        assert!(lines[1].contains("worse") && lines[1].contains("χ²         93.0"), "{out}");
+        assert!(lines[1].contains("cost 993.0: 0 traces skipped, 9 motions led by its hint"), "{out}");
     }
 }

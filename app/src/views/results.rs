@@ -189,16 +189,25 @@ fn ambiguous(ui: &mut egui::Ui, fit: &FitCheck) {
 }
 
 fn branches(ui: &mut egui::Ui, fit: &FitCheck) {
-    ui.label(RichText::new("Starts tried (the identification keeps the branch with the lowest χ²)").strong());
-    egui::Grid::new("branches").striped(true).num_columns(4).show(ui, |ui| {
-        for h in ["start", "χ²", "residual (σ RMS)", ""] {
+    ui.label(
+        RichText::new(
+            "Starts tried (the identification keeps the lowest cost: χ², plus a charge for each trace \
+             a branch skips and each motion its hint led)",
+        )
+        .strong(),
+    );
+    egui::Grid::new("branches").striped(true).num_columns(7).show(ui, |ui| {
+        for h in ["start", "cost", "χ²", "residual (σ RMS)", "skipped traces", "hint-led motions", ""] {
             ui.strong(h);
         }
         ui.end_row();
         for (k, b) in fit.branches.iter().enumerate() {
             ui.label(&b.start);
+            ui.monospace(format!("{:.1}", b.cost()));
             ui.monospace(format!("{:.1}", b.chi2));
             ui.monospace(format!("{:.2}", b.rms_sigma));
+            ui.monospace(b.skipped_traces.to_string());
+            ui.monospace(b.hint_led_traces.to_string());
             ui.label(fit.standing(k).word());
             ui.end_row();
         }

@@ -45,15 +45,6 @@ const MAX_TRAVEL_STARTS: usize = 6;
 const START_KEEP_FACTOR: f64 = 3.0;
 const START_KEEP_MARGIN: f64 = 30.0;
 
-/// Cost added per trace a branch cannot analyse (the beam misses the lamella in its model): a
-/// branch must not win by dropping the data it cannot explain.
-const SKIPPED_TRACE_COST: f64 = 100.0;
-
-/// Cost added per tracked motion whose tracking followed the branch's motion hint rather than
-/// its fringes ([`crate::measure::hint_led`]): such a tracking reports the gap change the
-/// branch predicts, so its residuals agree with the branch whatever the bench did.
-const HINT_LED_TRACE_COST: f64 = 100.0;
-
 /// The starts the data allow, without duplicates: the bootstrap from at least three absolute
 /// gaps (the lamella normal from gap differences between poses, and the gap), then the minima
 /// of the sign-free start fit.
@@ -122,12 +113,9 @@ impl Identification {
 }
 
 impl Identification {
-    /// χ² of the branch, with [`SKIPPED_TRACE_COST`] per trace it could not analyse and
-    /// [`HINT_LED_TRACE_COST`] per motion its hint led.
+    /// The branch's cost ([`BranchSummary::cost`]).
     fn cost(&self) -> f64 {
-        self.estimate.normalised_residuals.iter().map(|r| r * r).sum::<f64>()
-            + SKIPPED_TRACE_COST * self.skipped.len() as f64
-            + HINT_LED_TRACE_COST * self.hint_led.len() as f64
+        self.summary("").cost()
     }
 
     fn summary(&self, start: &str) -> BranchSummary {

@@ -67,6 +67,23 @@ pub struct BranchSummary {
     pub hint_led_traces: usize,
 }
 
+/// Cost added per trace a branch cannot analyse (the beam misses the lamella in its model): a
+/// branch must not win by dropping the data it cannot explain.
+pub const SKIPPED_TRACE_COST: f64 = 100.0;
+
+/// Cost added per tracked motion whose tracking followed the branch's motion hint rather than
+/// its fringes ([`crate::measure::hint_led`]): such a tracking reports the gap change the
+/// branch predicts, so its residuals agree with the branch whatever the bench did.
+pub const HINT_LED_TRACE_COST: f64 = 100.0;
+
+impl BranchSummary {
+    /// What the identification ranks branches by: χ², with [`SKIPPED_TRACE_COST`] per trace the
+    /// branch could not analyse and [`HINT_LED_TRACE_COST`] per motion its hint led.
+    pub fn cost(&self) -> f64 {
+        self.chi2 + SKIPPED_TRACE_COST * self.skipped_traces as f64 + HINT_LED_TRACE_COST * self.hint_led_traces as f64
+    }
+}
+
 /// One trace's share of the residual.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TraceResidual {
