@@ -841,10 +841,10 @@ fn diagnosis_view_proposes_saves_and_adds_the_discriminating_motions() {
     }
     assert!(again.effects.is_empty(), "a clean bench: nothing named ({:?})", again.effects);
     // Each family's residual, as the result gives it.
-    let families = photorobot_app::views::diagnosis::family_line(&again).expect("the result has its families");
+    let families = again.family_line().expect("the result has its families");
     assert!(again.residual_by_family.len() >= 3, "{:?}", again.residual_by_family);
     for f in &again.residual_by_family {
-        assert!(families.contains(&format!("{} {:.2} σ to {:.2} σ", f.family.words(), f.before_sigma, f.after_sigma)));
+        assert!(families.contains(&format!("{} {:.2}σ → {:.2}σ", f.family.words(), f.before_sigma, f.after_sigma)));
     }
     h.get_by_label(&photorobot_app::views::diagnosis::drawable(&families));
     if again.settled {

@@ -403,13 +403,8 @@ fn print_result(r: &DiagnosisResult, out: &mut dyn Write) -> std::io::Result<()>
             r.residual_rms_after_sigma
         )?;
     }
-    if !r.residual_by_family.is_empty() {
-        let families: Vec<String> = r
-            .residual_by_family
-            .iter()
-            .map(|f| format!("{} {:.2}σ → {:.2}σ (n = {})", f.family.words(), f.before_sigma, f.after_sigma, f.count))
-            .collect();
-        writeln!(out, "residual by family of observations, before → after: {}", families.join("; "))?;
+    if let Some(line) = r.family_line() {
+        writeln!(out, "{line}")?;
     }
     for g in &r.residual_where {
         writeln!(

@@ -141,18 +141,6 @@ fn residuals(ui: &mut egui::Ui, s: &AppState) {
     });
 }
 
-/// The residual of each family of observations, before and after the effects: where the
-/// model and the data disagree (the gap changes for a kinematic effect, the fringe amplitudes
-/// for optics unlike the model's).
-pub fn family_line(d: &photorobot_core::diagnose::DiagnosisResult) -> Option<String> {
-    let parts: Vec<String> = d
-        .residual_by_family
-        .iter()
-        .map(|f| format!("{} {:.2} σ to {:.2} σ (n = {})", f.family.words(), f.before_sigma, f.after_sigma, f.count))
-        .collect();
-    (!parts.is_empty()).then(|| format!("residual by family of observations: {}", parts.join("; ")))
-}
-
 fn workflow(ui: &mut egui::Ui, s: &AppState) {
     for (title, summary) in &s.diagnosis.steps {
         ui.label(RichText::new(drawable(title)).strong());
@@ -177,7 +165,7 @@ fn workflow(ui: &mut egui::Ui, s: &AppState) {
                 d.residual_rms_before_sigma,
                 d.residual_rms_after_sigma
             ));
-            if let Some(line) = family_line(d) {
+            if let Some(line) = d.family_line() {
                 ui.label(drawable(&line));
             }
             let effects: Vec<_> = d.effects.iter().chain(&d.partial).collect();

@@ -167,6 +167,18 @@ impl DiagnosisResult {
         self.residual_by_family.iter().max_by(|a, b| a.after_sigma.total_cmp(&b.after_sigma))
     }
 
+    /// The residual of each family of observations, before → after the effects, in one line:
+    /// where the model and the data disagree (the gap changes for a kinematic effect, the
+    /// fringe amplitudes for optics unlike the model's). `None` when no family was scored.
+    pub fn family_line(&self) -> Option<String> {
+        let parts: Vec<String> = self
+            .residual_by_family
+            .iter()
+            .map(|f| format!("{} {:.2}σ → {:.2}σ (n = {})", f.family.words(), f.before_sigma, f.after_sigma, f.count))
+            .collect();
+        (!parts.is_empty()).then(|| format!("residual by family of observations, before → after: {}", parts.join("; ")))
+    }
+
     /// What a settled result says of the pairs it leaves open, if it leaves any: with a bench
     /// the motions the pool has for each pair ran once (a pair the pool cannot separate has
     /// none); from recordings alone none is proposed for them.
