@@ -3,8 +3,8 @@
 //! signal shows, through the commands a user types, on another simulator's recordings
 //! (`photorobot_e2e::independent`: its own chain, optics and recorder).
 
-use photorobot_e2e::independent::{lab_records, Hidden, OpticsModel, Recorder, TABLE2};
-use photorobot_e2e::recordings::cli;
+use photorobot_e2e::independent::{Hidden, OpticsModel, Recorder, TABLE2};
+use photorobot_e2e::recordings::{calibrate_lab_records, cli};
 use serde_json::Value;
 use std::path::Path;
 
@@ -12,10 +12,7 @@ use std::path::Path;
 /// --traces` them into `dir/session`: the command's JSON (a refused calibration prints its
 /// JSON, then the error).
 fn calibrate(recorder: &Recorder, dir: &Path) -> Value {
-    let (traces, session) = (dir.join("recorded"), dir.join("session"));
-    recorder.write_folder(&lab_records(), &traces).unwrap();
-    let (t, s) = (traces.to_str().unwrap(), session.to_str().unwrap());
-    let (_, text) = cli(&["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", t, "--out", s, "--json"]);
+    let (_, text) = calibrate_lab_records(recorder, dir);
     let json = text.split("\nerror: ").next().unwrap_or_default();
     serde_json::from_str(json).unwrap_or_else(|e| panic!("{e}: {text}"))
 }

@@ -90,6 +90,18 @@ pub fn independent_loop_with(
     independent_loop_in(dir.path(), optics, hidden, seed, max_passes)
 }
 
+/// The lab motions recorded by `recorder` into `dir/recorded` and calibrated from them alone
+/// (`calibrate --bench table2-ideal --traces … --out dir/session --json`; a refused fit still
+/// writes its best extrinsics): the recordings' end on their clock (s) and what calibrate
+/// printed, then its error if it refused.
+pub fn calibrate_lab_records(recorder: &crate::independent::Recorder, dir: &Path) -> (f64, String) {
+    let (traces, session) = (dir.join("recorded"), dir.join("session"));
+    let (_, end_s) = recorder.write_folder(&crate::independent::lab_records(), &traces).unwrap();
+    let (t, s) = (traces.to_str().unwrap(), session.to_str().unwrap());
+    let (_, text) = cli(&["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", t, "--out", s, "--json"]);
+    (end_s, text)
+}
+
 /// [`independent_loop_with`] in the folder `dir`, which keeps the recordings (`recorded/`,
 /// `proposed-K/`) and the session (`session/`) for a later look.
 pub fn independent_loop_in(
@@ -99,15 +111,12 @@ pub fn independent_loop_in(
     seed: u64,
     max_passes: usize,
 ) -> Vec<Value> {
-    use crate::independent::{lab_records, records_of, Recorder};
+    use crate::independent::{records_of, Recorder};
     let mut recorder = Recorder::new(seed);
     recorder.hidden = hidden;
     recorder.optics = optics.clone();
-    let traces = dir.join("recorded");
-    let (_, mut end_s) = recorder.write_folder(&lab_records(), &traces).unwrap();
+    let (mut end_s, text) = calibrate_lab_records(&recorder, dir);
     let session = dir.join("session");
-    let (t, s) = (traces.to_str().unwrap(), session.to_str().unwrap());
-    let (_, text) = cli(&["photorobot", "calibrate", "--bench", "table2-ideal", "--traces", t, "--out", s, "--json"]);
     assert!(session.join("extrinsics.ron").exists(), "calibrate wrote no extrinsics: {text}");
     let mut passes = vec![diagnose_without_bench(&session)];
     for pass in 1..max_passes as u64 {

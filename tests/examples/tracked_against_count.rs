@@ -2,12 +2,14 @@
 //! `proposed-1/`), tracked from the motion hint of the calibration's extrinsics
 //! (`session/extrinsics.ron`) and of the independent simulator's true ones, against the fringe
 //! extrema its signal shows: the tracked travel in steps of λ/(4n) beside the count of extrema
-//! (the paper's count, `MotionMeasurement::count`). A tracking its hint led astray travels far
-//! more, or less, than its signal's extrema allow; a right one is within about one step.
+//! (the paper's count, `MotionMeasurement::count`), as the calibration's check measures them
+//! (`measure::hint_led`). A tracking its hint led astray travels far more, or less, than its
+//! signal's extrema allow, and is marked; a right one is within about one step.
 //!
 //!     cargo run --release -p photorobot-e2e --example tracked_against_count -- DIR/CASE [--seed 301]
 
 use photorobot_core::bench::BenchPreset;
+use photorobot_core::measure::hint_led::{hint_led, tracked_travel_steps};
 use photorobot_core::measure::{analyse_with, Measurement};
 use photorobot_core::model::extrinsics::Extrinsics;
 use photorobot_core::model::phase::PhaseModel;
@@ -20,12 +22,13 @@ fn table(name: &str, model: &PhaseModel, traces: &[Trace]) {
     for t in traces.iter().filter(|t| !photorobot_core::trace::is_sweep(t)) {
         match analyse_with(t, model, &Default::default()) {
             Ok(Measurement::Motion(m)) => {
-                let step = m.wavelength_nm / (4.0 * m.n_air);
+                let step = m.count.resolution_nm;
                 let dl = &m.track.dl_nm;
-                let travel: f64 = dl.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>() / step;
+                let travel = tracked_travel_steps(dl, step);
                 let net = (dl[dl.len() - 1] - dl[0]) / step;
+                let led = if hint_led(&m).is_some() { "  hint-led" } else { "" };
                 println!(
-                    "{:<46} travel {travel:6.1} net {net:+7.1} steps; extrema counted {:3}",
+                    "{:<46} travel {travel:6.1} net {net:+7.1} steps; extrema counted {:3}{led}",
                     t.meta.label, m.count.counted
                 );
             }
