@@ -244,18 +244,7 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
     }
     let contrast = |env0: Envelope| pose_contrast(inp, env0, &angles, &tracked, s);
     let poses_contrast = start_envelope.map(contrast).unwrap_or_default();
-    let tilt = rotation.and_then(|axis| {
-        let sensitivity = contrast_sensitivity(&inp.analysis.optics, wavelength_nm, inp.analysis.n_air, gap_um).ok()?;
-        let along = || {
-            let fp = FabryPerot::new(&inp.analysis.optics, wavelength_nm, inp.analysis.n_air).ok();
-            let shape = fp.map(|fp| ContrastShape::of(&fp, gap_um));
-            tilt_along(&dither_amplitudes(inp, &angles, s, &sensitivity), gap_um, &sensitivity, shape.as_ref())
-        };
-        if let Some((t, kappa)) = (axis == RotationAxis::Transverse).then(along).flatten() {
-            return Some((t, ContrastSensitivity { kappa_per_rad2: kappa, ..sensitivity }));
-        }
-        fit_tilt_term(axis, &poses_contrast, gap_um, &sensitivity).map(|t| (t, sensitivity))
-    });
+    let tilt = rotation.and_then(|axis| tilt_from_contrast(inp, axis, wavelength_nm, gap_um, &angles, &poses_contrast));
     if rotation.is_some() && tilt.is_none() {
         notes.push(format!(
             "the tilt term comes from the extrinsics under test: the contrast was measured at {} pose(s), {} needed",
@@ -291,20 +280,8 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
         }
         None => (None, None, None),
     };
-    let model_free_nm = model_free.as_ref().filter(|_| known_tilt).map(|mf| {
-        // The model-free gap's sign is free. Beyond a step the sweeps tell it (their σ is a few
-        // per cent of the change); within one, the larger figure of the two: there the sweeps'
-        // sign let two random perturbations in fifty read 22 % under the truth.
-        let beyond_step = mf.peak_to_peak_nm >= step_nm;
-        let signs = match sign_from_sweeps(&gaps, &mf.gap, s).filter(|_| beyond_step) {
-            Some(sign) => vec![sign],
-            None => vec![1.0, -1.0],
-        };
-        signs
-            .iter()
-            .map(|sign| peak_to_peak((0..mf.gap.len()).map(|k| sign * mf.gap[k] + t_along(k))))
-            .fold(0.0, f64::max)
-    });
+    let model_free_nm =
+        model_free.as_ref().filter(|_| known_tilt).map(|mf| model_free_cavity_nm(mf, &gaps, s, step_nm, &t_along));
     let sigma_tilt = tilt_sigma_nm.unwrap_or(0.0);
     let (sweep_spread_nm, sweep_sigma_nm) = sweep_spread(&gaps, &|sample| t_along(sample - s));
     let mut checks = Vec::new();
@@ -314,29 +291,8 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
     if let Some(mf) = &model_free {
         checks.push(model_free_check(mf, tracked_gap_nm, sigma_track));
     }
-    if let (Some(ind), Some(_)) = (independent_nm, rotation) {
-        let tol = SLACK_NM + 3.0 * (sigma_tilt * sigma_tilt + sigma_track * sigma_track).sqrt();
-        checks.push(Check {
-            name: "tilt term".into(),
-            agrees: (inp.tracked_nm - ind).abs() <= tol,
-            detail: format!(
-                "with the tilt term of the extrinsics under test {:.1} nm, with the one from the fringe contrast {ind:.1} nm \
-                 (tolerance {tol:.1} nm)",
-                inp.tracked_nm
-            ),
-        });
-    }
-    if rotation == Some(RotationAxis::Transverse) {
-        if let Some(r) = super::smooth::cyclic_residual_nm(inp.variation_nm, &angles) {
-            let tol = SLACK_NM + 6.0 * sigma_track;
-            checks.push(Check {
-                name: "fringe shape".into(),
-                agrees: r <= tol,
-                detail: format!(
-                    "the tracked curve leaves {r:.1} nm about a smooth path in the angle (tolerance {tol:.1} nm)"
-                ),
-            });
-        }
+    if let Some(axis) = rotation {
+        checks.extend(rotation_checks(inp, axis, independent_nm, sigma_tilt, sigma_track, &angles));
     }
     checks.extend(sweep_checks(&gaps));
     let verdict = if checks.iter().any(|c| !c.agrees) {
@@ -352,12 +308,8 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
     // 9.3 nm from the truth's; with a hint standing still, 0.3 nm), and the model-free
     // reading needs no hint (its free sign costs little on a gap that moves by less than a step).
     // Contradicted: the largest figure any measurement supports.
-    let small = model_free.as_ref().is_some_and(|m| m.peak_to_peak_nm < step_nm);
-    let axial = rotation == Some(RotationAxis::Axial);
-    let candidate = match model_free_nm.filter(|_| small && axial) {
-        Some(mf) => mf,
-        None => inp.tracked_nm,
-    };
+    let small_axial =
+        rotation == Some(RotationAxis::Axial) && model_free.as_ref().is_some_and(|m| m.peak_to_peak_nm < step_nm);
     let measured_nm = match verdict {
         Verdict::Contradicted => {
             let lower = bounds.filter(|_| rotation.is_none()).map(|b| b.lower_nm);
@@ -366,7 +318,7 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
                 .flatten()
                 .fold(0.0, f64::max)
         }
-        _ => candidate,
+        _ => model_free_nm.filter(|_| small_axial).unwrap_or(inp.tracked_nm),
     };
     let target = target_nm(inp.motion);
     Evidence {
@@ -392,6 +344,89 @@ pub fn assess(inp: &Inputs<'_>) -> Evidence {
         tilt_term: tilt.as_ref().map(|(t, _)| t.clone()),
         path_departure_nm: Vec::new(),
     }
+}
+
+/// The tilt term of a rotation about `axis` from the fringe contrast, not from the extrinsics
+/// under test: along a transverse rotation from the dither's amplitudes, else from the contrast
+/// at the poses; with the contrast's sensitivity it was read with.
+fn tilt_from_contrast(
+    inp: &Inputs<'_>,
+    axis: RotationAxis,
+    wavelength_nm: f64,
+    gap_um: f64,
+    angles: &[f64],
+    poses: &[ContrastPose],
+) -> Option<(TiltTerm, ContrastSensitivity)> {
+    let optics = &inp.analysis.optics;
+    let sensitivity = contrast_sensitivity(optics, wavelength_nm, inp.analysis.n_air, gap_um).ok()?;
+    let s = inp.motion_start.min(inp.trace.len().saturating_sub(1));
+    let along = || {
+        let fp = FabryPerot::new(optics, wavelength_nm, inp.analysis.n_air).ok();
+        let shape = fp.map(|fp| ContrastShape::of(&fp, gap_um));
+        tilt_along(&dither_amplitudes(inp, angles, s, &sensitivity), gap_um, &sensitivity, shape.as_ref())
+    };
+    if let Some((t, kappa)) = (axis == RotationAxis::Transverse).then(along).flatten() {
+        return Some((t, ContrastSensitivity { kappa_per_rad2: kappa, ..sensitivity }));
+    }
+    fit_tilt_term(axis, poses, gap_um, &sensitivity).map(|t| (t, sensitivity))
+}
+
+/// A rotation's own checks: the tracked figure against the one with the tilt term from the
+/// contrast (`independent_nm`, when known), and on a transverse rotation the tracked curve's
+/// departure from a smooth path in the angle.
+fn rotation_checks(
+    inp: &Inputs<'_>,
+    axis: RotationAxis,
+    independent_nm: Option<f64>,
+    sigma_tilt: f64,
+    sigma_track: f64,
+    angles: &[f64],
+) -> Vec<Check> {
+    let mut checks = Vec::new();
+    if let Some(ind) = independent_nm {
+        let tol = SLACK_NM + 3.0 * (sigma_tilt * sigma_tilt + sigma_track * sigma_track).sqrt();
+        checks.push(Check {
+            name: "tilt term".into(),
+            agrees: (inp.tracked_nm - ind).abs() <= tol,
+            detail: format!(
+                "with the tilt term of the extrinsics under test {:.1} nm, with the one from the fringe contrast {ind:.1} nm \
+                 (tolerance {tol:.1} nm)",
+                inp.tracked_nm
+            ),
+        });
+    }
+    if axis == RotationAxis::Transverse {
+        if let Some(r) = super::smooth::cyclic_residual_nm(inp.variation_nm, angles) {
+            let tol = SLACK_NM + 6.0 * sigma_track;
+            checks.push(Check {
+                name: "fringe shape".into(),
+                agrees: r <= tol,
+                detail: format!(
+                    "the tracked curve leaves {r:.1} nm about a smooth path in the angle (tolerance {tol:.1} nm)"
+                ),
+            });
+        }
+    }
+    checks
+}
+
+/// The cavity length's peak-to-peak along the motion from the model-free gap `mf` and the tilt
+/// term `t_along` (nm). The model-free gap's sign is free. Beyond a step the sweeps tell it
+/// (their σ is a few per cent of the change); within one, the larger figure of the two: there
+/// the sweeps' sign let two random perturbations in fifty read 22 % under the truth.
+fn model_free_cavity_nm(
+    mf: &ModelFree,
+    gaps: &[SweepGap],
+    s: usize,
+    step_nm: f64,
+    t_along: &dyn Fn(usize) -> f64,
+) -> f64 {
+    let beyond_step = mf.peak_to_peak_nm >= step_nm;
+    let signs = match sign_from_sweeps(gaps, &mf.gap, s).filter(|_| beyond_step) {
+        Some(sign) => vec![sign],
+        None => vec![1.0, -1.0],
+    };
+    signs.iter().map(|sign| peak_to_peak((0..mf.gap.len()).map(|k| sign * mf.gap[k] + t_along(k)))).fold(0.0, f64::max)
 }
 
 /// The model-free phase-equivalent gap of a motion and its floor.
